@@ -1,0 +1,489 @@
+//! The analytical sonar model of the thesis (eqs. 3.1 to 3.4, after Murphy),
+//! turning one range reading into log-odds deltas for the cells of its cone.
+//!
+//! For a cell at distance `r` from the sensor and angle `α` off its axis,
+//! with `R` the maximum range and `β` the cone's half-angle, let
+//! `u = ((R − r)/R + (β − α)/β) / 2`. Then, for a reading `d`:
+//! - Region I, `|r − d| ≤ tolerance` (probably occupied):
+//!   `P(occupied) = u · Max_occupied` (eq. 3.1);
+//! - Region II, `r < d − tolerance` (probably empty): `P(empty) = u` (eq. 3.4);
+//! - Region III, beyond: no information, no delta.
+//!
+//! Two guards keep the regions honest where the formula alone would not:
+//! a region I cell never gets `P(occupied) < 0.5` (it would be pushed towards
+//! empty), and a region II cell never gets `P(empty) < 0.5` (it would be
+//! pushed towards occupied) nor above `max_empty` (eq. 3.4 reaches 1 at the
+//! sensor, an infinite log-odds). Each probability becomes the log-odds delta
+//! `ln(P(occ) / (1 − P(occ)))`, which the Bayes update of eq. 3.13 adds.
+//!
+//! A reading at or past `R` is no echo: nothing was hit within range. It adds
+//! no region I; its cone is marked empty out to `no_echo_free_range` only,
+//! since sonar loses echoes off walls struck at a grazing angle and a long
+//! free ray would cut through them. Set it to 0 to ignore such readings.
+
+use crate::cell::{CellIndex, Resolution};
+use crate::error::{GridError, within};
+use crate::log_odds::{LOG_ODDS_SCALE, logit};
+use crate::pose::Pose2;
+use crate::sector::{LocalPoint, Sector};
+
+/// Every figure of the sonar model; the defaults are the Scout's Polaroid
+/// 6500 ranging modules.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SonarModelParams {
+    /// `R`: the largest range the sonar reports, metres (35 ft).
+    pub max_range: f64,
+    /// The smallest range the sonar reports, metres (6 in); shorter readings
+    /// are taken as this.
+    pub min_range: f64,
+    /// `β`: half the cone's opening angle, radians.
+    pub half_angle: f64,
+    /// Half the depth of region I around the reading, metres.
+    pub region_i_tolerance: f64,
+    /// `Max_occupied`: the strongest belief one reading gives a region I cell.
+    pub max_occupied: f64,
+    /// The strongest belief one reading gives a region II cell.
+    pub max_empty: f64,
+    /// How far a no-echo reading marks its cone empty, metres; 0 ignores
+    /// no-echo readings.
+    pub no_echo_free_range: f64,
+}
+
+impl Default for SonarModelParams {
+    fn default() -> Self {
+        Self {
+            max_range: 10.668,
+            min_range: 0.1524,
+            half_angle: 15f64.to_radians(),
+            region_i_tolerance: 0.05,
+            max_occupied: 0.98,
+            max_empty: 0.98,
+            no_echo_free_range: 3.0,
+        }
+    }
+}
+
+impl SonarModelParams {
+    /// Checks every figure is finite and sensible.
+    pub fn validate(&self) -> Result<Self, GridError> {
+        within("max_range", self.max_range, 0.01, 1000.0)?;
+        within("min_range", self.min_range, 0.0, self.max_range)?;
+        within("half_angle", self.half_angle, 1e-3, 80f64.to_radians())?;
+        within(
+            "region_i_tolerance",
+            self.region_i_tolerance,
+            0.0,
+            self.max_range,
+        )?;
+        within("max_occupied", self.max_occupied, 0.5, 0.9999)?;
+        within("max_empty", self.max_empty, 0.5, 0.9999)?;
+        within(
+            "no_echo_free_range",
+            self.no_echo_free_range,
+            0.0,
+            self.max_range,
+        )?;
+        Ok(*self)
+    }
+}
+
+/// Which region of the model a cell falls in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Region {
+    /// Around the reading: probably occupied.
+    Occupied,
+    /// Between the sensor and region I: probably empty.
+    Empty,
+}
+
+/// A validated reading, ready to rasterise.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reading {
+    /// The range in metres, raised to the minimum range.
+    pub range: f64,
+    /// Whether this is an echo (`false`: no echo within the maximum range).
+    pub echo: bool,
+    /// The cone's extent for this reading, metres.
+    pub extent: f64,
+}
+
+/// Number of steps of `u` in the delta tables.
+const TABLE_STEPS: usize = 2048;
+
+/// The sonar model with its log-odds tables built.
+#[derive(Debug, Clone)]
+pub struct SonarModel {
+    params: SonarModelParams,
+    inv_max_range: f64,
+    inv_half_angle: f64,
+    tan_half_angle: f64,
+    // Fixed-point deltas at evenly spaced `u`, interpolated linearly:
+    // a logarithm per cell would cost more than the rest of the cell.
+    occupied_table: Box<[f32]>,
+    empty_table: Box<[f32]>,
+    // `α / (2β)` at evenly spaced `tan α` in [0, tan β], for the same reason.
+    angle_table: Box<[f64]>,
+    angle_table_scale: f64,
+}
+
+impl SonarModel {
+    /// The model for validated parameters.
+    pub fn new(params: SonarModelParams) -> Result<Self, GridError> {
+        let params = params.validate()?;
+        let table = |region| {
+            (0..=TABLE_STEPS)
+                .map(|i| exact_delta(&params, region, i as f64 / TABLE_STEPS as f64) as f32)
+                .collect()
+        };
+        Ok(Self {
+            params,
+            inv_max_range: 1.0 / params.max_range,
+            inv_half_angle: 1.0 / params.half_angle,
+            tan_half_angle: params.half_angle.tan(),
+            occupied_table: table(Region::Occupied),
+            empty_table: table(Region::Empty),
+            angle_table: (0..=TABLE_STEPS)
+                .map(|i| {
+                    let tan = params.half_angle.tan() * i as f64 / TABLE_STEPS as f64;
+                    0.5 * tan.atan() / params.half_angle
+                })
+                .collect(),
+            angle_table_scale: TABLE_STEPS as f64 / params.half_angle.tan(),
+        })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &SonarModelParams {
+        &self.params
+    }
+
+    /// Checks a range and decides how far its cone reaches.
+    pub fn reading(&self, range: f64) -> Result<Reading, GridError> {
+        let range = within("range", range, 0.0, f64::MAX)?.max(self.params.min_range);
+        let p = &self.params;
+        Ok(if range >= p.max_range {
+            Reading {
+                range,
+                echo: false,
+                extent: p.no_echo_free_range,
+            }
+        } else {
+            Reading {
+                range,
+                echo: true,
+                extent: (range + p.region_i_tolerance).min(p.max_range),
+            }
+        })
+    }
+
+    /// The region of a cell at distance `r` for `reading`; `None` past the cone.
+    #[inline]
+    pub fn region(&self, reading: &Reading, r: f64) -> Option<Region> {
+        if r > reading.extent {
+            None
+        } else if reading.echo && r >= reading.range - self.params.region_i_tolerance {
+            Some(Region::Occupied)
+        } else {
+            Some(Region::Empty)
+        }
+    }
+
+    /// The thesis's `u`: the mean of the range and angle factors, in [0, 1].
+    #[inline]
+    pub fn strength(&self, r: f64, alpha: f64) -> f64 {
+        (1.0 - 0.5 * (r * self.inv_max_range + alpha * self.inv_half_angle)).clamp(0.0, 1.0)
+    }
+
+    /// The probability of occupancy one reading gives a cell in `region`
+    /// at distance `r` and angle `alpha`, exactly as the equations say (with
+    /// the guards described in the module docs).
+    pub fn probability(&self, region: Region, r: f64, alpha: f64) -> f64 {
+        occupied_probability(&self.params, region, self.strength(r, alpha))
+    }
+
+    /// The fixed-point log-odds delta for a cell, from the tables.
+    #[inline]
+    pub fn delta(&self, region: Region, r: f64, alpha: f64) -> i16 {
+        self.delta_for_strength(region, self.strength(r, alpha))
+    }
+
+    #[inline]
+    fn delta_for_strength(&self, region: Region, u: f64) -> i16 {
+        let table = match region {
+            Region::Occupied => &self.occupied_table,
+            Region::Empty => &self.empty_table,
+        };
+        let (i, frac) = table_position(u * TABLE_STEPS as f64);
+        let value = table[i] + (table[i + 1] - table[i]) * frac as f32;
+        // Round half away from zero without a libm call.
+        (value + 0.5f32.copysign(value)) as i16
+    }
+
+    /// `u` for a point in a cone's own frame, angle from the table.
+    #[inline]
+    fn local_strength(&self, local: LocalPoint, r: f64) -> f64 {
+        let half_angle_term = if local.along > 0.0 {
+            let (i, frac) = table_position(local.across.abs() / local.along * self.angle_table_scale);
+            self.angle_table[i] + (self.angle_table[i + 1] - self.angle_table[i]) * frac
+        } else {
+            0.0
+        };
+        (1.0 - 0.5 * r * self.inv_max_range - half_angle_term).clamp(0.0, 1.0)
+    }
+
+    /// The sector a reading from a sensor at `sensor` covers.
+    pub fn sector(&self, sensor: &Pose2, reading: &Reading) -> Sector {
+        Sector::from_pose(sensor, self.params.half_angle, reading.extent)
+    }
+
+    /// Calls `visit(cell, delta)` for every cell of the cone of a reading
+    /// `range` taken by a sensor at `sensor` (world frame), once each, with
+    /// its nonzero log-odds delta. Fails, visiting nothing, on a non-finite
+    /// pose or range, or coordinates beyond the grid.
+    pub fn for_each_cell(
+        &self,
+        sensor: &Pose2,
+        range: f64,
+        res: Resolution,
+        mut visit: impl FnMut(CellIndex, i16),
+    ) -> Result<(), GridError> {
+        let sensor = sensor.validate("sensor pose")?;
+        let reading = self.reading(range)?;
+        if reading.extent <= 0.0 {
+            return Ok(());
+        }
+        let sector = self.sector(&sensor, &reading);
+        let bounds = sector.cell_box(res)?;
+        sector.for_each_cell(res, &bounds, |cell, local| {
+            let r = local.distance();
+            if let Some(region) = self.region(&reading, r) {
+                let delta = self.delta_for_strength(region, self.local_strength(local, r));
+                if delta != 0 {
+                    visit(cell, delta);
+                }
+            }
+        });
+        Ok(())
+    }
+
+    /// The plain way: every cell of the cone's bounding box, angle by
+    /// `atan2` and delta by `ln`, with no tables and no row clipping. The
+    /// reference the fast path is tested against, and the benchmark baseline.
+    pub fn for_each_cell_reference(
+        &self,
+        sensor: &Pose2,
+        range: f64,
+        res: Resolution,
+        mut visit: impl FnMut(CellIndex, i16),
+    ) -> Result<(), GridError> {
+        let sensor = sensor.validate("sensor pose")?;
+        let reading = self.reading(range)?;
+        if reading.extent <= 0.0 {
+            return Ok(());
+        }
+        let sector = self.sector(&sensor, &reading);
+        let bounds = sector.cell_box(res)?;
+        for y in bounds.min.y..=bounds.max.y {
+            for x in bounds.min.x..=bounds.max.x {
+                let cell = CellIndex::new(x, y);
+                let (cx, cy) = res.cell_center(cell);
+                let (dx, dy) = (cx - sensor.x, cy - sensor.y);
+                let bearing = dy.atan2(dx);
+                let alpha = crate::pose::normalize_angle(bearing - sensor.theta).abs();
+                let local = LocalPoint {
+                    along: dx.hypot(dy) * alpha.cos(),
+                    across: dx.hypot(dy) * alpha.sin(),
+                };
+                // Membership by the same test the fast path uses, so the two
+                // agree on cells whose centres lie on the cone's edge.
+                let exact = LocalPoint {
+                    along: dx * sensor.theta.cos() + dy * sensor.theta.sin(),
+                    across: dy * sensor.theta.cos() - dx * sensor.theta.sin(),
+                };
+                if !sector.contains_local(exact, self.tan_half_angle) {
+                    continue;
+                }
+                let r = local.along.hypot(local.across);
+                if let Some(region) = self.region(&reading, r) {
+                    let p = self.probability(region, r, alpha);
+                    let delta = (logit(p) * LOG_ODDS_SCALE).round() as i16;
+                    if delta != 0 {
+                        visit(cell, delta);
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Eqs. 3.1 and 3.3–3.4 with their guards, as a probability of occupancy.
+fn occupied_probability(p: &SonarModelParams, region: Region, u: f64) -> f64 {
+    match region {
+        Region::Occupied => (u * p.max_occupied).max(0.5),
+        Region::Empty => 1.0 - u.clamp(0.5, p.max_empty),
+    }
+}
+
+/// The table index below `pos` and the fraction past it, kept inside the table.
+#[inline]
+fn table_position(pos: f64) -> (usize, f64) {
+    let pos = pos.clamp(0.0, TABLE_STEPS as f64);
+    let i = (pos as usize).min(TABLE_STEPS - 1);
+    (i, pos - i as f64)
+}
+
+fn exact_delta(p: &SonarModelParams, region: Region, u: f64) -> f64 {
+    logit(occupied_probability(p, region, u)) * LOG_ODDS_SCALE
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use std::collections::HashMap;
+
+    fn model() -> SonarModel {
+        SonarModel::new(SonarModelParams::default()).unwrap()
+    }
+
+    fn cells(model: &SonarModel, pose: Pose2, range: f64) -> HashMap<CellIndex, i16> {
+        let mut out = HashMap::new();
+        model
+            .for_each_cell(&pose, range, Resolution::DEFAULT, |cell, delta| {
+                assert!(
+                    out.insert(cell, delta).is_none(),
+                    "cell {cell:?} visited twice"
+                );
+            })
+            .unwrap();
+        out
+    }
+
+    #[test]
+    fn thesis_equations_on_the_axis() {
+        let m = model();
+        let p = m.params();
+        // Eq. 3.1 on the axis at 2 m: ((R - r)/R + 1) / 2 * Max_occupied.
+        let expected = ((p.max_range - 2.0) / p.max_range + 1.0) / 2.0 * p.max_occupied;
+        assert!((m.probability(Region::Occupied, 2.0, 0.0) - expected).abs() < 1e-12);
+        // Eq. 3.4 at 2 m, half-way to the cone's edge.
+        let beta = p.half_angle;
+        let empty = ((p.max_range - 2.0) / p.max_range + 0.5) / 2.0;
+        assert!((m.probability(Region::Empty, 2.0, beta / 2.0) - (1.0 - empty)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn guards_keep_each_region_on_its_side() {
+        let m = model();
+        let beta = m.params().half_angle;
+        // Far and at the edge, eq. 3.1 alone would fall below 0.5.
+        assert_eq!(m.probability(Region::Occupied, 10.0, beta), 0.5);
+        assert_eq!(m.probability(Region::Empty, 10.0, beta), 0.5);
+        // At the sensor eq. 3.4 reaches 1; the cap keeps log-odds finite.
+        assert!((m.probability(Region::Empty, 0.0, 0.0) - 0.02).abs() < 1e-12);
+    }
+
+    #[test]
+    fn regions_of_a_reading_at_two_metres() {
+        let m = model();
+        let pose = Pose2::new(0.0, 0.0, 0.0);
+        let deltas = cells(&m, pose, 2.0);
+        let res = Resolution::DEFAULT;
+        let tol = m.params().region_i_tolerance;
+        assert!(deltas.values().any(|&d| d > 0) && deltas.values().any(|&d| d < 0));
+        for (cell, delta) in &deltas {
+            let (cx, cy) = res.cell_center(*cell);
+            let r = cx.hypot(cy);
+            assert!(r <= 2.0 + tol + 1e-9, "cell beyond region I at {r}");
+            if r < 2.0 - tol {
+                assert!(*delta < 0, "region II cell at {r} pushed towards occupied");
+            } else {
+                assert!(*delta > 0, "region I cell at {r} pushed towards empty");
+            }
+        }
+        // The strongest occupied cell lies on the axis, at the near edge of region I.
+        let (best, _) = deltas.iter().max_by_key(|(_, d)| **d).unwrap();
+        let (bx, by) = res.cell_center(*best);
+        assert!(
+            by.abs() < res.metres(),
+            "strongest cell off the axis: {best:?}"
+        );
+        assert!(
+            (bx - (2.0 - tol)).abs() <= res.metres(),
+            "strongest cell at {bx}"
+        );
+    }
+
+    #[test]
+    fn no_echo_marks_free_space_only_out_to_its_limit() {
+        let m = model();
+        let deltas = cells(&m, Pose2::new(1.0, -2.0, 1.0), 50.0);
+        assert!(!deltas.is_empty());
+        let limit = m.params().no_echo_free_range;
+        for (cell, delta) in &deltas {
+            let (cx, cy) = Resolution::DEFAULT.cell_center(*cell);
+            assert!(*delta < 0);
+            assert!((cx - 1.0).hypot(cy + 2.0) <= limit + 1e-9);
+        }
+        let ignoring = SonarModel::new(SonarModelParams {
+            no_echo_free_range: 0.0,
+            ..SonarModelParams::default()
+        })
+        .unwrap();
+        assert!(cells(&ignoring, Pose2::default(), m.params().max_range).is_empty());
+    }
+
+    #[test]
+    fn bad_readings_and_parameters_are_errors() {
+        let m = model();
+        let res = Resolution::DEFAULT;
+        for range in [f64::NAN, f64::INFINITY, -0.5] {
+            assert!(
+                m.for_each_cell(&Pose2::default(), range, res, |_, _| {})
+                    .is_err()
+            );
+        }
+        let far = Pose2::new(1e15, 0.0, 0.0);
+        assert!(m.for_each_cell(&far, 1.0, res, |_, _| {}).is_err());
+        let bad = SonarModelParams {
+            max_occupied: 1.0,
+            ..SonarModelParams::default()
+        };
+        assert!(SonarModel::new(bad).is_err());
+        let bad = SonarModelParams {
+            half_angle: f64::NAN,
+            ..SonarModelParams::default()
+        };
+        assert!(SonarModel::new(bad).is_err());
+    }
+
+    #[test]
+    fn short_readings_count_as_the_minimum_range() {
+        let m = model();
+        assert_eq!(m.reading(0.01).unwrap().range, m.params().min_range);
+    }
+
+    proptest! {
+        /// The tabled, row-clipped path gives the cells and deltas of the
+        /// plain trigonometric one, each delta within one fixed-point unit.
+        #[test]
+        fn fast_path_matches_reference(
+            x in -20.0f64..20.0, y in -20.0f64..20.0, theta in -4.0f64..4.0, range in 0.0f64..12.0,
+        ) {
+            let m = model();
+            let pose = Pose2::new(x, y, theta);
+            let fast = cells(&m, pose, range);
+            let mut reference = HashMap::new();
+            m.for_each_cell_reference(&pose, range, Resolution::DEFAULT, |c, d| { reference.insert(c, d); }).unwrap();
+            for (cell, d) in &reference {
+                let f = fast.get(cell).copied().unwrap_or(0);
+                prop_assert!((i32::from(f) - i32::from(*d)).abs() <= 1, "{cell:?}: {f} vs {d}");
+            }
+            for (cell, f) in &fast {
+                let d = reference.get(cell).copied().unwrap_or(0);
+                prop_assert!((i32::from(*f) - i32::from(d)).abs() <= 1, "{cell:?}: {f} vs {d}");
+            }
+        }
+    }
+}

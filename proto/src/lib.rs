@@ -1,0 +1,17 @@
+//! The deog wire API, generated from `proto/deog/v1/*.proto`.
+//!
+//! # Layout
+//! - [`v1`]: every message and both services, `MapService` (the map server)
+//!   and `RobotService` (the simulator), with tonic clients and servers.
+//! - [`FILE_DESCRIPTOR_SET`]: the encoded descriptors, for the gRPC reflection
+//!   service.
+
+/// Version 1 of the API, package `deog.v1`.
+#[allow(missing_docs, clippy::all, clippy::pedantic)]
+pub mod v1 {
+    tonic::include_proto!("deog.v1");
+}
+
+/// The encoded `FileDescriptorSet` of every deog proto file.
+pub const FILE_DESCRIPTOR_SET: &[u8] =
+    include_bytes!(concat!(env!("OUT_DIR"), "/deog_descriptor.bin"));
