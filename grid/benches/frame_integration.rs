@@ -1,3 +1,4 @@
+#![allow(missing_docs)] // criterion_group! generates an undocumented function.
 //! Frame integration: Scout frames (16 sonars) at 0.05 m cells, ranges cast
 //! in a furnished 10 m × 8 m room, turned into per-tile log-odds deltas.
 //!
@@ -13,8 +14,8 @@ use std::hint::black_box;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use deog_grid::frame::combine;
 use deog_grid::{
-    CellIndex, ClampLimits, FrameIntegrator, Pose2, Resolution, SensorRing, SonarModel, SonarModelParams, TileDelta,
-    TileMap, TileSize, cast_cone,
+    CellIndex, ClampLimits, FrameIntegrator, Pose2, Resolution, SensorRing, SonarModel,
+    SonarModelParams, TileDelta, TileMap, TileSize, cast_cone,
 };
 
 const FRAMES: usize = 200;
@@ -25,18 +26,21 @@ fn room() -> TileMap {
     let res = Resolution::DEFAULT;
     let mut map = TileMap::new(res, TileSize::DEFAULT, ClampLimits::default());
     let boxes: [(f64, f64, f64, f64); 8] = [
-        (-0.1, -0.1, 10.1, 0.0),  // south wall
-        (-0.1, 8.0, 10.1, 8.1),   // north wall
-        (-0.1, -0.1, 0.0, 8.1),   // west wall
-        (10.0, -0.1, 10.1, 8.1),  // east wall
-        (3.0, 3.0, 4.2, 3.8),     // table
-        (7.5, 6.0, 9.9, 7.9),     // cabinet
-        (6.0, 2.0, 6.3, 2.3),     // pillar
-        (0.1, 5.0, 0.9, 7.2),     // sofa
+        (-0.1, -0.1, 10.1, 0.0), // south wall
+        (-0.1, 8.0, 10.1, 8.1),  // north wall
+        (-0.1, -0.1, 0.0, 8.1),  // west wall
+        (10.0, -0.1, 10.1, 8.1), // east wall
+        (3.0, 3.0, 4.2, 3.8),    // table
+        (7.5, 6.0, 9.9, 7.9),    // cabinet
+        (6.0, 2.0, 6.3, 2.3),    // pillar
+        (0.1, 5.0, 0.9, 7.2),    // sofa
     ];
     let size = TileSize::DEFAULT;
     for (x0, y0, x1, y1) in boxes {
-        let (a, b) = (res.cell_of(x0, y0).unwrap(), res.cell_of(x1 - 1e-9, y1 - 1e-9).unwrap());
+        let (a, b) = (
+            res.cell_of(x0, y0).unwrap(),
+            res.cell_of(x1 - 1e-9, y1 - 1e-9).unwrap(),
+        );
         for y in a.y..=b.y {
             for x in a.x..=b.x {
                 let (key, offset) = size.split(CellIndex::new(x, y));
@@ -70,7 +74,13 @@ fn frames(model: &SonarModel, ring: &SensorRing) -> Vec<(Pose2, Vec<f64>)> {
         .collect()
 }
 
-fn baseline(model: &SonarModel, ring: &SensorRing, size: TileSize, pose: &Pose2, ranges: &[f64]) -> Vec<TileDelta> {
+fn baseline(
+    model: &SonarModel,
+    ring: &SensorRing,
+    size: TileSize,
+    pose: &Pose2,
+    ranges: &[f64],
+) -> Vec<TileDelta> {
     let mut cells: HashMap<CellIndex, i16> = HashMap::new();
     for (sensor, &range) in ring.sensor_poses(pose).zip(ranges) {
         model
@@ -83,7 +93,10 @@ fn baseline(model: &SonarModel, ring: &SensorRing, size: TileSize, pose: &Pose2,
     let mut tiles: HashMap<_, TileDelta> = HashMap::new();
     for (cell, d) in cells {
         let (key, offset) = size.split(cell);
-        tiles.entry(key).or_insert_with(|| TileDelta::zero(key, size)).raw_mut()[offset.index(size)] = d;
+        tiles
+            .entry(key)
+            .or_insert_with(|| TileDelta::zero(key, size))
+            .raw_mut()[offset.index(size)] = d;
     }
     tiles.into_values().collect()
 }
@@ -93,7 +106,8 @@ fn bench(c: &mut Criterion) {
     let ring = SensorRing::scout();
     let size = TileSize::DEFAULT;
     let frames = frames(&model, &ring);
-    let mut integrator = FrameIntegrator::new(model.clone(), ring.clone(), Resolution::DEFAULT, size);
+    let mut integrator =
+        FrameIntegrator::new(model.clone(), ring.clone(), Resolution::DEFAULT, size);
 
     let mut out = Vec::new();
     let mut cell_deltas = 0u64;
@@ -107,7 +121,10 @@ fn bench(c: &mut Criterion) {
         cell_deltas as f64 / frames.len() as f64
     );
 
-    for (unit, amount) in [("frames", frames.len() as u64), ("cell_deltas", cell_deltas)] {
+    for (unit, amount) in [
+        ("frames", frames.len() as u64),
+        ("cell_deltas", cell_deltas),
+    ] {
         let mut group = c.benchmark_group(format!("frame_integration/{unit}"));
         group.throughput(Throughput::Elements(amount));
         group.sample_size(20);
@@ -130,5 +147,9 @@ fn bench(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench);
+criterion_group! {
+    name = benches;
+    config = Criterion::default();
+    targets = bench
+}
 criterion_main!(benches);

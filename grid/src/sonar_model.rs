@@ -223,7 +223,8 @@ impl SonarModel {
     #[inline]
     fn local_strength(&self, local: LocalPoint, r: f64) -> f64 {
         let half_angle_term = if local.along > 0.0 {
-            let (i, frac) = table_position(local.across.abs() / local.along * self.angle_table_scale);
+            let (i, frac) =
+                table_position(local.across.abs() / local.along * self.angle_table_scale);
             self.angle_table[i] + (self.angle_table[i + 1] - self.angle_table[i]) * frac
         } else {
             0.0
@@ -254,13 +255,23 @@ impl SonarModel {
         }
         let sector = self.sector(&sensor, &reading);
         let bounds = sector.cell_box(res)?;
+        // The sector ends at the reading's extent, so every visited cell is
+        // in region I or II: only the boundary between them is tested here.
+        let region_i_start = if reading.echo {
+            reading.range - self.params.region_i_tolerance
+        } else {
+            f64::INFINITY
+        };
         sector.for_each_cell(res, &bounds, |cell, local| {
             let r = local.distance();
-            if let Some(region) = self.region(&reading, r) {
-                let delta = self.delta_for_strength(region, self.local_strength(local, r));
-                if delta != 0 {
-                    visit(cell, delta);
-                }
+            let region = if r >= region_i_start {
+                Region::Occupied
+            } else {
+                Region::Empty
+            };
+            let delta = self.delta_for_strength(region, self.local_strength(local, r));
+            if delta != 0 {
+                visit(cell, delta);
             }
         });
         Ok(())
