@@ -16,6 +16,30 @@
 //! - [`frame`]: a whole frame folded into per-tile delta batches.
 //! - [`raycast`]: ray and cone casting on an occupancy view.
 //! - [`error`]: the crate's one error type.
+//!
+//! # Example
+//! One Scout frame, a wall 2 m ahead of every sonar, folded into tiles and
+//! applied to a map:
+//! ```
+//! use deog_grid::*;
+//!
+//! let model = SonarModel::new(SonarModelParams::default())?;
+//! let mut integrator =
+//!     FrameIntegrator::new(model, SensorRing::scout(), Resolution::DEFAULT, TileSize::DEFAULT);
+//! let mut deltas = Vec::new();
+//! let stats = integrator.integrate(&Pose2::new(0.0, 0.0, 0.0), &[2.0; 16], &mut deltas)?;
+//! assert_eq!(stats.tiles, deltas.len());
+//!
+//! let mut map = TileMap::new(Resolution::DEFAULT, TileSize::DEFAULT, ClampLimits::default());
+//! for delta in &deltas {
+//!     map.apply(delta)?;
+//! }
+//! // Just past 2 m ahead lies region I, probably occupied; at 1 m, empty.
+//! let wall = map.get(Resolution::DEFAULT.cell_of(2.2, 0.01)?).unwrap();
+//! let floor = map.get(Resolution::DEFAULT.cell_of(1.0, 0.01)?).unwrap();
+//! assert!(wall.probability() > 0.5 && floor.probability() < 0.5);
+//! # Ok::<(), GridError>(())
+//! ```
 
 pub mod cell;
 pub mod error;

@@ -59,34 +59,28 @@ impl Sector {
     /// sector, plus a one-cell margin.
     pub fn cell_box(&self, res: Resolution) -> Result<CellBox, GridError> {
         let (ax, ay) = (self.apex_x, self.apex_y);
-        let mut xs = vec![ax];
-        let mut ys = vec![ay];
-        for edge in [
-            self.heading - self.half_angle,
-            self.heading + self.half_angle,
-        ] {
-            xs.push(ax + self.radius * edge.cos());
-            ys.push(ay + self.radius * edge.sin());
-        }
-        // The arc's extreme points along each axis, where they fall inside.
+        // Extreme points: the apex, both ends of the arc, and the arc's
+        // points along ±x and ±y where they fall inside the cone.
+        let (mut min_x, mut min_y, mut max_x, mut max_y) = (ax, ay, ax, ay);
+        let mut include = |angle: f64| {
+            let (x, y) = (
+                ax + self.radius * angle.cos(),
+                ay + self.radius * angle.sin(),
+            );
+            (min_x, max_x) = (min_x.min(x), max_x.max(x));
+            (min_y, max_y) = (min_y.min(y), max_y.max(y));
+        };
+        include(self.heading - self.half_angle);
+        include(self.heading + self.half_angle);
         for k in 0..4 {
             let angle = f64::from(k) * std::f64::consts::FRAC_PI_2;
-            let off = crate::pose::normalize_angle(angle - self.heading);
-            if off.abs() <= self.half_angle {
-                xs.push(ax + self.radius * angle.cos());
-                ys.push(ay + self.radius * angle.sin());
+            if crate::pose::normalize_angle(angle - self.heading).abs() <= self.half_angle {
+                include(angle);
             }
         }
-        let fold = |v: &[f64], f: fn(f64, f64) -> f64, start| v.iter().copied().fold(start, f);
         let m = res.metres();
-        let min = res.cell_of(
-            fold(&xs, f64::min, f64::INFINITY) - m,
-            fold(&ys, f64::min, f64::INFINITY) - m,
-        )?;
-        let max = res.cell_of(
-            fold(&xs, f64::max, f64::NEG_INFINITY) + m,
-            fold(&ys, f64::max, f64::NEG_INFINITY) + m,
-        )?;
+        let min = res.cell_of(min_x - m, min_y - m)?;
+        let max = res.cell_of(max_x + m, max_y + m)?;
         Ok(CellBox { min, max })
     }
 
