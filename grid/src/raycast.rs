@@ -91,19 +91,23 @@ pub fn cast_ray(
     let (step_x, mut next_x, delta_x) = axis(origin.x, cell.x, dir_x);
     let (step_y, mut next_y, delta_y) = axis(origin.y, cell.y, dir_y);
     let mut travelled = 0.0;
-    let max_steps = (end.x.abs_diff(cell.x) + end.y.abs_diff(cell.y)) as u64 + 2;
+    let max_steps = u64::from(end.x.abs_diff(cell.x)) + u64::from(end.y.abs_diff(cell.y)) + 2;
     for _ in 0..=max_steps {
         if view.occupancy(cell) == Occupancy::Occupied {
             return Ok(Some(travelled));
         }
-        if next_x < next_y {
+        // Stepping off the i32 grid ends the walk: nothing lies beyond it.
+        let stepped = if next_x < next_y {
             travelled = next_x;
             next_x += delta_x;
-            cell.x += step_x;
+            cell.x.checked_add(step_x).map(|x| cell.x = x)
         } else {
             travelled = next_y;
             next_y += delta_y;
-            cell.y += step_y;
+            cell.y.checked_add(step_y).map(|y| cell.y = y)
+        };
+        if stepped.is_none() {
+            break;
         }
         if travelled > max_range {
             break;
@@ -237,6 +241,18 @@ mod tests {
             .unwrap();
         let view = Cells(HashSet::from([outside]));
         assert_eq!(cast_cone(&view, RES, &sensor, beta, 10.0).unwrap(), None);
+    }
+
+    #[test]
+    fn rays_at_the_edge_of_the_grid_end_without_overflow() {
+        let view = Cells(HashSet::new());
+        let edge = f64::from(i32::MAX) * RES.metres() - 0.5;
+        assert_eq!(
+            cast_ray(&view, RES, &Pose2::new(edge, 0.0, 0.0), 0.45).unwrap(),
+            None
+        );
+        let corner = Pose2::new(-edge, -edge, -2.0);
+        assert_eq!(cast_ray(&view, RES, &corner, 0.45).unwrap(), None);
     }
 
     #[test]
