@@ -80,7 +80,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
         // Two laps of an ellipse around the table, turning as it goes.
         let t = i as f64 / args.frames as f64 * 2.0 * std::f64::consts::TAU;
         let pose = Pose2::new(5.0 + 3.0 * t.cos(), 4.0 + 2.2 * t.sin(), t + 1.7);
-        let ranges = SensorRing::scout()
+        let ranges = integrator
+            .ring()
             .sensor_poses(&pose)
             .map(|sensor| {
                 let hit = cast_cone(&truth, res, &sensor, params.half_angle, params.max_range)?;

@@ -84,12 +84,10 @@ impl FrameIntegrator {
             if reading.extent <= 0.0 {
                 continue;
             }
-            let bounds = self
-                .model
-                .sector(&sensor, &reading)
-                .cell_box(self.resolution)?;
+            let sector = self.model.sector(&sensor, &reading);
+            let bounds = sector.cell_box(self.resolution)?;
             frame_box = Some(frame_box.map_or(bounds, |b| b.union(&bounds)));
-            cones.push((sensor, range));
+            cones.push((sector, reading, bounds));
         }
         let Some(frame_box) = frame_box else {
             return Ok(FrameStats::default());
@@ -100,16 +98,17 @@ impl FrameIntegrator {
         self.scratch.clear();
         self.scratch.resize(width * height, 0);
         let scratch = &mut self.scratch;
-        for (sensor, range) in cones {
+        // Cones, readings and bounds were all checked above: nothing below fails.
+        for (sector, reading, bounds) in &cones {
             self.model
-                .for_each_cell(&sensor, range, self.resolution, |cell, delta| {
+                .visit_cone(sector, reading, self.resolution, bounds, |cell, delta| {
                     let col = (cell.x - frame_box.min.x) as usize;
                     let row = (cell.y - frame_box.min.y) as usize;
                     // Every visited cell lies in its cone's box, inside frame_box.
                     if let Some(slot) = scratch.get_mut(row * width + col) {
                         *slot = combine(*slot, delta);
                     }
-                })?;
+                });
         }
         Ok(self.fold_into_tiles(&frame_box, out))
     }

@@ -21,7 +21,7 @@
 //! since sonar loses echoes off walls struck at a grazing angle and a long
 //! free ray would cut through them. Set it to 0 to ignore such readings.
 
-use crate::cell::{CellIndex, Resolution};
+use crate::cell::{CellBox, CellIndex, Resolution};
 use crate::error::{GridError, within};
 use crate::log_odds::{LOG_ODDS_SCALE, logit};
 use crate::pose::Pose2;
@@ -246,7 +246,7 @@ impl SonarModel {
         sensor: &Pose2,
         range: f64,
         res: Resolution,
-        mut visit: impl FnMut(CellIndex, i16),
+        visit: impl FnMut(CellIndex, i16),
     ) -> Result<(), GridError> {
         let sensor = sensor.validate("sensor pose")?;
         let reading = self.reading(range)?;
@@ -255,6 +255,20 @@ impl SonarModel {
         }
         let sector = self.sector(&sensor, &reading);
         let bounds = sector.cell_box(res)?;
+        self.visit_cone(&sector, &reading, res, &bounds, visit);
+        Ok(())
+    }
+
+    /// The cell walk of [`Self::for_each_cell`] for a sector and bounds the
+    /// caller has already built and checked from a valid reading.
+    pub(crate) fn visit_cone(
+        &self,
+        sector: &Sector,
+        reading: &Reading,
+        res: Resolution,
+        bounds: &CellBox,
+        mut visit: impl FnMut(CellIndex, i16),
+    ) {
         // The sector ends at the reading's extent, so every visited cell is
         // in region I or II: only the boundary between them is tested here.
         let region_i_start = if reading.echo {
@@ -262,7 +276,7 @@ impl SonarModel {
         } else {
             f64::INFINITY
         };
-        sector.for_each_cell(res, &bounds, |cell, local| {
+        sector.for_each_cell(res, bounds, |cell, local| {
             let r = local.distance();
             let region = if r >= region_i_start {
                 Region::Occupied
@@ -274,7 +288,6 @@ impl SonarModel {
                 visit(cell, delta);
             }
         });
-        Ok(())
     }
 
     /// The plain way: every cell of the cone's bounding box, angle by
@@ -299,12 +312,7 @@ impl SonarModel {
                 let cell = CellIndex::new(x, y);
                 let (cx, cy) = res.cell_center(cell);
                 let (dx, dy) = (cx - sensor.x, cy - sensor.y);
-                let bearing = dy.atan2(dx);
-                let alpha = crate::pose::normalize_angle(bearing - sensor.theta).abs();
-                let local = LocalPoint {
-                    along: dx.hypot(dy) * alpha.cos(),
-                    across: dx.hypot(dy) * alpha.sin(),
-                };
+                let alpha = crate::pose::normalize_angle(dy.atan2(dx) - sensor.theta).abs();
                 // Membership by the same test the fast path uses, so the two
                 // agree on cells whose centres lie on the cone's edge.
                 let exact = LocalPoint {
@@ -314,7 +322,7 @@ impl SonarModel {
                 if !sector.contains_local(exact, self.tan_half_angle) {
                     continue;
                 }
-                let r = local.along.hypot(local.across);
+                let r = dx.hypot(dy);
                 if let Some(region) = self.region(&reading, r) {
                     let p = self.probability(region, r, alpha);
                     let delta = (logit(p) * LOG_ODDS_SCALE).round() as i16;
