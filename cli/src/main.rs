@@ -1,6 +1,8 @@
 //! `deog`: every process of the system as a subcommand.
 
 mod demo;
+mod server;
+mod signal;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -19,6 +21,9 @@ enum Command {
     /// Maps the embedded default room in-process with the grid core and
     /// writes the map and a quality summary.
     Demo(demo::DemoArgs),
+    /// Runs the map server: maps, frames and poses in an embedded store,
+    /// served over gRPC.
+    Server(server::ServerArgs),
 }
 
 fn main() -> Result<()> {
@@ -30,5 +35,6 @@ fn main() -> Result<()> {
         .init();
     match Cli::parse().command {
         Command::Demo(args) => demo::run(args),
+        Command::Server(args) => server::run(args),
     }
 }

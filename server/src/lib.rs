@@ -1,7 +1,30 @@
 //! The map server: the central storage of deog (the thesis's Centralized
-//! Storage System, section 7.1).
+//! Storage System, section 7.1), served over gRPC.
 //!
 //! # Layout
-//! This crate holds the gRPC `MapService` of `deog-proto` over an embedded
-//! store. Its tile arithmetic is `deog-grid`'s [`Tile`](deog_grid::Tile); the
-//! service itself is not written yet, and nothing here serves requests.
+//! - [`store`]: the [`Store`] trait and its embedded default on sled
+//!   ([`SledStore`]); records and their byte encodings.
+//! - [`writer`]: the group-commit writer thread, the one place the store
+//!   changes: batches are applied in arrival order, once, and acknowledged
+//!   after one flush per group.
+//! - [`events`]: bounded broadcast channels for watchers and subscribers.
+//! - [`convert`]: wire messages to checked domain values; request [`Limits`].
+//! - [`service`]: the thin `MapService` handlers.
+//! - [`auth`]: the optional bearer-token check.
+//! - [`serve`](mod@serve): [`serve()`] with health, reflection and TLS, until a
+//!   shutdown future resolves.
+//! - [`error`]: [`StoreError`] and its one mapping to a gRPC status.
+
+pub mod auth;
+pub mod convert;
+pub mod error;
+pub mod events;
+pub mod serve;
+pub mod service;
+pub mod store;
+pub mod writer;
+
+pub use convert::Limits;
+pub use error::StoreError;
+pub use serve::{MAP_SERVICE_NAME, ServeError, ServerConfig, TlsIdentity, serve};
+pub use store::{SledConfig, SledStore, Store};

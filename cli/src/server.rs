@@ -1,0 +1,86 @@
+//! `deog server`: the map server process.
+
+use anyhow::{Context, Result};
+use clap::Args;
+use deog_server::{Limits, ServerConfig, SledConfig, SledStore, TlsIdentity};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// Options of `deog server`.
+#[derive(Debug, Args)]
+pub struct ServerArgs {
+    /// Address to listen on (port 0 picks a free port, printed at start).
+    #[arg(long, env = "DEOG_LISTEN", default_value = "127.0.0.1:50051")]
+    listen: SocketAddr,
+    /// Data directory of the embedded store; created if missing.
+    #[arg(long, env = "DEOG_DATA", default_value = "deog-data")]
+    data: PathBuf,
+    /// File holding the bearer token every map call must carry.
+    #[arg(long, env = "DEOG_TOKEN_FILE")]
+    token_file: Option<PathBuf>,
+    /// TLS certificate chain (PEM); needs --tls-key.
+    #[arg(long, env = "DEOG_TLS_CERT", requires = "tls_key")]
+    tls_cert: Option<PathBuf>,
+    /// TLS private key (PEM); needs --tls-cert.
+    #[arg(long, env = "DEOG_TLS_KEY", requires = "tls_cert")]
+    tls_key: Option<PathBuf>,
+    /// Page cache of the store, MiB: what bounds the server's memory.
+    #[arg(long, env = "DEOG_CACHE_MB", default_value_t = 64)]
+    cache_mb: u64,
+    /// Largest request message accepted, bytes.
+    #[arg(long, env = "DEOG_MAX_MESSAGE_BYTES", default_value_t = Limits::default().max_message_bytes)]
+    max_message_bytes: usize,
+}
+
+/// Runs the server until ctrl-c or SIGTERM.
+pub fn run(args: ServerArgs) -> Result<()> {
+    let token = args
+        .token_file
+        .as_ref()
+        .map(|path| {
+            let token = std::fs::read_to_string(path)
+                .with_context(|| format!("reading token file {}", path.display()))?;
+            let token = token.trim().to_string();
+            anyhow::ensure!(!token.is_empty(), "token file {} is empty", path.display());
+            Ok(token)
+        })
+        .transpose()?;
+    let tls = match (&args.tls_cert, &args.tls_key) {
+        (Some(cert), Some(key)) => Some(TlsIdentity {
+            cert_pem: std::fs::read(cert).with_context(|| format!("reading {}", cert.display()))?,
+            key_pem: std::fs::read(key).with_context(|| format!("reading {}", key.display()))?,
+        }),
+        _ => None,
+    };
+    let config = ServerConfig {
+        limits: Limits {
+            max_message_bytes: args.max_message_bytes,
+            ..Limits::default()
+        },
+        token,
+        tls,
+        ..ServerConfig::default()
+    };
+    let store = SledStore::open(&SledConfig {
+        path: args.data.clone(),
+        cache_bytes: args.cache_mb << 20,
+    })
+    .with_context(|| format!("opening the store in {}", args.data.display()))?;
+    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    runtime.block_on(async move {
+        let listener = tokio::net::TcpListener::bind(args.listen)
+            .await
+            .with_context(|| format!("binding {}", args.listen))?;
+        let addr = listener.local_addr()?;
+        tracing::info!(
+            %addr,
+            data = %args.data.display(),
+            tls = config.tls.is_some(),
+            auth = config.token.is_some(),
+            "map server listening"
+        );
+        deog_server::serve(Arc::new(store), listener, config, crate::signal::shutdown()).await?;
+        Ok(())
+    })
+}

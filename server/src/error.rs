@@ -1,0 +1,89 @@
+//! The one error type of the map server, and its gRPC status.
+
+use deog_grid::GridError;
+use thiserror::Error;
+use tonic::{Code, Status};
+
+/// Why a map-server operation failed. Each variant maps to one gRPC code in
+/// the single `From<StoreError> for Status` below.
+#[derive(Debug, Error)]
+pub enum StoreError {
+    /// A request field was malformed; `field` names it as the proto does.
+    #[error("{field}: {reason}")]
+    InvalidArgument {
+        /// Path of the offending field, e.g. `tiles[3].cells`.
+        field: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// A request was larger than the server accepts.
+    #[error("{field}: {reason}")]
+    TooLarge {
+        /// The field or message that is too large.
+        field: String,
+        /// The size and the limit.
+        reason: String,
+    },
+    /// No map has this name.
+    #[error("map {0:?} does not exist")]
+    MapNotFound(String),
+    /// A map with this name exists already.
+    #[error("map {0:?} already exists")]
+    MapExists(String),
+    /// The server is shutting down and takes no more writes.
+    #[error("the map server is shutting down")]
+    ShuttingDown,
+    /// The embedded database failed.
+    #[error("storage failure: {0}")]
+    Backend(String),
+    /// Stored bytes could not be decoded: the data directory is damaged or
+    /// was written by an incompatible version.
+    #[error("stored record {what} is corrupt: {reason}")]
+    Corrupt {
+        /// Which record.
+        what: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+}
+
+impl StoreError {
+    /// An invalid-argument error naming `field`.
+    pub fn invalid(field: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self::InvalidArgument {
+            field: field.into(),
+            reason: reason.into(),
+        }
+    }
+
+    /// An invalid-argument error from a grid-core refusal, under `prefix`
+    /// (the grid names its own field; the prefix says where it sits).
+    pub fn grid(prefix: &str, error: GridError) -> Self {
+        let reason = error.to_string();
+        if prefix.is_empty() {
+            Self::invalid("request", reason)
+        } else {
+            Self::invalid(prefix, reason)
+        }
+    }
+}
+
+impl From<sled::Error> for StoreError {
+    fn from(error: sled::Error) -> Self {
+        Self::Backend(error.to_string())
+    }
+}
+
+impl From<StoreError> for Status {
+    fn from(error: StoreError) -> Self {
+        let code = match &error {
+            StoreError::InvalidArgument { .. } => Code::InvalidArgument,
+            StoreError::TooLarge { .. } => Code::ResourceExhausted,
+            StoreError::MapNotFound(_) => Code::NotFound,
+            StoreError::MapExists(_) => Code::AlreadyExists,
+            StoreError::ShuttingDown => Code::Unavailable,
+            StoreError::Backend(_) | StoreError::Corrupt { .. } => Code::Internal,
+        };
+        Status::new(code, error.to_string())
+    }
+}

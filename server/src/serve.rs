@@ -1,0 +1,158 @@
+//! Running the map server on a listener until a shutdown future resolves.
+
+use crate::auth::BearerAuth;
+use crate::convert::Limits;
+use crate::events::Events;
+use crate::service::MapServer;
+use crate::store::Store;
+use crate::writer::Writer;
+use deog_proto::v1::map_service_server::MapServiceServer;
+use std::future::Future;
+use std::sync::Arc;
+use std::time::Duration;
+use thiserror::Error;
+use tokio::net::TcpListener;
+use tokio_stream::wrappers::TcpListenerStream;
+use tokio_util::sync::CancellationToken;
+use tonic::transport::{Identity, Server, ServerTlsConfig};
+
+/// The gRPC name of the map service, as the health service reports it.
+pub const MAP_SERVICE_NAME: &str = "deog.v1.MapService";
+
+/// A certificate chain and private key, PEM.
+#[derive(Clone)]
+pub struct TlsIdentity {
+    /// Certificate chain, PEM.
+    pub cert_pem: Vec<u8>,
+    /// Private key, PEM.
+    pub key_pem: Vec<u8>,
+}
+
+impl std::fmt::Debug for TlsIdentity {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TlsIdentity").finish_non_exhaustive()
+    }
+}
+
+/// How the server runs.
+#[derive(Debug, Clone)]
+pub struct ServerConfig {
+    /// Request limits.
+    pub limits: Limits,
+    /// Bearer token every map-service call must carry; `None` turns
+    /// authentication off. Health and reflection stay open.
+    pub token: Option<String>,
+    /// Serve TLS with this identity; `None` serves plain HTTP/2.
+    pub tls: Option<TlsIdentity>,
+    /// Messages buffered per response stream.
+    pub stream_buffer: usize,
+    /// Events buffered per broadcast channel before a watcher is lagging.
+    pub event_buffer: usize,
+    /// Writes queued for the writer before senders wait.
+    pub write_queue: usize,
+    /// How long in-flight calls may take to finish after shutdown begins.
+    pub shutdown_grace: Duration,
+}
+
+impl Default for ServerConfig {
+    fn default() -> Self {
+        Self {
+            limits: Limits::default(),
+            token: None,
+            tls: None,
+            stream_buffer: 32,
+            event_buffer: 1024,
+            write_queue: 64,
+            shutdown_grace: Duration::from_secs(5),
+        }
+    }
+}
+
+/// Why the server could not run.
+#[derive(Debug, Error)]
+pub enum ServeError {
+    /// TLS could not be set up from the identity.
+    #[error("TLS setup failed: {0}")]
+    Tls(tonic::transport::Error),
+    /// The transport failed while serving.
+    #[error("serving failed: {0}")]
+    Transport(#[from] tonic::transport::Error),
+    /// The writer thread could not be started.
+    #[error("could not start the writer thread: {0}")]
+    Writer(#[from] std::io::Error),
+}
+
+/// Serves the map service, health and reflection on `listener` until
+/// `shutdown` resolves; then stops long-lived streams, lets in-flight calls
+/// finish (up to the grace period), and flushes the store.
+pub async fn serve<S: Store>(
+    store: Arc<S>,
+    listener: TcpListener,
+    config: ServerConfig,
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), ServeError> {
+    let events = Arc::new(Events::new(config.event_buffer));
+    let writer = Writer::start(store.clone(), events.clone(), config.write_queue)?;
+    let stop_streams = CancellationToken::new();
+    let service = MapServer::new(
+        store,
+        writer.handle(),
+        events,
+        config.limits,
+        config.stream_buffer,
+        stop_streams.clone(),
+    );
+    // tonic's own decoder limit is a backstop well above ours, so that an
+    // oversized message reaches our check and gets a message naming it.
+    let transport_limit = config.limits.max_message_bytes.saturating_mul(2).saturating_add(1 << 20);
+    let map_service = tonic::service::interceptor::InterceptedService::new(
+        MapServiceServer::new(service)
+            .max_decoding_message_size(transport_limit)
+            .max_encoding_message_size(usize::MAX),
+        BearerAuth::new(config.token.clone()),
+    );
+
+    let (health, health_service) = tonic_health::server::health_reporter();
+    health
+        .set_service_status(MAP_SERVICE_NAME, tonic_health::ServingStatus::Serving)
+        .await;
+    let reflection = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(deog_proto::FILE_DESCRIPTOR_SET)
+        .build_v1()
+        .map_err(|e| std::io::Error::other(e.to_string()))?;
+
+    let mut builder = Server::builder();
+    if let Some(tls) = &config.tls {
+        builder = builder
+            .tls_config(ServerTlsConfig::new().identity(Identity::from_pem(&tls.cert_pem, &tls.key_pem)))
+            .map_err(ServeError::Tls)?;
+    }
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let router = builder
+        .add_service(health_service)
+        .add_service(reflection)
+        .add_service(map_service);
+    let serving = router.serve_with_incoming_shutdown(TcpListenerStream::new(listener), async {
+        let _ = stop_rx.await;
+    });
+    tokio::pin!(serving);
+    let result = tokio::select! {
+        result = &mut serving => result,
+        () = shutdown => {
+            tracing::info!("shutting down: finishing in-flight calls");
+            health.set_service_status(MAP_SERVICE_NAME, tonic_health::ServingStatus::NotServing).await;
+            stop_streams.cancel();
+            let _ = stop_tx.send(());
+            match tokio::time::timeout(config.shutdown_grace, &mut serving).await {
+                Ok(result) => result,
+                Err(_) => {
+                    tracing::warn!("calls still open after the grace period; closing them");
+                    Ok(())
+                }
+            }
+        }
+    };
+    writer.stop().await;
+    tracing::info!("store flushed; map server stopped");
+    result.map_err(ServeError::from)
+}

@@ -1,0 +1,632 @@
+//! The gRPC `MapService`: thin handlers over the store, the writer and the
+//! event channels.
+//!
+//! Streams never buffer without bound. Every response stream is a bounded
+//! channel; a watcher that stops reading first fills its channel, then falls
+//! behind on the event broadcast, and is then sent one `Resync` (tiles) or
+//! re-read from the store (frames, poses, which are kept), never queued.
+
+use crate::convert::{self, Limits};
+use crate::error::StoreError;
+use crate::events::{Events, MapEvent};
+use crate::store::{MapRecord, Store, TileRange};
+use crate::writer::{Batch, FrameInput, WriterHandle};
+use deog_proto::v1 as pb;
+use deog_proto::v1::map_service_server::MapService;
+use std::sync::Arc;
+use tokio::sync::{broadcast, mpsc, oneshot};
+use tokio_stream::wrappers::ReceiverStream;
+use tokio_util::sync::CancellationToken;
+use tonic::{Request, Response, Status, Streaming};
+
+/// Batches one `ApplyUpdates` stream may have waiting for the writer.
+const IN_FLIGHT_BATCHES: usize = 64;
+/// Frames or poses read from the store per blocking call while catching up.
+const CATCH_UP_CHUNK: usize = 256;
+
+type ResponseStream<T> = ReceiverStream<Result<T, Status>>;
+
+/// The map service over store `S`.
+pub struct MapServer<S> {
+    store: Arc<S>,
+    writer: WriterHandle,
+    events: Arc<Events>,
+    limits: Limits,
+    stream_buffer: usize,
+    shutdown: CancellationToken,
+}
+
+impl<S> std::fmt::Debug for MapServer<S> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MapServer").field("limits", &self.limits).finish_non_exhaustive()
+    }
+}
+
+impl<S> Clone for MapServer<S> {
+    fn clone(&self) -> Self {
+        Self {
+            store: self.store.clone(),
+            writer: self.writer.clone(),
+            events: self.events.clone(),
+            limits: self.limits,
+            stream_buffer: self.stream_buffer,
+            shutdown: self.shutdown.clone(),
+        }
+    }
+}
+
+impl<S: Store> MapServer<S> {
+    /// The service; `shutdown` ends its long-lived streams.
+    pub fn new(
+        store: Arc<S>,
+        writer: WriterHandle,
+        events: Arc<Events>,
+        limits: Limits,
+        stream_buffer: usize,
+        shutdown: CancellationToken,
+    ) -> Self {
+        Self {
+            store,
+            writer,
+            events,
+            limits,
+            stream_buffer: stream_buffer.max(1),
+            shutdown,
+        }
+    }
+
+    fn record(&self, name: &str) -> Result<MapRecord, StoreError> {
+        self.store
+            .map(name)?
+            .ok_or_else(|| StoreError::MapNotFound(name.to_string()))
+    }
+
+    fn check_batch(&self, batch: pb::UpdateBatch) -> Result<Batch, StoreError> {
+        self.limits.check_size("UpdateBatch", &batch)?;
+        let map = convert::map_name("map", &batch.map)?;
+        let client_id = convert::client_id("client_id", &batch.client_id)?;
+        if batch.sequence == 0 {
+            return Err(StoreError::invalid("sequence", "must be at least 1"));
+        }
+        if batch.tiles.len() > self.limits.max_tiles_per_batch {
+            return Err(StoreError::TooLarge {
+                field: "tiles".into(),
+                reason: format!(
+                    "{} tiles exceed the server's limit of {} per batch",
+                    batch.tiles.len(),
+                    self.limits.max_tiles_per_batch
+                ),
+            });
+        }
+        let record = self.record(&map)?;
+        let size = record.settings.tile_size;
+        let deltas = batch
+            .tiles
+            .iter()
+            .enumerate()
+            .map(|(i, t)| convert::tile_delta(&format!("tiles[{i}]"), t, size, &self.limits))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Batch {
+            map,
+            client_id,
+            sequence: batch.sequence,
+            deltas,
+        })
+    }
+
+    /// Runs `produce` on a blocking thread, streaming what it sends.
+    fn blocking_stream<T: Send + 'static>(
+        &self,
+        produce: impl FnOnce(&mpsc::Sender<Result<T, Status>>) -> Result<(), StoreError> + Send + 'static,
+    ) -> ResponseStream<T> {
+        let (tx, rx) = mpsc::channel(self.stream_buffer);
+        tokio::task::spawn_blocking(move || {
+            if let Err(error) = produce(&tx) {
+                let _ = tx.blocking_send(Err(error.into()));
+            }
+        });
+        ReceiverStream::new(rx)
+    }
+}
+
+fn decode<T: prost::Message + Default>(bytes: &[u8], what: &str) -> Result<T, StoreError> {
+    T::decode(bytes).map_err(|e| StoreError::Corrupt {
+        what: what.to_string(),
+        reason: e.to_string(),
+    })
+}
+
+/// Reads a robot's stored frames from `from` on, in chunks, sending each;
+/// returns the sequence after the last one sent, or None once the client is gone.
+async fn send_frames_from<S: Store>(
+    store: &Arc<S>,
+    robot: &str,
+    mut next: u64,
+    tx: &mpsc::Sender<Result<pb::SonarFrame, Status>>,
+) -> Option<u64> {
+    loop {
+        let (store, name) = (store.clone(), robot.to_string());
+        let chunk = tokio::task::spawn_blocking(move || {
+            let mut out = Vec::new();
+            let mut failure = None;
+            let read = store.read_frames(&name, next, u64::MAX, &mut |seq, bytes| {
+                match decode::<pb::SonarFrame>(bytes, "frame") {
+                    Ok(frame) => out.push((seq, frame)),
+                    Err(e) => failure = Some(e),
+                }
+                failure.is_none() && out.len() < CATCH_UP_CHUNK
+            });
+            match (read, failure) {
+                (Err(e), _) | (Ok(()), Some(e)) => Err(e),
+                (Ok(()), None) => Ok(out),
+            }
+        })
+        .await;
+        let chunk = match chunk {
+            Ok(Ok(chunk)) => chunk,
+            Ok(Err(error)) => {
+                let _ = tx.send(Err(error.into())).await;
+                return None;
+            }
+            Err(_) => {
+                let _ = tx.send(Err(Status::internal("frame reader failed"))).await;
+                return None;
+            }
+        };
+        let full = chunk.len() == CATCH_UP_CHUNK;
+        for (seq, frame) in chunk {
+            tx.send(Ok(frame)).await.ok()?;
+            next = seq + 1;
+        }
+        if !full {
+            return Some(next);
+        }
+    }
+}
+
+#[tonic::async_trait]
+impl<S: Store> MapService for MapServer<S> {
+    async fn create_map(
+        &self,
+        request: Request<pb::CreateMapRequest>,
+    ) -> Result<Response<pb::MapInfo>, Status> {
+        let request = request.into_inner();
+        self.limits.check_size("CreateMapRequest", &request)?;
+        let name = convert::map_name("name", &request.name)?;
+        let settings = convert::map_settings(&request)?;
+        let record = self.writer.create_map(MapRecord::new(name, settings)).await?;
+        tracing::info!(map = %record.name, "map created");
+        Ok(Response::new(convert::map_info(&record)))
+    }
+
+    async fn list_maps(
+        &self,
+        _request: Request<pb::ListMapsRequest>,
+    ) -> Result<Response<pb::ListMapsResponse>, Status> {
+        let maps = self.store.maps()?.iter().map(convert::map_info).collect();
+        Ok(Response::new(pb::ListMapsResponse { maps }))
+    }
+
+    async fn get_map_info(&self, request: Request<pb::MapRef>) -> Result<Response<pb::MapInfo>, Status> {
+        let name = convert::map_name("name", &request.get_ref().name)?;
+        Ok(Response::new(convert::map_info(&self.record(&name)?)))
+    }
+
+    async fn clear_map(&self, request: Request<pb::MapRef>) -> Result<Response<pb::MapInfo>, Status> {
+        let name = convert::map_name("name", &request.get_ref().name)?;
+        let record = self.writer.clear_map(name).await?;
+        tracing::info!(map = %record.name, version = record.version, "map cleared");
+        Ok(Response::new(convert::map_info(&record)))
+    }
+
+    async fn delete_map(
+        &self,
+        request: Request<pb::MapRef>,
+    ) -> Result<Response<pb::DeleteMapResponse>, Status> {
+        let name = convert::map_name("name", &request.get_ref().name)?;
+        self.writer.delete_map(name.clone()).await?;
+        tracing::info!(map = %name, "map deleted");
+        Ok(Response::new(pb::DeleteMapResponse {}))
+    }
+
+    type ApplyUpdatesStream = ResponseStream<pb::UpdateAck>;
+
+    async fn apply_updates(
+        &self,
+        request: Request<Streaming<pb::UpdateBatch>>,
+    ) -> Result<Response<Self::ApplyUpdatesStream>, Status> {
+        enum Pending {
+            Ack(String, u64, oneshot::Receiver<Result<crate::writer::Ack, StoreError>>),
+            Fail(Status),
+        }
+        let mut inbound = request.into_inner();
+        let (out_tx, out_rx) = mpsc::channel(self.stream_buffer);
+        let (pending_tx, mut pending_rx) = mpsc::channel::<Pending>(IN_FLIGHT_BATCHES);
+        let server = self.clone();
+        // Reads batches and hands them to the writer, in order.
+        tokio::spawn(async move {
+            loop {
+                let message = tokio::select! {
+                    () = server.shutdown.cancelled() => {
+                        let _ = pending_tx.send(Pending::Fail(Status::unavailable("the map server is shutting down"))).await;
+                        break;
+                    }
+                    message = inbound.message() => message,
+                };
+                let batch = match message {
+                    Ok(Some(batch)) => batch,
+                    Ok(None) | Err(_) => break,
+                };
+                let (client, sequence) = (batch.client_id.clone(), batch.sequence);
+                let submitted = match server.check_batch(batch) {
+                    Ok(batch) => server.writer.submit_batch(batch).await,
+                    Err(error) => Err(error),
+                };
+                let pending = match submitted {
+                    Ok(ack) => Pending::Ack(client, sequence, ack),
+                    Err(error) => {
+                        tracing::debug!(%error, "update batch refused");
+                        Pending::Fail(error.into())
+                    }
+                };
+                let failed = matches!(pending, Pending::Fail(_));
+                if pending_tx.send(pending).await.is_err() || failed {
+                    break;
+                }
+            }
+        });
+        // Sends acknowledgements, in the order the batches came.
+        tokio::spawn(async move {
+            while let Some(pending) = pending_rx.recv().await {
+                let reply = match pending {
+                    Pending::Ack(client_id, sequence, ack) => match ack.await {
+                        Ok(Ok(ack)) => Ok(pb::UpdateAck {
+                            client_id,
+                            sequence,
+                            applied: ack.applied,
+                            map_version: ack.map_version,
+                        }),
+                        Ok(Err(error)) => Err(error.into()),
+                        Err(_) => Err(StoreError::ShuttingDown.into()),
+                    },
+                    Pending::Fail(status) => Err(status),
+                };
+                let failed = reply.is_err();
+                if out_tx.send(reply).await.is_err() || failed {
+                    break;
+                }
+            }
+        });
+        Ok(Response::new(ReceiverStream::new(out_rx)))
+    }
+
+    async fn get_update_cursor(
+        &self,
+        request: Request<pb::UpdateCursorRequest>,
+    ) -> Result<Response<pb::UpdateCursor>, Status> {
+        let request = request.into_inner();
+        let map = convert::map_name("map", &request.map)?;
+        let client = convert::client_id("client_id", &request.client_id)?;
+        self.record(&map)?;
+        let last_sequence = self.store.cursor(&map, &client)?;
+        Ok(Response::new(pb::UpdateCursor { last_sequence }))
+    }
+
+    type GetTilesStream = ResponseStream<pb::Tile>;
+
+    async fn get_tiles(
+        &self,
+        request: Request<pb::TileQuery>,
+    ) -> Result<Response<Self::GetTilesStream>, Status> {
+        let request = request.into_inner();
+        self.limits.check_size("TileQuery", &request)?;
+        let map = convert::map_name("map", &request.map)?;
+        let record = self.record(&map)?;
+        let size = record.settings.tile_size;
+        let newer_than = request.newer_than_version;
+        let wire = move |key, stored: &crate::store::StoredTile| {
+            convert::tile_to_wire(key, stored.version, (stored.version > newer_than).then_some(&stored.tile))
+        };
+        let store = self.store.clone();
+        let stream = match request.selection {
+            Some(pb::tile_query::Selection::Region(region)) => {
+                let region = convert::cell_box("region", Some(&region))?;
+                let (min, max) = size.tiles_covering(&region);
+                self.blocking_stream(move |tx| {
+                    store.tiles_in(&record, TileRange { min, max }, &mut |key, stored| {
+                        tx.blocking_send(Ok(wire(key, &stored))).is_ok()
+                    })
+                })
+            }
+            Some(pb::tile_query::Selection::Keys(keys)) => {
+                let keys = keys
+                    .keys
+                    .iter()
+                    .enumerate()
+                    .map(|(i, k)| convert::tile_key(&format!("keys.keys[{i}]"), Some(k), size, &self.limits))
+                    .collect::<Result<Vec<_>, _>>()?;
+                self.blocking_stream(move |tx| {
+                    for key in keys {
+                        if let Some(stored) = store.tile(&record, key)?
+                            && tx.blocking_send(Ok(wire(key, &stored))).is_err()
+                        {
+                            break;
+                        }
+                    }
+                    Ok(())
+                })
+            }
+            None => return Err(StoreError::invalid("selection", "give a region or keys").into()),
+        };
+        Ok(Response::new(stream))
+    }
+
+    type WatchTilesStream = ResponseStream<pb::TileEvent>;
+
+    async fn watch_tiles(
+        &self,
+        request: Request<pb::WatchTilesRequest>,
+    ) -> Result<Response<Self::WatchTilesStream>, Status> {
+        let request = request.into_inner();
+        let map = convert::map_name("map", &request.map)?;
+        let region = convert::cell_box("region", request.region.as_ref())?;
+        let record = self.record(&map)?;
+        let (min, max) = record.settings.tile_size.tiles_covering(&region);
+        let range = TileRange { min, max };
+        let mut events = self.events.watch_map(&map);
+        let (tx, rx) = mpsc::channel(self.stream_buffer);
+        let server = self.clone();
+        let include_cells = request.include_cells;
+        tokio::spawn(async move {
+            use pb::tile_event::Event;
+            loop {
+                let event = tokio::select! {
+                    () = server.shutdown.cancelled() => {
+                        let _ = tx.send(Err(Status::unavailable("the map server is shutting down"))).await;
+                        break;
+                    }
+                    () = tx.closed() => break,
+                    event = events.recv() => event,
+                };
+                let event = match event {
+                    Ok(MapEvent::TileChanged { key, version }) => {
+                        if !range.contains(key) {
+                            continue;
+                        }
+                        if !include_cells {
+                            Event::Changed(convert::tile_to_wire(key, version, None))
+                        } else {
+                            match server.store.tile(&record, key) {
+                                Ok(Some(stored)) => Event::Changed(convert::tile_to_wire(key, stored.version, Some(&stored.tile))),
+                                Ok(None) => continue,
+                                Err(error) => {
+                                    let _ = tx.send(Err(error.into())).await;
+                                    break;
+                                }
+                            }
+                        }
+                    }
+                    Ok(MapEvent::Cleared { version }) => Event::Cleared(pb::MapCleared { map_version: version }),
+                    Ok(MapEvent::Deleted) => {
+                        let _ = tx.send(Err(StoreError::MapNotFound(map.clone()).into())).await;
+                        break;
+                    }
+                    Err(broadcast::error::RecvError::Lagged(missed)) => {
+                        let map_version = server.store.map(&map).ok().flatten().map_or(0, |r| r.version);
+                        tracing::debug!(map = %map, missed, "tile watcher fell behind; sending resync");
+                        Event::Resync(pb::Resync {
+                            map_version,
+                            reason: format!("{missed} tile events dropped because the subscriber fell behind"),
+                        })
+                    }
+                    Err(broadcast::error::RecvError::Closed) => break,
+                };
+                if tx.send(Ok(pb::TileEvent { event: Some(event) })).await.is_err() {
+                    break;
+                }
+            }
+        });
+        Ok(Response::new(ReceiverStream::new(rx)))
+    }
+
+    async fn publish_frames(
+        &self,
+        request: Request<pb::PublishFramesRequest>,
+    ) -> Result<Response<pb::PublishFramesResponse>, Status> {
+        let request = request.into_inner();
+        self.limits.check_size("PublishFramesRequest", &request)?;
+        if request.frames.len() > self.limits.max_frames_per_request {
+            return Err(StoreError::TooLarge {
+                field: "frames".into(),
+                reason: format!(
+                    "{} frames exceed the server's limit of {} per request",
+                    request.frames.len(),
+                    self.limits.max_frames_per_request
+                ),
+            }
+            .into());
+        }
+        let mut inputs = Vec::with_capacity(request.frames.len());
+        for (i, frame) in request.frames.iter().enumerate() {
+            convert::sonar_frame(&format!("frames[{i}]"), frame, &self.limits)?;
+            inputs.push(FrameInput {
+                robot: frame.robot.clone(),
+                sequence: frame.sequence,
+                bytes: prost::Message::encode_to_vec(frame),
+            });
+        }
+        let (stored, duplicates) = self.writer.publish_frames(inputs).await?;
+        Ok(Response::new(pb::PublishFramesResponse { stored, duplicates }))
+    }
+
+    type ReadFramesStream = ResponseStream<pb::SonarFrame>;
+
+    async fn read_frames(
+        &self,
+        request: Request<pb::ReadFramesRequest>,
+    ) -> Result<Response<Self::ReadFramesStream>, Status> {
+        let request = request.into_inner();
+        let robot = convert::robot_name("robot", &request.robot)?;
+        let (from, to) = convert::sequence_range(request.from_sequence, request.to_sequence)?;
+        let limit = if request.limit == 0 { usize::MAX } else { request.limit as usize };
+        let store = self.store.clone();
+        Ok(Response::new(self.blocking_stream(move |tx| {
+            let mut sent = 0usize;
+            let mut failure = None;
+            store.read_frames(&robot, from, to, &mut |_, bytes| {
+                match decode::<pb::SonarFrame>(bytes, "frame") {
+                    Ok(frame) => {
+                        sent += 1;
+                        tx.blocking_send(Ok(frame)).is_ok() && sent < limit
+                    }
+                    Err(e) => {
+                        failure = Some(e);
+                        false
+                    }
+                }
+            })?;
+            failure.map_or(Ok(()), Err)
+        })))
+    }
+
+    type SubscribeFramesStream = ResponseStream<pb::SonarFrame>;
+
+    async fn subscribe_frames(
+        &self,
+        request: Request<pb::SubscribeFramesRequest>,
+    ) -> Result<Response<Self::SubscribeFramesStream>, Status> {
+        let request = request.into_inner();
+        let robot = convert::robot_name("robot", &request.robot)?;
+        // Subscribe before reading the store, so no frame falls in between.
+        let mut notes = self.events.watch_frames();
+        let mut next = match request.from_sequence {
+            0 => self.store.robot(&robot)?.map_or(1, |s| s.last_sequence + 1),
+            from => from,
+        };
+        let (tx, rx) = mpsc::channel(self.stream_buffer);
+        let server = self.clone();
+        tokio::spawn(async move {
+            let mut catch_up = true;
+            loop {
+                if catch_up {
+                    match send_frames_from(&server.store, &robot, next, &tx).await {
+                        Some(after) => next = after,
+                        None => break,
+                    }
+                }
+                let note = tokio::select! {
+                    () = server.shutdown.cancelled() => {
+                        let _ = tx.send(Err(Status::unavailable("the map server is shutting down"))).await;
+                        break;
+                    }
+                    () = tx.closed() => break,
+                    note = notes.recv() => note,
+                };
+                catch_up = match note {
+                    Ok(note) => &*note.robot == robot.as_str() && note.sequence >= next,
+                    // Frames are stored: a subscriber that fell behind re-reads them.
+                    Err(broadcast::error::RecvError::Lagged(_)) => true,
+                    Err(broadcast::error::RecvError::Closed) => break,
+                };
+            }
+        });
+        Ok(Response::new(ReceiverStream::new(rx)))
+    }
+
+    async fn list_robots(
+        &self,
+        _request: Request<pb::ListRobotsRequest>,
+    ) -> Result<Response<pb::ListRobotsResponse>, Status> {
+        let robots = self
+            .store
+            .robots()?
+            .into_iter()
+            .map(|(robot, s)| pb::RobotFrames {
+                robot,
+                first_sequence: s.first_sequence,
+                last_sequence: s.last_sequence,
+                frame_count: s.frame_count,
+            })
+            .collect();
+        Ok(Response::new(pb::ListRobotsResponse { robots }))
+    }
+
+    async fn publish_pose(
+        &self,
+        request: Request<pb::PoseEstimate>,
+    ) -> Result<Response<pb::PublishPoseResponse>, Status> {
+        let estimate = request.into_inner();
+        self.limits.check_size("PoseEstimate", &estimate)?;
+        convert::pose_estimate(&estimate)?;
+        self.writer.publish_pose(estimate).await?;
+        Ok(Response::new(pb::PublishPoseResponse {}))
+    }
+
+    type ReadPosesStream = ResponseStream<pb::PoseEstimate>;
+
+    async fn read_poses(
+        &self,
+        request: Request<pb::ReadPosesRequest>,
+    ) -> Result<Response<Self::ReadPosesStream>, Status> {
+        let request = request.into_inner();
+        let robot = convert::robot_name("robot", &request.robot)?;
+        let (from, to) = convert::sequence_range(request.from_sequence, request.to_sequence)?;
+        let store = self.store.clone();
+        Ok(Response::new(self.blocking_stream(move |tx| {
+            let mut failure = None;
+            store.read_poses(&robot, from, to, &mut |_, bytes| match decode::<pb::PoseEstimate>(bytes, "pose") {
+                Ok(pose) => tx.blocking_send(Ok(pose)).is_ok(),
+                Err(e) => {
+                    failure = Some(e);
+                    false
+                }
+            })?;
+            failure.map_or(Ok(()), Err)
+        })))
+    }
+
+    type WatchPosesStream = ResponseStream<pb::PoseEstimate>;
+
+    async fn watch_poses(
+        &self,
+        request: Request<pb::WatchPosesRequest>,
+    ) -> Result<Response<Self::WatchPosesStream>, Status> {
+        let request = request.into_inner();
+        let robot = match request.robot.as_str() {
+            "" => None,
+            name => Some(convert::robot_name("robot", name)?),
+        };
+        let mut poses = self.events.watch_poses();
+        let (tx, rx) = mpsc::channel(self.stream_buffer);
+        let server = self.clone();
+        tokio::spawn(async move {
+            loop {
+                let pose = tokio::select! {
+                    () = server.shutdown.cancelled() => {
+                        let _ = tx.send(Err(Status::unavailable("the map server is shutting down"))).await;
+                        break;
+                    }
+                    () = tx.closed() => break,
+                    pose = poses.recv() => pose,
+                };
+                match pose {
+                    Ok(pose) => {
+                        if robot.as_ref().is_some_and(|r| *r != pose.robot) {
+                            continue;
+                        }
+                        if tx.send(Ok((*pose).clone())).await.is_err() {
+                            break;
+                        }
+                    }
+                    // Estimates are stored; a watcher that fell behind skips
+                    // to the newest and can read the gap with ReadPoses.
+                    Err(broadcast::error::RecvError::Lagged(missed)) => {
+                        tracing::debug!(missed, "pose watcher fell behind");
+                    }
+                    Err(broadcast::error::RecvError::Closed) => break,
+                }
+            }
+        });
+        Ok(Response::new(ReceiverStream::new(rx)))
+    }
+}

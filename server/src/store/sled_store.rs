@@ -1,0 +1,360 @@
+//! The embedded default store, on sled.
+//!
+//! Layout: one sled tree per map, `map/<name>`, holding the record under `m`,
+//! client cursors under `c<client>` and tiles under `t<key>` (the key's 8
+//! sortable bytes, so a range of x is a range of keys). Frames live in the
+//! tree `frames` under `f<robot>\0<sequence>` with a summary per robot under
+//! `r<robot>`; poses in `poses` under `<robot>\0<sequence>`. Names never hold
+//! a zero byte (the service checks), and sequences are big-endian, so a
+//! robot's frames sort by sequence.
+
+use super::{FrameWrite, MapRecord, MapWrite, RobotSummary, Store, StoredTile, TileRange};
+use crate::error::StoreError;
+use deog_grid::TileKey;
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::RwLock;
+
+const MAP_TREE_PREFIX: &str = "map/";
+const RECORD_KEY: &[u8] = b"m";
+const CURSOR_PREFIX: u8 = b'c';
+const TILE_PREFIX: u8 = b't';
+
+/// How to open the sled store.
+#[derive(Debug, Clone)]
+pub struct SledConfig {
+    /// Data directory; created if missing.
+    pub path: PathBuf,
+    /// Bytes sled may keep in its page cache. The map lives on disk; this is
+    /// what bounds the server's memory.
+    pub cache_bytes: u64,
+}
+
+impl SledConfig {
+    /// The defaults for `path`: a 64 MiB cache.
+    pub fn new(path: impl Into<PathBuf>) -> Self {
+        Self {
+            path: path.into(),
+            cache_bytes: 64 << 20,
+        }
+    }
+}
+
+/// The sled-backed [`Store`].
+pub struct SledStore {
+    db: sled::Db,
+    frames: sled::Tree,
+    poses: sled::Tree,
+    maps: RwLock<HashMap<String, sled::Tree>>,
+}
+
+impl std::fmt::Debug for SledStore {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SledStore").finish_non_exhaustive()
+    }
+}
+
+impl SledStore {
+    /// Opens (or creates) the store. This is the one place the database is
+    /// opened.
+    pub fn open(config: &SledConfig) -> Result<Self, StoreError> {
+        let db = sled::Config::new()
+            .path(&config.path)
+            .cache_capacity(config.cache_bytes)
+            // Durability comes from the writer's explicit flush after each
+            // group of writes; the periodic flush only bounds dirty memory.
+            .flush_every_ms(Some(1000))
+            .open()?;
+        let frames = db.open_tree("frames")?;
+        let poses = db.open_tree("poses")?;
+        let mut maps = HashMap::new();
+        for name in db.tree_names() {
+            let Some(map) = std::str::from_utf8(&name)
+                .ok()
+                .and_then(|n| n.strip_prefix(MAP_TREE_PREFIX))
+            else {
+                continue;
+            };
+            let tree = db.open_tree(&name)?;
+            if tree.contains_key(RECORD_KEY)? {
+                maps.insert(map.to_string(), tree);
+            } else {
+                // A create that never finished: no record, so never acknowledged.
+                drop(tree);
+                db.drop_tree(&name)?;
+            }
+        }
+        Ok(Self {
+            db,
+            frames,
+            poses,
+            maps: RwLock::new(maps),
+        })
+    }
+
+    fn tree(&self, name: &str) -> Result<sled::Tree, StoreError> {
+        self.maps
+            .read()
+            .map_err(|_| StoreError::Backend("map catalog lock poisoned".into()))?
+            .get(name)
+            .cloned()
+            .ok_or_else(|| StoreError::MapNotFound(name.to_string()))
+    }
+}
+
+fn tile_key_bytes(key: TileKey) -> [u8; 9] {
+    let mut out = [TILE_PREFIX; 9];
+    out[1..].copy_from_slice(&key.to_store_bytes());
+    out
+}
+
+fn cursor_key(client: &str) -> Vec<u8> {
+    let mut out = Vec::with_capacity(client.len() + 1);
+    out.push(CURSOR_PREFIX);
+    out.extend_from_slice(client.as_bytes());
+    out
+}
+
+fn frame_key(robot: &str, sequence: u64) -> Vec<u8> {
+    let mut out = Vec::with_capacity(robot.len() + 10);
+    out.push(b'f');
+    out.extend_from_slice(robot.as_bytes());
+    out.push(0);
+    out.extend_from_slice(&sequence.to_be_bytes());
+    out
+}
+
+fn summary_key(robot: &str) -> Vec<u8> {
+    let mut out = Vec::with_capacity(robot.len() + 1);
+    out.push(b'r');
+    out.extend_from_slice(robot.as_bytes());
+    out
+}
+
+fn pose_key(robot: &str, sequence: u64) -> Vec<u8> {
+    let mut out = Vec::with_capacity(robot.len() + 9);
+    out.extend_from_slice(robot.as_bytes());
+    out.push(0);
+    out.extend_from_slice(&sequence.to_be_bytes());
+    out
+}
+
+fn sequence_of(key: &[u8]) -> u64 {
+    key.last_chunk::<8>().map_or(0, |b| u64::from_be_bytes(*b))
+}
+
+fn visit_range(
+    tree: &sled::Tree,
+    from: Vec<u8>,
+    to: Vec<u8>,
+    visit: &mut dyn FnMut(u64, &[u8]) -> bool,
+) -> Result<(), StoreError> {
+    for entry in tree.range(from..=to) {
+        let (key, value) = entry?;
+        if !visit(sequence_of(&key), &value) {
+            break;
+        }
+    }
+    Ok(())
+}
+
+impl Store for SledStore {
+    fn maps(&self) -> Result<Vec<MapRecord>, StoreError> {
+        let trees: Vec<(String, sled::Tree)> = self
+            .maps
+            .read()
+            .map_err(|_| StoreError::Backend("map catalog lock poisoned".into()))?
+            .iter()
+            .map(|(n, t)| (n.clone(), t.clone()))
+            .collect();
+        let mut out = Vec::with_capacity(trees.len());
+        for (name, tree) in trees {
+            if let Some(bytes) = tree.get(RECORD_KEY)? {
+                out.push(MapRecord::decode(&name, &bytes)?);
+            }
+        }
+        out.sort_by(|a, b| a.name.cmp(&b.name));
+        Ok(out)
+    }
+
+    fn map(&self, name: &str) -> Result<Option<MapRecord>, StoreError> {
+        let tree = match self.tree(name) {
+            Ok(tree) => tree,
+            Err(StoreError::MapNotFound(_)) => return Ok(None),
+            Err(e) => return Err(e),
+        };
+        tree.get(RECORD_KEY)?
+            .map(|bytes| MapRecord::decode(name, &bytes))
+            .transpose()
+    }
+
+    fn create_map(&self, record: &MapRecord) -> Result<(), StoreError> {
+        let mut maps = self
+            .maps
+            .write()
+            .map_err(|_| StoreError::Backend("map catalog lock poisoned".into()))?;
+        if maps.contains_key(&record.name) {
+            return Err(StoreError::MapExists(record.name.clone()));
+        }
+        let tree = self
+            .db
+            .open_tree(format!("{MAP_TREE_PREFIX}{}", record.name))?;
+        tree.insert(RECORD_KEY, record.encode())?;
+        maps.insert(record.name.clone(), tree);
+        Ok(())
+    }
+
+    fn delete_map(&self, name: &str) -> Result<(), StoreError> {
+        let mut maps = self
+            .maps
+            .write()
+            .map_err(|_| StoreError::Backend("map catalog lock poisoned".into()))?;
+        if maps.remove(name).is_none() {
+            return Err(StoreError::MapNotFound(name.to_string()));
+        }
+        self.db.drop_tree(format!("{MAP_TREE_PREFIX}{name}"))?;
+        Ok(())
+    }
+
+    fn write_map(&self, name: &str, write: MapWrite) -> Result<(), StoreError> {
+        let tree = self.tree(name)?;
+        let mut batch = sled::Batch::default();
+        if write.clear_tiles {
+            for key in tree.scan_prefix([TILE_PREFIX]).keys() {
+                batch.remove(key?);
+            }
+        }
+        for (key, tile) in &write.tiles {
+            batch.insert(&tile_key_bytes(*key)[..], tile.encode());
+        }
+        for (client, sequence) in &write.cursors {
+            batch.insert(cursor_key(client), &sequence.to_le_bytes()[..]);
+        }
+        if let Some(record) = &write.record {
+            batch.insert(RECORD_KEY, record.encode());
+        }
+        tree.apply_batch(batch)?;
+        Ok(())
+    }
+
+    fn tile(&self, map: &MapRecord, key: TileKey) -> Result<Option<StoredTile>, StoreError> {
+        let tree = self.tree(&map.name)?;
+        tree.get(tile_key_bytes(key))?
+            .map(|bytes| StoredTile::decode(map.settings.tile_size, &bytes))
+            .transpose()
+    }
+
+    fn tiles_in(
+        &self,
+        map: &MapRecord,
+        range: TileRange,
+        visit: &mut dyn FnMut(TileKey, StoredTile) -> bool,
+    ) -> Result<(), StoreError> {
+        let tree = self.tree(&map.name)?;
+        let from = tile_key_bytes(range.min);
+        let to = tile_key_bytes(range.max);
+        for entry in tree.range(from..=to) {
+            let (key_bytes, value) = entry?;
+            let key = TileKey::from_store_bytes(&key_bytes[1..]).map_err(|e| {
+                StoreError::Corrupt {
+                    what: format!("tile key in map {:?}", map.name),
+                    reason: e.to_string(),
+                }
+            })?;
+            // Keys sort by x, then y: the x band is contiguous, y is filtered.
+            if !range.contains(key) {
+                continue;
+            }
+            let tile = StoredTile::decode(map.settings.tile_size, &value)?;
+            if !visit(key, tile) {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    fn cursor(&self, name: &str, client: &str) -> Result<u64, StoreError> {
+        let tree = self.tree(name)?;
+        Ok(tree
+            .get(cursor_key(client))?
+            .and_then(|b| b.as_ref().first_chunk::<8>().map(|b| u64::from_le_bytes(*b)))
+            .unwrap_or(0))
+    }
+
+    fn write_frames(&self, writes: Vec<FrameWrite>) -> Result<(), StoreError> {
+        for write in writes {
+            let mut batch = sled::Batch::default();
+            for (sequence, bytes) in write.frames {
+                batch.insert(frame_key(&write.robot, sequence), bytes);
+            }
+            batch.insert(summary_key(&write.robot), &write.summary.encode()[..]);
+            self.frames.apply_batch(batch)?;
+        }
+        Ok(())
+    }
+
+    fn has_frame(&self, robot: &str, sequence: u64) -> Result<bool, StoreError> {
+        Ok(self.frames.contains_key(frame_key(robot, sequence))?)
+    }
+
+    fn robot(&self, robot: &str) -> Result<Option<RobotSummary>, StoreError> {
+        self.frames
+            .get(summary_key(robot))?
+            .map(|b| RobotSummary::decode(&b))
+            .transpose()
+    }
+
+    fn robots(&self) -> Result<Vec<(String, RobotSummary)>, StoreError> {
+        let mut out = Vec::new();
+        for entry in self.frames.scan_prefix(b"r") {
+            let (key, value) = entry?;
+            let name = String::from_utf8_lossy(&key[1..]).into_owned();
+            out.push((name, RobotSummary::decode(&value)?));
+        }
+        Ok(out)
+    }
+
+    fn read_frames(
+        &self,
+        robot: &str,
+        from: u64,
+        to: u64,
+        visit: &mut dyn FnMut(u64, &[u8]) -> bool,
+    ) -> Result<(), StoreError> {
+        visit_range(
+            &self.frames,
+            frame_key(robot, from),
+            frame_key(robot, to),
+            visit,
+        )
+    }
+
+    fn write_poses(&self, poses: Vec<(String, u64, Vec<u8>)>) -> Result<(), StoreError> {
+        let mut batch = sled::Batch::default();
+        for (robot, sequence, bytes) in poses {
+            batch.insert(pose_key(&robot, sequence), bytes);
+        }
+        self.poses.apply_batch(batch)?;
+        Ok(())
+    }
+
+    fn read_poses(
+        &self,
+        robot: &str,
+        from: u64,
+        to: u64,
+        visit: &mut dyn FnMut(u64, &[u8]) -> bool,
+    ) -> Result<(), StoreError> {
+        visit_range(
+            &self.poses,
+            pose_key(robot, from),
+            pose_key(robot, to),
+            visit,
+        )
+    }
+
+    fn flush(&self) -> Result<(), StoreError> {
+        self.db.flush()?;
+        Ok(())
+    }
+}

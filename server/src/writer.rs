@@ -1,0 +1,586 @@
+//! The group-commit writer: the one thread that changes the store.
+//!
+//! Every write (map batches, frames, poses, map admin) is sent here. The
+//! writer takes whatever has queued up, applies it in arrival order, writes
+//! each touched map once, flushes the store once, and only then answers each
+//! request and tells the watchers. One writer makes concurrent updates to a
+//! tile atomic and serialisable, makes the exactly-once check race-free, and
+//! turns one flush per batch into one flush per group.
+
+use crate::error::StoreError;
+use crate::events::{Events, FrameNote, MapEvent};
+use crate::store::{FrameWrite, MapRecord, MapWrite, RobotSummary, Store, StoredTile};
+use deog_grid::{CellBox, CellIndex, LogOdds, Tile, TileDelta, TileKey, TileSize};
+use deog_proto::v1::PoseEstimate;
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use tokio::sync::{mpsc, oneshot};
+
+/// Most requests taken into one group commit.
+const MAX_GROUP: usize = 512;
+
+/// A batch of tile deltas from one client, decoded and checked.
+#[derive(Debug)]
+pub struct Batch {
+    /// Target map.
+    pub map: String,
+    /// Sending client.
+    pub client_id: String,
+    /// The client's sequence number, from 1.
+    pub sequence: u64,
+    /// Dense deltas per tile, in the map's tile size.
+    pub deltas: Vec<TileDelta>,
+}
+
+/// The answer to a batch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Ack {
+    /// False when the batch was a resend and was not applied again.
+    pub applied: bool,
+    /// The map's version after the batch.
+    pub map_version: u64,
+}
+
+/// One frame to store.
+#[derive(Debug)]
+pub struct FrameInput {
+    /// Robot name.
+    pub robot: String,
+    /// Sequence.
+    pub sequence: u64,
+    /// The encoded `SonarFrame`.
+    pub bytes: Vec<u8>,
+}
+
+type Reply<T> = oneshot::Sender<Result<T, StoreError>>;
+
+enum WriteOp {
+    CreateMap(MapRecord, Reply<MapRecord>),
+    ClearMap(String, Reply<MapRecord>),
+    DeleteMap(String, Reply<()>),
+    Apply(Batch, Reply<Ack>),
+    Frames(Vec<FrameInput>, Reply<(u32, u32)>),
+    Pose(Arc<PoseEstimate>, Vec<u8>, Reply<()>),
+    Stop,
+}
+
+/// A handle for sending writes; cheap to clone.
+#[derive(Clone)]
+pub struct WriterHandle {
+    sender: mpsc::Sender<WriteOp>,
+}
+
+impl std::fmt::Debug for WriterHandle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("WriterHandle").finish_non_exhaustive()
+    }
+}
+
+/// The writer thread.
+pub struct Writer {
+    handle: WriterHandle,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl std::fmt::Debug for Writer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Writer").finish_non_exhaustive()
+    }
+}
+
+impl Writer {
+    /// Starts the writer over `store`; at most `queue` requests wait for it.
+    pub fn start<S: Store>(store: Arc<S>, events: Arc<Events>, queue: usize) -> std::io::Result<Self> {
+        let (sender, receiver) = mpsc::channel(queue.max(1));
+        let thread = std::thread::Builder::new()
+            .name("deog-writer".into())
+            .spawn(move || run(store.as_ref(), &events, receiver))?;
+        Ok(Self {
+            handle: WriterHandle { sender },
+            thread: Some(thread),
+        })
+    }
+
+    /// A handle for sending writes.
+    pub fn handle(&self) -> WriterHandle {
+        self.handle.clone()
+    }
+
+    /// Finishes every queued write, flushes, and stops the thread. Writes
+    /// sent later fail with [`StoreError::ShuttingDown`].
+    pub async fn stop(mut self) {
+        let _ = self.handle.sender.send(WriteOp::Stop).await;
+        if let Some(thread) = self.thread.take() {
+            // The thread only ends after its final flush.
+            let _ = tokio::task::spawn_blocking(move || thread.join()).await;
+        }
+    }
+}
+
+impl WriterHandle {
+    async fn call<T>(&self, make: impl FnOnce(Reply<T>) -> WriteOp) -> Result<T, StoreError> {
+        let (tx, rx) = oneshot::channel();
+        self.sender
+            .send(make(tx))
+            .await
+            .map_err(|_| StoreError::ShuttingDown)?;
+        rx.await.map_err(|_| StoreError::ShuttingDown)?
+    }
+
+    /// Creates a map.
+    pub async fn create_map(&self, record: MapRecord) -> Result<MapRecord, StoreError> {
+        self.call(|r| WriteOp::CreateMap(record, r)).await
+    }
+
+    /// Clears a map.
+    pub async fn clear_map(&self, name: String) -> Result<MapRecord, StoreError> {
+        self.call(|r| WriteOp::ClearMap(name, r)).await
+    }
+
+    /// Deletes a map.
+    pub async fn delete_map(&self, name: String) -> Result<(), StoreError> {
+        self.call(|r| WriteOp::DeleteMap(name, r)).await
+    }
+
+    /// Queues a batch and returns a receiver for its acknowledgement, so a
+    /// client's batches can be pipelined while keeping their order.
+    pub async fn submit_batch(
+        &self,
+        batch: Batch,
+    ) -> Result<oneshot::Receiver<Result<Ack, StoreError>>, StoreError> {
+        let (tx, rx) = oneshot::channel();
+        self.sender
+            .send(WriteOp::Apply(batch, tx))
+            .await
+            .map_err(|_| StoreError::ShuttingDown)?;
+        Ok(rx)
+    }
+
+    /// Stores frames; returns (stored, duplicates).
+    pub async fn publish_frames(&self, frames: Vec<FrameInput>) -> Result<(u32, u32), StoreError> {
+        self.call(|r| WriteOp::Frames(frames, r)).await
+    }
+
+    /// Stores a pose estimate.
+    pub async fn publish_pose(&self, pose: PoseEstimate) -> Result<(), StoreError> {
+        let bytes = prost::Message::encode_to_vec(&pose);
+        self.call(|r| WriteOp::Pose(Arc::new(pose), bytes, r)).await
+    }
+}
+
+fn run<S: Store>(store: &S, events: &Events, mut receiver: mpsc::Receiver<WriteOp>) {
+    let mut stopping = false;
+    while !stopping {
+        let Some(first) = receiver.blocking_recv() else {
+            break;
+        };
+        let mut group = vec![first];
+        while group.len() < MAX_GROUP {
+            match receiver.try_recv() {
+                Ok(op) => group.push(op),
+                Err(_) => break,
+            }
+        }
+        if let Some(at) = group.iter().position(|op| matches!(op, WriteOp::Stop)) {
+            stopping = true;
+            group.truncate(at);
+        }
+        Group::new(store).run(group, events);
+    }
+    receiver.close();
+    // Anything still queued was never accepted.
+    while let Ok(op) = receiver.try_recv() {
+        refuse(op);
+    }
+    if let Err(error) = store.flush() {
+        tracing::error!(%error, "final flush failed");
+    }
+    tracing::debug!("writer stopped");
+}
+
+fn refuse(op: WriteOp) {
+    match op {
+        WriteOp::CreateMap(_, r) | WriteOp::ClearMap(_, r) => {
+            let _ = r.send(Err(StoreError::ShuttingDown));
+        }
+        WriteOp::DeleteMap(_, r) | WriteOp::Pose(_, _, r) => {
+            let _ = r.send(Err(StoreError::ShuttingDown));
+        }
+        WriteOp::Apply(_, r) => {
+            let _ = r.send(Err(StoreError::ShuttingDown));
+        }
+        WriteOp::Frames(_, r) => {
+            let _ = r.send(Err(StoreError::ShuttingDown));
+        }
+        WriteOp::Stop => {}
+    }
+}
+
+/// A reply held back until the group is durable; given the commit's error
+/// message, if any.
+type Deferred = Box<dyn FnOnce(Option<&str>) + Send>;
+
+fn defer<T: Send + 'static>(reply: Reply<T>, value: Result<T, StoreError>) -> Deferred {
+    Box::new(move |failure| {
+        let result = match failure {
+            Some(message) => Err(StoreError::Backend(message.to_string())),
+            None => value,
+        };
+        let _ = reply.send(result);
+    })
+}
+
+/// A map's state while a group is being applied.
+struct PendingMap {
+    record: MapRecord,
+    tiles: HashMap<TileKey, StoredTile>,
+    /// Tiles changed in this group, with the version of their last change.
+    dirty: BTreeMap<TileKey, u64>,
+    cursors: HashMap<String, u64>,
+    dirty_cursors: HashSet<String>,
+    record_dirty: bool,
+}
+
+struct Group<'s, S> {
+    store: &'s S,
+    maps: HashMap<String, PendingMap>,
+    frames: BTreeMap<String, (RobotSummary, Vec<(u64, Vec<u8>)>)>,
+    poses: Vec<(String, u64, Vec<u8>)>,
+    replies: Vec<Deferred>,
+    map_events: Vec<(String, MapEvent)>,
+    frame_events: Vec<FrameNote>,
+    pose_events: Vec<Arc<PoseEstimate>>,
+    failure: Option<String>,
+}
+
+impl<'s, S: Store> Group<'s, S> {
+    fn new(store: &'s S) -> Self {
+        Self {
+            store,
+            maps: HashMap::new(),
+            frames: BTreeMap::new(),
+            poses: Vec::new(),
+            replies: Vec::new(),
+            map_events: Vec::new(),
+            frame_events: Vec::new(),
+            pose_events: Vec::new(),
+            failure: None,
+        }
+    }
+
+    fn run(mut self, ops: Vec<WriteOp>, events: &Events) {
+        for op in ops {
+            self.apply(op);
+        }
+        self.write_maps();
+        self.write_rest();
+        if self.failure.is_none()
+            && let Err(error) = self.store.flush()
+        {
+            self.failure = Some(error.to_string());
+        }
+        if let Some(failure) = &self.failure {
+            tracing::error!(%failure, "group commit failed");
+        }
+        let failure = self.failure.as_deref();
+        for reply in self.replies {
+            reply(failure);
+        }
+        if failure.is_some() {
+            return;
+        }
+        let mut by_map: BTreeMap<String, Vec<MapEvent>> = BTreeMap::new();
+        for (map, event) in self.map_events {
+            by_map.entry(map).or_default().push(event);
+        }
+        for (map, list) in by_map {
+            events.map_changed(&map, list);
+        }
+        for note in self.frame_events {
+            events.frame_stored(note);
+        }
+        for pose in self.pose_events {
+            events.pose_stored(pose);
+        }
+    }
+
+    fn apply(&mut self, op: WriteOp) {
+        match op {
+            WriteOp::CreateMap(record, reply) => {
+                self.write_maps();
+                let result = self.store.create_map(&record).map(|()| record);
+                self.replies.push(defer(reply, result));
+            }
+            WriteOp::ClearMap(name, reply) => {
+                self.write_maps();
+                let result = self.clear(&name);
+                self.replies.push(defer(reply, result));
+            }
+            WriteOp::DeleteMap(name, reply) => {
+                self.write_maps();
+                let result = self.store.delete_map(&name);
+                if result.is_ok() {
+                    self.map_events.push((name, MapEvent::Deleted));
+                }
+                self.replies.push(defer(reply, result));
+            }
+            WriteOp::Apply(batch, reply) => {
+                let result = self.apply_batch(batch);
+                self.replies.push(defer(reply, result));
+            }
+            WriteOp::Frames(frames, reply) => {
+                let result = self.add_frames(frames);
+                self.replies.push(defer(reply, result));
+            }
+            WriteOp::Pose(pose, bytes, reply) => {
+                self.poses
+                    .push((pose.robot.clone(), pose.frame_sequence, bytes));
+                self.pose_events.push(pose);
+                self.replies.push(defer(reply, Ok(())));
+            }
+            WriteOp::Stop => {}
+        }
+    }
+
+    fn clear(&mut self, name: &str) -> Result<MapRecord, StoreError> {
+        let mut record = self
+            .store
+            .map(name)?
+            .ok_or_else(|| StoreError::MapNotFound(name.to_string()))?;
+        record.version += 1;
+        record.tile_count = 0;
+        record.cell_count = 0;
+        record.bounds = None;
+        self.store.write_map(
+            name,
+            MapWrite {
+                record: Some(record.clone()),
+                clear_tiles: true,
+                ..MapWrite::default()
+            },
+        )?;
+        self.map_events.push((
+            name.to_string(),
+            MapEvent::Cleared {
+                version: record.version,
+            },
+        ));
+        Ok(record)
+    }
+
+    fn pending(&mut self, name: &str) -> Result<&mut PendingMap, StoreError> {
+        if !self.maps.contains_key(name) {
+            let record = self
+                .store
+                .map(name)?
+                .ok_or_else(|| StoreError::MapNotFound(name.to_string()))?;
+            self.maps.insert(
+                name.to_string(),
+                PendingMap {
+                    record,
+                    tiles: HashMap::new(),
+                    dirty: BTreeMap::new(),
+                    cursors: HashMap::new(),
+                    dirty_cursors: HashSet::new(),
+                    record_dirty: false,
+                },
+            );
+        }
+        // Inserted just above when missing.
+        self.maps
+            .get_mut(name)
+            .ok_or_else(|| StoreError::MapNotFound(name.to_string()))
+    }
+
+    fn apply_batch(&mut self, batch: Batch) -> Result<Ack, StoreError> {
+        let store = self.store;
+        let map = self.pending(&batch.map)?;
+        let last = match map.cursors.get(&batch.client_id) {
+            Some(&last) => last,
+            None => {
+                let last = store.cursor(&batch.map, &batch.client_id)?;
+                map.cursors.insert(batch.client_id.clone(), last);
+                last
+            }
+        };
+        if batch.sequence <= last {
+            return Ok(Ack {
+                applied: false,
+                map_version: map.record.version,
+            });
+        }
+        let size = map.record.settings.tile_size;
+        if let Some(delta) = batch.deltas.iter().find(|d| d.raw().len() != size.area()) {
+            return Err(StoreError::invalid(
+                "tiles.cells",
+                format!("tile ({}, {}) has the wrong number of cells", delta.key.x, delta.key.y),
+            ));
+        }
+        let version = map.record.version + 1;
+        for delta in &batch.deltas {
+            if !map.tiles.contains_key(&delta.key) {
+                let stored = store.tile(&map.record, delta.key)?;
+                if let Some(stored) = stored {
+                    map.tiles.insert(delta.key, stored);
+                }
+            }
+            let is_new = !map.tiles.contains_key(&delta.key);
+            let newly_observed = delta
+                .raw()
+                .iter()
+                .zip(
+                    map.tiles
+                        .get(&delta.key)
+                        .map(|t| t.tile.raw_cells())
+                        .unwrap_or(&[]),
+                )
+                .filter(|&(&d, &c)| d != 0 && c == LogOdds::UNKNOWN_RAW)
+                .count()
+                + if is_new { delta.nonzero_count() } else { 0 };
+            if is_new && newly_observed == 0 {
+                // No evidence for an unstored tile: nothing to store.
+                continue;
+            }
+            let stored = map.tiles.entry(delta.key).or_insert_with(|| StoredTile {
+                version,
+                tile: Tile::unknown(size),
+            });
+            stored
+                .tile
+                .apply(delta, map.record.settings.clamp)
+                .map_err(|e| StoreError::grid("tiles.cells", e))?;
+            stored.version = version;
+            map.dirty.insert(delta.key, version);
+            if is_new {
+                map.record.tile_count += 1;
+            }
+            map.record.cell_count += newly_observed as u64;
+            if newly_observed > 0
+                && let Some(cells) = evidence_box(size, delta)
+            {
+                map.record.bounds = Some(match map.record.bounds {
+                    Some(b) => b.union(&cells),
+                    None => cells,
+                });
+            }
+        }
+        map.record.version = version;
+        map.record_dirty = true;
+        map.cursors.insert(batch.client_id.clone(), batch.sequence);
+        map.dirty_cursors.insert(batch.client_id);
+        Ok(Ack {
+            applied: true,
+            map_version: version,
+        })
+    }
+
+    /// Writes every pending map (without flushing), before an admin
+    /// operation or at the end of the group.
+    fn write_maps(&mut self) {
+        for (name, map) in std::mem::take(&mut self.maps) {
+            if !map.record_dirty {
+                continue;
+            }
+            let tiles: Vec<(TileKey, StoredTile)> = map
+                .dirty
+                .keys()
+                .filter_map(|k| map.tiles.get(k).map(|t| (*k, t.clone())))
+                .collect();
+            let cursors = map
+                .dirty_cursors
+                .iter()
+                .filter_map(|c| map.cursors.get(c).map(|s| (c.clone(), *s)))
+                .collect();
+            let write = MapWrite {
+                record: Some(map.record),
+                clear_tiles: false,
+                tiles,
+                cursors,
+            };
+            if let Err(error) = self.store.write_map(&name, write) {
+                self.failure.get_or_insert(error.to_string());
+                continue;
+            }
+            for (key, version) in map.dirty {
+                self.map_events
+                    .push((name.clone(), MapEvent::TileChanged { key, version }));
+            }
+        }
+    }
+
+    fn add_frames(&mut self, frames: Vec<FrameInput>) -> Result<(u32, u32), StoreError> {
+        let (mut stored, mut duplicates) = (0u32, 0u32);
+        for frame in frames {
+            if !self.frames.contains_key(&frame.robot) {
+                let summary = self.store.robot(&frame.robot)?.unwrap_or_default();
+                self.frames
+                    .insert(frame.robot.clone(), (summary, Vec::new()));
+            }
+            let Some((summary, pending)) = self.frames.get_mut(&frame.robot) else {
+                continue;
+            };
+            let seen = pending.iter().any(|(s, _)| *s == frame.sequence)
+                || self.store.has_frame(&frame.robot, frame.sequence)?;
+            if seen {
+                duplicates += 1;
+                continue;
+            }
+            *summary = summary.with(frame.sequence);
+            pending.push((frame.sequence, frame.bytes));
+            self.frame_events.push(FrameNote {
+                robot: Arc::from(frame.robot.as_str()),
+                sequence: frame.sequence,
+            });
+            stored += 1;
+        }
+        Ok((stored, duplicates))
+    }
+
+    fn write_rest(&mut self) {
+        let writes: Vec<FrameWrite> = std::mem::take(&mut self.frames)
+            .into_iter()
+            .filter(|(_, (_, frames))| !frames.is_empty())
+            .map(|(robot, (summary, frames))| FrameWrite {
+                robot,
+                summary,
+                frames,
+            })
+            .collect();
+        if !writes.is_empty()
+            && let Err(error) = self.store.write_frames(writes)
+        {
+            self.failure.get_or_insert(error.to_string());
+        }
+        let poses = std::mem::take(&mut self.poses);
+        if !poses.is_empty()
+            && let Err(error) = self.store.write_poses(poses)
+        {
+            self.failure.get_or_insert(error.to_string());
+        }
+    }
+}
+
+/// The box of cells with evidence in `delta`.
+fn evidence_box(size: TileSize, delta: &TileDelta) -> Option<CellBox> {
+    let side = size.cells() as usize;
+    let (mut min_x, mut min_y, mut max_x, mut max_y) = (usize::MAX, usize::MAX, 0, 0);
+    for (row, cells) in delta.raw().chunks_exact(side).enumerate() {
+        let Some(first) = cells.iter().position(|&d| d != 0) else {
+            continue;
+        };
+        let last = cells.iter().rposition(|&d| d != 0).unwrap_or(first);
+        min_x = min_x.min(first);
+        max_x = max_x.max(last);
+        min_y = min_y.min(row);
+        max_y = row;
+    }
+    if min_x == usize::MAX {
+        return None;
+    }
+    let origin = size.origin(delta.key).ok()?;
+    CellBox::new(
+        CellIndex::new(origin.x + min_x as i32, origin.y + min_y as i32),
+        CellIndex::new(origin.x + max_x as i32, origin.y + max_y as i32),
+    )
+}
