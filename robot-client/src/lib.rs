@@ -1,6 +1,22 @@
 //! The robot-side client of the map server.
 //!
 //! # Layout
-//! This crate will hold the typed async client every robot process uses
-//! (connect with retry, batched updates, resend after reconnect, a versioned
-//! tile cache). It holds no code yet.
+//! - [`connect`]: address, TLS, bearer token, and retry with exponential
+//!   backoff ([`ClientConfig`], [`RetryPolicy`]).
+//! - [`client`]: [`MapClient`], typed calls (maps, frames, poses, tiles).
+//! - [`updates`]: [`UpdateSender`], batched and pipelined tile updates that
+//!   are resent after a reconnect and applied exactly once.
+//! - [`tile_cache`]: [`TileCache`], a versioned copy of a map's tiles.
+//! - [`error`]: [`ClientError`].
+
+pub mod client;
+pub mod connect;
+pub mod error;
+pub mod tile_cache;
+pub mod updates;
+
+pub use client::MapClient;
+pub use connect::{ClientConfig, RawMapClient, RetryPolicy};
+pub use error::ClientError;
+pub use tile_cache::TileCache;
+pub use updates::{AckState, UpdateSender, UpdateSenderConfig, encode_delta};

@@ -1,0 +1,145 @@
+//! [`MapClient`]: typed calls to the map server.
+
+use crate::connect::{ClientConfig, RawMapClient, connect, with_retry};
+use crate::error::ClientError;
+use crate::updates::{UpdateSender, UpdateSenderConfig};
+use deog_proto::v1 as pb;
+use deog_proto::v1::map_service_client::MapServiceClient;
+use tokio_stream::StreamExt;
+
+/// A connection to the map server; cheap to clone.
+#[derive(Debug, Clone)]
+pub struct MapClient {
+    raw: RawMapClient,
+    config: ClientConfig,
+}
+
+impl MapClient {
+    /// Connects, retrying with backoff while the server is not up yet.
+    pub async fn connect(config: ClientConfig) -> Result<Self, ClientError> {
+        let (channel, interceptor) = connect(&config).await?;
+        let raw = MapServiceClient::with_interceptor(channel, interceptor)
+            .max_decoding_message_size(usize::MAX)
+            .max_encoding_message_size(usize::MAX);
+        Ok(Self { raw, config })
+    }
+
+    /// The generated client, for calls this type does not wrap.
+    pub fn raw(&self) -> RawMapClient {
+        self.raw.clone()
+    }
+
+    /// The configuration this client was made with.
+    pub fn config(&self) -> &ClientConfig {
+        &self.config
+    }
+
+    /// Creates a map, or returns the existing one of that name.
+    pub async fn ensure_map(&self, request: pb::CreateMapRequest) -> Result<pb::MapInfo, ClientError> {
+        let raw = self.raw.clone();
+        let created = with_retry(&self.config.retry, || {
+            let (mut raw, request) = (raw.clone(), request.clone());
+            async move { raw.create_map(request).await }
+        })
+        .await;
+        match created {
+            Ok(info) => Ok(info.into_inner()),
+            Err(ClientError::Status(s)) if s.code() == tonic::Code::AlreadyExists => {
+                self.map_info(&request.name).await
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    /// A map's settings and counts.
+    pub async fn map_info(&self, name: &str) -> Result<pb::MapInfo, ClientError> {
+        let raw = self.raw.clone();
+        let request = pb::MapRef { name: name.to_string() };
+        Ok(with_retry(&self.config.retry, || {
+            let (mut raw, request) = (raw.clone(), request.clone());
+            async move { raw.get_map_info(request).await }
+        })
+        .await?
+        .into_inner())
+    }
+
+    /// The highest batch sequence the server applied for `client_id`.
+    pub async fn update_cursor(&self, map: &str, client_id: &str) -> Result<u64, ClientError> {
+        let raw = self.raw.clone();
+        let request = pb::UpdateCursorRequest {
+            map: map.to_string(),
+            client_id: client_id.to_string(),
+        };
+        Ok(with_retry(&self.config.retry, || {
+            let (mut raw, request) = (raw.clone(), request.clone());
+            async move { raw.get_update_cursor(request).await }
+        })
+        .await?
+        .into_inner()
+        .last_sequence)
+    }
+
+    /// Every stored tile that the query selects.
+    pub async fn tiles(&self, query: pb::TileQuery) -> Result<Vec<pb::Tile>, ClientError> {
+        let mut stream = self.raw.clone().get_tiles(query).await?.into_inner();
+        let mut out = Vec::new();
+        while let Some(tile) = stream.next().await {
+            out.push(tile?);
+        }
+        Ok(out)
+    }
+
+    /// Stores frames; returns (stored, duplicates). Safe to retry: the
+    /// server skips sequences it has.
+    pub async fn publish_frames(&self, frames: Vec<pb::SonarFrame>) -> Result<(u32, u32), ClientError> {
+        let raw = self.raw.clone();
+        let request = pb::PublishFramesRequest { frames };
+        let reply = with_retry(&self.config.retry, || {
+            let (mut raw, request) = (raw.clone(), request.clone());
+            async move { raw.publish_frames(request).await }
+        })
+        .await?
+        .into_inner();
+        Ok((reply.stored, reply.duplicates))
+    }
+
+    /// A robot's stored frames in `from..=to` (0 = open).
+    pub async fn read_frames(&self, robot: &str, from: u64, to: u64) -> Result<Vec<pb::SonarFrame>, ClientError> {
+        let request = pb::ReadFramesRequest {
+            robot: robot.to_string(),
+            from_sequence: from,
+            to_sequence: to,
+            limit: 0,
+        };
+        let mut stream = self.raw.clone().read_frames(request).await?.into_inner();
+        let mut out = Vec::new();
+        while let Some(frame) = stream.next().await {
+            out.push(frame?);
+        }
+        Ok(out)
+    }
+
+    /// Stores a pose estimate.
+    pub async fn publish_pose(&self, estimate: pb::PoseEstimate) -> Result<(), ClientError> {
+        let raw = self.raw.clone();
+        with_retry(&self.config.retry, || {
+            let (mut raw, estimate) = (raw.clone(), estimate.clone());
+            async move { raw.publish_pose(estimate).await }
+        })
+        .await?;
+        Ok(())
+    }
+
+    /// Opens a batching, resending update stream for `client_id` on `map`,
+    /// continuing after the last sequence the server applied for it.
+    pub async fn updates(
+        &self,
+        map: &str,
+        client_id: &str,
+        config: UpdateSenderConfig,
+    ) -> Result<UpdateSender, ClientError> {
+        let info = self.map_info(map).await?;
+        let last = self.update_cursor(map, client_id).await?;
+        UpdateSender::start(self.clone(), info, client_id.to_string(), last + 1, config)
+    }
+}

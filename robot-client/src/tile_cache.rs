@@ -1,0 +1,150 @@
+//! [`TileCache`]: a client's copy of a map's tiles, kept current by version.
+
+use crate::client::MapClient;
+use crate::error::ClientError;
+use deog_grid::{CellBox, CellIndex, LogOdds, Tile, TileKey, TileSize};
+use deog_proto::v1 as pb;
+use std::collections::HashMap;
+
+/// Tiles of one map with the version each was read at.
+#[derive(Debug, Clone)]
+pub struct TileCache {
+    map: String,
+    tile_size: TileSize,
+    tiles: HashMap<TileKey, (u64, Tile)>,
+    /// Map version up to which every cached tile is known current.
+    synced_version: u64,
+    needs_resync: bool,
+}
+
+impl TileCache {
+    /// An empty cache for `map`.
+    pub fn new(map: impl Into<String>, tile_size: TileSize) -> Self {
+        Self {
+            map: map.into(),
+            tile_size,
+            tiles: HashMap::new(),
+            synced_version: 0,
+            needs_resync: false,
+        }
+    }
+
+    /// Cells per tile side.
+    pub fn tile_size(&self) -> TileSize {
+        self.tile_size
+    }
+
+    /// Number of cached tiles.
+    pub fn len(&self) -> usize {
+        self.tiles.len()
+    }
+
+    /// Whether nothing is cached.
+    pub fn is_empty(&self) -> bool {
+        self.tiles.is_empty()
+    }
+
+    /// Whether a watch event asked for a re-read.
+    pub fn needs_resync(&self) -> bool {
+        self.needs_resync
+    }
+
+    /// A cached tile and its version.
+    pub fn tile(&self, key: TileKey) -> Option<(u64, &Tile)> {
+        self.tiles.get(&key).map(|(v, t)| (*v, t))
+    }
+
+    /// The belief of a cell, if its tile is cached and the cell observed.
+    pub fn cell(&self, cell: CellIndex) -> Option<LogOdds> {
+        let (key, offset) = self.tile_size.split(cell);
+        self.tiles.get(&key).and_then(|(_, t)| t.get(offset))
+    }
+
+    /// Brings the tiles of `region` up to date, fetching only the tiles that
+    /// changed since the last refresh. Returns how many tiles were fetched.
+    pub async fn refresh(&mut self, client: &MapClient, region: CellBox) -> Result<usize, ClientError> {
+        let version = client.map_info(&self.map).await?.version;
+        let region_wire = pb::CellBox {
+            min_x: region.min.x,
+            min_y: region.min.y,
+            max_x: region.max.x,
+            max_y: region.max.y,
+        };
+        let listed = client
+            .tiles(pb::TileQuery {
+                map: self.map.clone(),
+                selection: Some(pb::tile_query::Selection::Region(region_wire)),
+                newer_than_version: self.synced_version,
+            })
+            .await?;
+        let mut fetched = 0;
+        let mut missing = Vec::new();
+        for tile in listed {
+            let key = tile
+                .key
+                .map(|k| TileKey::new(k.x, k.y))
+                .ok_or_else(|| ClientError::Updates("tile without a key".into()))?;
+            if tile.cells.is_empty() {
+                // Not newer than our sync point: keep ours, or fetch it if
+                // this region was never read.
+                if !self.tiles.contains_key(&key) {
+                    missing.push(pb::TileKey { x: key.x, y: key.y });
+                }
+                continue;
+            }
+            self.insert_wire(key, &tile)?;
+            fetched += 1;
+        }
+        if !missing.is_empty() {
+            for tile in client
+                .tiles(pb::TileQuery {
+                    map: self.map.clone(),
+                    selection: Some(pb::tile_query::Selection::Keys(pb::TileKeys { keys: missing })),
+                    newer_than_version: 0,
+                })
+                .await?
+            {
+                if let Some(k) = tile.key {
+                    self.insert_wire(TileKey::new(k.x, k.y), &tile)?;
+                    fetched += 1;
+                }
+            }
+        }
+        self.synced_version = self.synced_version.max(version);
+        self.needs_resync = false;
+        Ok(fetched)
+    }
+
+    /// Applies one event of a `WatchTiles` stream.
+    pub fn apply_event(&mut self, event: &pb::TileEvent) -> Result<(), ClientError> {
+        match &event.event {
+            Some(pb::tile_event::Event::Changed(tile)) => {
+                let Some(k) = tile.key else { return Ok(()) };
+                let key = TileKey::new(k.x, k.y);
+                if tile.cells.is_empty() {
+                    // Only told that it changed: drop ours so it is re-read.
+                    self.tiles.remove(&key);
+                    self.needs_resync = true;
+                } else {
+                    self.insert_wire(key, tile)?;
+                }
+            }
+            Some(pb::tile_event::Event::Cleared(_)) => {
+                self.tiles.clear();
+                self.synced_version = 0;
+            }
+            Some(pb::tile_event::Event::Resync(_)) => self.needs_resync = true,
+            None => {}
+        }
+        Ok(())
+    }
+
+    fn insert_wire(&mut self, key: TileKey, tile: &pb::Tile) -> Result<(), ClientError> {
+        if self.tiles.get(&key).is_some_and(|(v, _)| *v > tile.version) {
+            return Ok(());
+        }
+        let cells = Tile::from_dense_bytes(self.tile_size, &tile.cells)?;
+        self.tiles.insert(key, (tile.version, cells));
+        Ok(())
+    }
+}

@@ -1,0 +1,187 @@
+//! A real map server on 127.0.0.1:0 over a sled directory in a temp dir.
+#![allow(dead_code)]
+
+use deog_proto::v1 as pb;
+use deog_proto::v1::map_service_client::MapServiceClient;
+use deog_server::{ServerConfig, SledConfig, SledStore};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::sync::oneshot;
+use tokio::task::JoinHandle;
+use tonic::transport::Channel;
+
+pub struct TestServer {
+    pub addr: SocketAddr,
+    pub dir: Option<tempfile::TempDir>,
+    pub path: PathBuf,
+    stop: Option<oneshot::Sender<()>>,
+    task: Option<JoinHandle<Result<(), deog_server::ServeError>>>,
+}
+
+impl TestServer {
+    pub async fn start() -> Self {
+        Self::start_with(ServerConfig::default()).await
+    }
+
+    pub async fn start_with(config: ServerConfig) -> Self {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("store");
+        let mut server = Self::start_at(path, config).await;
+        server.dir = Some(dir);
+        server
+    }
+
+    /// A server over an existing directory (a restart).
+    pub async fn start_at(path: PathBuf, config: ServerConfig) -> Self {
+        let store = SledStore::open(&SledConfig::new(&path)).expect("open store");
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
+        let addr = listener.local_addr().expect("addr");
+        let (stop, stopped) = oneshot::channel::<()>();
+        let plain = config.tls.is_none();
+        let task = tokio::spawn(deog_server::serve(Arc::new(store), listener, config, async {
+            let _ = stopped.await;
+        }));
+        let server = Self {
+            addr,
+            dir: None,
+            path,
+            stop: Some(stop),
+            task: Some(task),
+        };
+        if plain {
+            server.wait_ready().await;
+        }
+        server
+    }
+
+    pub fn url(&self) -> String {
+        format!("http://{}", self.addr)
+    }
+
+    /// Waits on the health service, with a bounded number of tries.
+    pub async fn wait_ready(&self) {
+        for _ in 0..100 {
+            if let Ok(channel) = Channel::from_shared(self.url()).expect("url").connect().await {
+                let mut health = tonic_health::pb::health_client::HealthClient::new(channel);
+                let request = tonic_health::pb::HealthCheckRequest {
+                    service: deog_server::MAP_SERVICE_NAME.into(),
+                };
+                if let Ok(reply) = health.check(request).await
+                    && reply.into_inner().status
+                        == tonic_health::pb::health_check_response::ServingStatus::Serving as i32
+                {
+                    return;
+                }
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        panic!("server at {} never became ready", self.addr);
+    }
+
+    pub async fn client(&self) -> MapServiceClient<Channel> {
+        MapServiceClient::connect(self.url())
+            .await
+            .expect("connect")
+            .max_decoding_message_size(usize::MAX)
+            .max_encoding_message_size(usize::MAX)
+    }
+
+    /// Graceful stop: in-flight calls finish, the store is flushed.
+    pub async fn stop(mut self) -> Option<tempfile::TempDir> {
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+        if let Some(task) = self.task.take() {
+            task.await.expect("server task").expect("server result");
+        }
+        self.dir.take()
+    }
+}
+
+impl Drop for TestServer {
+    fn drop(&mut self) {
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+    }
+}
+
+pub async fn create_map(client: &mut MapServiceClient<Channel>, name: &str, tile_size: u32) -> pb::MapInfo {
+    client
+        .create_map(pb::CreateMapRequest {
+            name: name.into(),
+            tile_size,
+            ..Default::default()
+        })
+        .await
+        .expect("create map")
+        .into_inner()
+}
+
+/// A dense delta message for tile (x, y) of `size`² cells.
+pub fn dense_delta(x: i32, y: i32, cells: &[i16]) -> pb::TileDelta {
+    pb::TileDelta {
+        key: Some(pb::TileKey { x, y }),
+        encoding: pb::CellEncoding::DenseI16Le as i32,
+        cells: cells.iter().flat_map(|c| c.to_le_bytes()).collect(),
+    }
+}
+
+pub fn batch(map: &str, client: &str, sequence: u64, tiles: Vec<pb::TileDelta>) -> pb::UpdateBatch {
+    pb::UpdateBatch {
+        map: map.into(),
+        client_id: client.into(),
+        sequence,
+        tiles,
+    }
+}
+
+/// Sends the batches on one stream and collects every ack (or the error
+/// that ended the stream).
+pub async fn send_batches(
+    client: &mut MapServiceClient<Channel>,
+    batches: Vec<pb::UpdateBatch>,
+) -> (Vec<pb::UpdateAck>, Option<tonic::Status>) {
+    let mut stream = match client.apply_updates(tokio_stream::iter(batches)).await {
+        Ok(r) => r.into_inner(),
+        Err(status) => return (Vec::new(), Some(status)),
+    };
+    let mut acks = Vec::new();
+    loop {
+        match stream.message().await {
+            Ok(Some(ack)) => acks.push(ack),
+            Ok(None) => return (acks, None),
+            Err(status) => return (acks, Some(status)),
+        }
+    }
+}
+
+/// Every stored tile of the map, decoded to raw cells.
+pub async fn all_tiles(client: &mut MapServiceClient<Channel>, map: &str) -> Vec<(pb::TileKey, u64, Vec<i16>)> {
+    let mut stream = client
+        .get_tiles(pb::TileQuery {
+            map: map.into(),
+            selection: Some(pb::tile_query::Selection::Region(pb::CellBox {
+                min_x: i32::MIN,
+                min_y: i32::MIN,
+                max_x: i32::MAX,
+                max_y: i32::MAX,
+            })),
+            newer_than_version: 0,
+        })
+        .await
+        .expect("get tiles")
+        .into_inner();
+    let mut out = Vec::new();
+    while let Some(tile) = stream.message().await.expect("tile") {
+        let cells = tile
+            .cells
+            .chunks_exact(2)
+            .map(|b| i16::from_le_bytes([b[0], b[1]]))
+            .collect();
+        out.push((tile.key.expect("key"), tile.version, cells));
+    }
+    out
+}
