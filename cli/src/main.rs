@@ -1,5 +1,6 @@
 //! `deog`: every process of the system as a subcommand.
 
+mod bench;
 mod demo;
 mod server;
 mod signal;
@@ -24,6 +25,8 @@ enum Command {
     /// Runs the map server: maps, frames and poses in an embedded store,
     /// served over gRPC.
     Server(server::ServerArgs),
+    /// Runs the release benchmarks of the map server.
+    Bench(bench::BenchArgs),
 }
 
 fn main() -> Result<()> {
@@ -36,5 +39,6 @@ fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Demo(args) => demo::run(args),
         Command::Server(args) => server::run(args),
+        Command::Bench(args) => bench::run(args),
     }
 }

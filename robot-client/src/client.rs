@@ -35,7 +35,10 @@ impl MapClient {
     }
 
     /// Creates a map, or returns the existing one of that name.
-    pub async fn ensure_map(&self, request: pb::CreateMapRequest) -> Result<pb::MapInfo, ClientError> {
+    pub async fn ensure_map(
+        &self,
+        request: pb::CreateMapRequest,
+    ) -> Result<pb::MapInfo, ClientError> {
         let raw = self.raw.clone();
         let created = with_retry(&self.config.retry, || {
             let (mut raw, request) = (raw.clone(), request.clone());
@@ -54,7 +57,9 @@ impl MapClient {
     /// A map's settings and counts.
     pub async fn map_info(&self, name: &str) -> Result<pb::MapInfo, ClientError> {
         let raw = self.raw.clone();
-        let request = pb::MapRef { name: name.to_string() };
+        let request = pb::MapRef {
+            name: name.to_string(),
+        };
         Ok(with_retry(&self.config.retry, || {
             let (mut raw, request) = (raw.clone(), request.clone());
             async move { raw.get_map_info(request).await }
@@ -91,7 +96,10 @@ impl MapClient {
 
     /// Stores frames; returns (stored, duplicates). Safe to retry: the
     /// server skips sequences it has.
-    pub async fn publish_frames(&self, frames: Vec<pb::SonarFrame>) -> Result<(u32, u32), ClientError> {
+    pub async fn publish_frames(
+        &self,
+        frames: Vec<pb::SonarFrame>,
+    ) -> Result<(u32, u32), ClientError> {
         let raw = self.raw.clone();
         let request = pb::PublishFramesRequest { frames };
         let reply = with_retry(&self.config.retry, || {
@@ -104,7 +112,12 @@ impl MapClient {
     }
 
     /// A robot's stored frames in `from..=to` (0 = open).
-    pub async fn read_frames(&self, robot: &str, from: u64, to: u64) -> Result<Vec<pb::SonarFrame>, ClientError> {
+    pub async fn read_frames(
+        &self,
+        robot: &str,
+        from: u64,
+        to: u64,
+    ) -> Result<Vec<pb::SonarFrame>, ClientError> {
         let request = pb::ReadFramesRequest {
             robot: robot.to_string(),
             from_sequence: from,

@@ -123,9 +123,14 @@ impl std::fmt::Debug for TokenInterceptor {
 }
 
 impl Interceptor for TokenInterceptor {
-    fn call(&mut self, mut request: tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> {
+    fn call(
+        &mut self,
+        mut request: tonic::Request<()>,
+    ) -> Result<tonic::Request<()>, tonic::Status> {
         if let Some(header) = &self.header {
-            request.metadata_mut().insert("authorization", header.clone());
+            request
+                .metadata_mut()
+                .insert("authorization", header.clone());
         }
         Ok(request)
     }
@@ -141,9 +146,9 @@ pub async fn connect(config: &ClientConfig) -> Result<(Channel, TokenInterceptor
         .token
         .as_ref()
         .map(|t| {
-            format!("Bearer {}", t.trim())
-                .parse()
-                .map_err(|_| ClientError::Config("the token holds characters not allowed in a header".into()))
+            format!("Bearer {}", t.trim()).parse().map_err(|_| {
+                ClientError::Config("the token holds characters not allowed in a header".into())
+            })
         })
         .transpose()?;
     let mut attempt = 1;
@@ -210,7 +215,9 @@ mod tests {
             max: Duration::from_millis(500),
             max_attempts: Some(5),
         };
-        let delays: Vec<u64> = (1..=6).map(|a| policy.delay(a).as_millis() as u64).collect();
+        let delays: Vec<u64> = (1..=6)
+            .map(|a| policy.delay(a).as_millis() as u64)
+            .collect();
         assert_eq!(delays, [0, 100, 200, 400, 500, 500]);
         assert!(policy.allows(5));
         assert!(!policy.allows(6));

@@ -7,7 +7,7 @@
 //! - [`updates`]: [`UpdateSender`], batched and pipelined tile updates that
 //!   are resent after a reconnect and applied exactly once.
 //! - [`tile_cache`]: [`TileCache`], a versioned copy of a map's tiles.
-//! - [`error`]: [`ClientError`].
+//! - [`error`]: [`ClientError`], and which failures are worth a retry.
 
 pub mod client;
 pub mod connect;

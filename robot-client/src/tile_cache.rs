@@ -62,7 +62,11 @@ impl TileCache {
 
     /// Brings the tiles of `region` up to date, fetching only the tiles that
     /// changed since the last refresh. Returns how many tiles were fetched.
-    pub async fn refresh(&mut self, client: &MapClient, region: CellBox) -> Result<usize, ClientError> {
+    pub async fn refresh(
+        &mut self,
+        client: &MapClient,
+        region: CellBox,
+    ) -> Result<usize, ClientError> {
         let version = client.map_info(&self.map).await?.version;
         let region_wire = pb::CellBox {
             min_x: region.min.x,
@@ -99,7 +103,9 @@ impl TileCache {
             for tile in client
                 .tiles(pb::TileQuery {
                     map: self.map.clone(),
-                    selection: Some(pb::tile_query::Selection::Keys(pb::TileKeys { keys: missing })),
+                    selection: Some(pb::tile_query::Selection::Keys(pb::TileKeys {
+                        keys: missing,
+                    })),
                     newer_than_version: 0,
                 })
                 .await?

@@ -261,7 +261,10 @@ async fn run_stream(
         if !first {
             failures += 1;
             if !retry.allows(failures + 1) {
-                fail(&acks, format!("gave up after {failures} failed attempts to reach the map server"));
+                fail(
+                    &acks,
+                    format!("gave up after {failures} failed attempts to reach the map server"),
+                );
                 return;
             }
             tokio::time::sleep(retry.delay(failures + 1)).await;
@@ -273,7 +276,11 @@ async fn run_stream(
             // The channel holds a whole window and unacked never exceeds it.
             let _ = request_tx.try_send(batch.clone());
         }
-        let mut responses = match client.raw().apply_updates(ReceiverStream::new(request_rx)).await {
+        let mut responses = match client
+            .raw()
+            .apply_updates(ReceiverStream::new(request_rx))
+            .await
+        {
             Ok(response) => response.into_inner(),
             Err(status) if is_transient(&status) => {
                 tracing::debug!(%status, "cannot open the update stream; retrying");

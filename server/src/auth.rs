@@ -63,10 +63,17 @@ mod tests {
         let mut auth = BearerAuth::new(Some("s3cret\n".into()));
         assert!(auth.call(Request::new(())).is_err());
         let mut wrong = Request::new(());
-        wrong.metadata_mut().insert("authorization", "Bearer nope".parse().unwrap());
-        assert_eq!(auth.call(wrong).unwrap_err().code(), tonic::Code::Unauthenticated);
+        wrong
+            .metadata_mut()
+            .insert("authorization", "Bearer nope".parse().unwrap());
+        assert_eq!(
+            auth.call(wrong).unwrap_err().code(),
+            tonic::Code::Unauthenticated
+        );
         let mut right = Request::new(());
-        right.metadata_mut().insert("authorization", "Bearer s3cret".parse().unwrap());
+        right
+            .metadata_mut()
+            .insert("authorization", "Bearer s3cret".parse().unwrap());
         assert!(auth.call(right).is_ok());
         assert!(BearerAuth::new(None).call(Request::new(())).is_ok());
     }

@@ -92,7 +92,10 @@ fn finite(field: &str, value: f64) -> Result<f64, StoreError> {
     if value.is_finite() {
         Ok(value)
     } else {
-        Err(StoreError::invalid(field, format!("must be a finite number, got {value}")))
+        Err(StoreError::invalid(
+            field,
+            format!("must be a finite number, got {value}"),
+        ))
     }
 }
 
@@ -162,8 +165,11 @@ fn cell_box_to_wire(b: CellBox) -> pb::CellBox {
 /// A box of cells; absent means a required field is missing.
 pub fn cell_box(field: &str, value: Option<&pb::CellBox>) -> Result<CellBox, StoreError> {
     let b = value.ok_or_else(|| StoreError::invalid(field, "is required"))?;
-    CellBox::new(CellIndex::new(b.min_x, b.min_y), CellIndex::new(b.max_x, b.max_y))
-        .ok_or_else(|| StoreError::invalid(field, "max_x and max_y must not be below min_x and min_y"))
+    CellBox::new(
+        CellIndex::new(b.min_x, b.min_y),
+        CellIndex::new(b.max_x, b.max_y),
+    )
+    .ok_or_else(|| StoreError::invalid(field, "max_x and max_y must not be below min_x and min_y"))
 }
 
 /// A tile key within the map's addressable range and the server's extent.
@@ -210,7 +216,10 @@ pub fn tile_delta(
         _ => {
             return Err(StoreError::invalid(
                 format!("{field}.encoding"),
-                format!("must be DENSE_I16_LE or SPARSE_I16_LE, got {}", value.encoding),
+                format!(
+                    "must be DENSE_I16_LE or SPARSE_I16_LE, got {}",
+                    value.encoding
+                ),
             ));
         }
     }
@@ -274,7 +283,10 @@ pub fn sonar_frame(field: &str, frame: &pb::SonarFrame, limits: &Limits) -> Resu
     for (i, &r) in frame.ranges.iter().enumerate() {
         let f = format!("{field}.ranges[{i}]");
         if finite(&f, r)? < 0.0 {
-            return Err(StoreError::invalid(f, format!("must not be negative, got {r}")));
+            return Err(StoreError::invalid(
+                f,
+                format!("must not be negative, got {r}"),
+            ));
         }
     }
     Ok(())
@@ -290,7 +302,10 @@ pub fn pose_estimate(estimate: &pb::PoseEstimate) -> Result<(), StoreError> {
     if !(estimate.covariance.is_empty() || estimate.covariance.len() == 9) {
         return Err(StoreError::invalid(
             "covariance",
-            format!("must hold 9 values (3 x 3, row-major) or none, got {}", estimate.covariance.len()),
+            format!(
+                "must hold 9 values (3 x 3, row-major) or none, got {}",
+                estimate.covariance.len()
+            ),
         ));
     }
     for (i, &c) in estimate.covariance.iter().enumerate() {
@@ -298,7 +313,10 @@ pub fn pose_estimate(estimate: &pb::PoseEstimate) -> Result<(), StoreError> {
     }
     let lost = finite("lost_score", estimate.lost_score)?;
     if !(0.0..=1.0).contains(&lost) {
-        return Err(StoreError::invalid("lost_score", format!("must be within [0, 1], got {lost}")));
+        return Err(StoreError::invalid(
+            "lost_score",
+            format!("must be within [0, 1], got {lost}"),
+        ));
     }
     Ok(())
 }

@@ -104,7 +104,11 @@ pub async fn serve<S: Store>(
     );
     // tonic's own decoder limit is a backstop well above ours, so that an
     // oversized message reaches our check and gets a message naming it.
-    let transport_limit = config.limits.max_message_bytes.saturating_mul(2).saturating_add(1 << 20);
+    let transport_limit = config
+        .limits
+        .max_message_bytes
+        .saturating_mul(2)
+        .saturating_add(1 << 20);
     let map_service = tonic::service::interceptor::InterceptedService::new(
         MapServiceServer::new(service)
             .max_decoding_message_size(transport_limit)
@@ -124,7 +128,9 @@ pub async fn serve<S: Store>(
     let mut builder = Server::builder();
     if let Some(tls) = &config.tls {
         builder = builder
-            .tls_config(ServerTlsConfig::new().identity(Identity::from_pem(&tls.cert_pem, &tls.key_pem)))
+            .tls_config(
+                ServerTlsConfig::new().identity(Identity::from_pem(&tls.cert_pem, &tls.key_pem)),
+            )
             .map_err(ServeError::Tls)?;
     }
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();

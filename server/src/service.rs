@@ -38,7 +38,9 @@ pub struct MapServer<S> {
 
 impl<S> std::fmt::Debug for MapServer<S> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("MapServer").field("limits", &self.limits).finish_non_exhaustive()
+        f.debug_struct("MapServer")
+            .field("limits", &self.limits)
+            .finish_non_exhaustive()
     }
 }
 
@@ -117,7 +119,9 @@ impl<S: Store> MapServer<S> {
     /// Runs `produce` on a blocking thread, streaming what it sends.
     fn blocking_stream<T: Send + 'static>(
         &self,
-        produce: impl FnOnce(&mpsc::Sender<Result<T, Status>>) -> Result<(), StoreError> + Send + 'static,
+        produce: impl FnOnce(&mpsc::Sender<Result<T, Status>>) -> Result<(), StoreError>
+        + Send
+        + 'static,
     ) -> ResponseStream<T> {
         let (tx, rx) = mpsc::channel(self.stream_buffer);
         tokio::task::spawn_blocking(move || {
@@ -194,7 +198,10 @@ impl<S: Store> MapService for MapServer<S> {
         self.limits.check_size("CreateMapRequest", &request)?;
         let name = convert::map_name("name", &request.name)?;
         let settings = convert::map_settings(&request)?;
-        let record = self.writer.create_map(MapRecord::new(name, settings)).await?;
+        let record = self
+            .writer
+            .create_map(MapRecord::new(name, settings))
+            .await?;
         tracing::info!(map = %record.name, "map created");
         Ok(Response::new(convert::map_info(&record)))
     }
@@ -207,12 +214,18 @@ impl<S: Store> MapService for MapServer<S> {
         Ok(Response::new(pb::ListMapsResponse { maps }))
     }
 
-    async fn get_map_info(&self, request: Request<pb::MapRef>) -> Result<Response<pb::MapInfo>, Status> {
+    async fn get_map_info(
+        &self,
+        request: Request<pb::MapRef>,
+    ) -> Result<Response<pb::MapInfo>, Status> {
         let name = convert::map_name("name", &request.get_ref().name)?;
         Ok(Response::new(convert::map_info(&self.record(&name)?)))
     }
 
-    async fn clear_map(&self, request: Request<pb::MapRef>) -> Result<Response<pb::MapInfo>, Status> {
+    async fn clear_map(
+        &self,
+        request: Request<pb::MapRef>,
+    ) -> Result<Response<pb::MapInfo>, Status> {
         let name = convert::map_name("name", &request.get_ref().name)?;
         let record = self.writer.clear_map(name).await?;
         tracing::info!(map = %record.name, version = record.version, "map cleared");
@@ -236,7 +249,11 @@ impl<S: Store> MapService for MapServer<S> {
         request: Request<Streaming<pb::UpdateBatch>>,
     ) -> Result<Response<Self::ApplyUpdatesStream>, Status> {
         enum Pending {
-            Ack(String, u64, oneshot::Receiver<Result<crate::writer::Ack, StoreError>>),
+            Ack(
+                String,
+                u64,
+                oneshot::Receiver<Result<crate::writer::Ack, StoreError>>,
+            ),
             Fail(Status),
         }
         let mut inbound = request.into_inner();
@@ -325,7 +342,11 @@ impl<S: Store> MapService for MapServer<S> {
         let size = record.settings.tile_size;
         let newer_than = request.newer_than_version;
         let wire = move |key, stored: &crate::store::StoredTile| {
-            convert::tile_to_wire(key, stored.version, (stored.version > newer_than).then_some(&stored.tile))
+            convert::tile_to_wire(
+                key,
+                stored.version,
+                (stored.version > newer_than).then_some(&stored.tile),
+            )
         };
         let store = self.store.clone();
         let stream = match request.selection {
@@ -343,7 +364,9 @@ impl<S: Store> MapService for MapServer<S> {
                     .keys
                     .iter()
                     .enumerate()
-                    .map(|(i, k)| convert::tile_key(&format!("keys.keys[{i}]"), Some(k), size, &self.limits))
+                    .map(|(i, k)| {
+                        convert::tile_key(&format!("keys.keys[{i}]"), Some(k), size, &self.limits)
+                    })
                     .collect::<Result<Vec<_>, _>>()?;
                 self.blocking_stream(move |tx| {
                     for key in keys {
@@ -397,7 +420,11 @@ impl<S: Store> MapService for MapServer<S> {
                             Event::Changed(convert::tile_to_wire(key, version, None))
                         } else {
                             match server.store.tile(&record, key) {
-                                Ok(Some(stored)) => Event::Changed(convert::tile_to_wire(key, stored.version, Some(&stored.tile))),
+                                Ok(Some(stored)) => Event::Changed(convert::tile_to_wire(
+                                    key,
+                                    stored.version,
+                                    Some(&stored.tile),
+                                )),
                                 Ok(None) => continue,
                                 Err(error) => {
                                     let _ = tx.send(Err(error.into())).await;
@@ -406,22 +433,37 @@ impl<S: Store> MapService for MapServer<S> {
                             }
                         }
                     }
-                    Ok(MapEvent::Cleared { version }) => Event::Cleared(pb::MapCleared { map_version: version }),
+                    Ok(MapEvent::Cleared { version }) => Event::Cleared(pb::MapCleared {
+                        map_version: version,
+                    }),
                     Ok(MapEvent::Deleted) => {
-                        let _ = tx.send(Err(StoreError::MapNotFound(map.clone()).into())).await;
+                        let _ = tx
+                            .send(Err(StoreError::MapNotFound(map.clone()).into()))
+                            .await;
                         break;
                     }
                     Err(broadcast::error::RecvError::Lagged(missed)) => {
-                        let map_version = server.store.map(&map).ok().flatten().map_or(0, |r| r.version);
+                        let map_version = server
+                            .store
+                            .map(&map)
+                            .ok()
+                            .flatten()
+                            .map_or(0, |r| r.version);
                         tracing::debug!(map = %map, missed, "tile watcher fell behind; sending resync");
                         Event::Resync(pb::Resync {
                             map_version,
-                            reason: format!("{missed} tile events dropped because the subscriber fell behind"),
+                            reason: format!(
+                                "{missed} tile events dropped because the subscriber fell behind"
+                            ),
                         })
                     }
                     Err(broadcast::error::RecvError::Closed) => break,
                 };
-                if tx.send(Ok(pb::TileEvent { event: Some(event) })).await.is_err() {
+                if tx
+                    .send(Ok(pb::TileEvent { event: Some(event) }))
+                    .await
+                    .is_err()
+                {
                     break;
                 }
             }
@@ -456,7 +498,10 @@ impl<S: Store> MapService for MapServer<S> {
             });
         }
         let (stored, duplicates) = self.writer.publish_frames(inputs).await?;
-        Ok(Response::new(pb::PublishFramesResponse { stored, duplicates }))
+        Ok(Response::new(pb::PublishFramesResponse {
+            stored,
+            duplicates,
+        }))
     }
 
     type ReadFramesStream = ResponseStream<pb::SonarFrame>;
@@ -468,13 +513,20 @@ impl<S: Store> MapService for MapServer<S> {
         let request = request.into_inner();
         let robot = convert::robot_name("robot", &request.robot)?;
         let (from, to) = convert::sequence_range(request.from_sequence, request.to_sequence)?;
-        let limit = if request.limit == 0 { usize::MAX } else { request.limit as usize };
+        let limit = if request.limit == 0 {
+            usize::MAX
+        } else {
+            request.limit as usize
+        };
         let store = self.store.clone();
         Ok(Response::new(self.blocking_stream(move |tx| {
             let mut sent = 0usize;
             let mut failure = None;
-            store.read_frames(&robot, from, to, &mut |_, bytes| {
-                match decode::<pb::SonarFrame>(bytes, "frame") {
+            store.read_frames(
+                &robot,
+                from,
+                to,
+                &mut |_, bytes| match decode::<pb::SonarFrame>(bytes, "frame") {
                     Ok(frame) => {
                         sent += 1;
                         tx.blocking_send(Ok(frame)).is_ok() && sent < limit
@@ -483,8 +535,8 @@ impl<S: Store> MapService for MapServer<S> {
                         failure = Some(e);
                         false
                     }
-                }
-            })?;
+                },
+            )?;
             failure.map_or(Ok(()), Err)
         })))
     }
@@ -574,13 +626,18 @@ impl<S: Store> MapService for MapServer<S> {
         let store = self.store.clone();
         Ok(Response::new(self.blocking_stream(move |tx| {
             let mut failure = None;
-            store.read_poses(&robot, from, to, &mut |_, bytes| match decode::<pb::PoseEstimate>(bytes, "pose") {
-                Ok(pose) => tx.blocking_send(Ok(pose)).is_ok(),
-                Err(e) => {
-                    failure = Some(e);
-                    false
-                }
-            })?;
+            store.read_poses(
+                &robot,
+                from,
+                to,
+                &mut |_, bytes| match decode::<pb::PoseEstimate>(bytes, "pose") {
+                    Ok(pose) => tx.blocking_send(Ok(pose)).is_ok(),
+                    Err(e) => {
+                        failure = Some(e);
+                        false
+                    }
+                },
+            )?;
             failure.map_or(Ok(()), Err)
         })))
     }

@@ -91,7 +91,11 @@ impl std::fmt::Debug for Writer {
 
 impl Writer {
     /// Starts the writer over `store`; at most `queue` requests wait for it.
-    pub fn start<S: Store>(store: Arc<S>, events: Arc<Events>, queue: usize) -> std::io::Result<Self> {
+    pub fn start<S: Store>(
+        store: Arc<S>,
+        events: Arc<Events>,
+        queue: usize,
+    ) -> std::io::Result<Self> {
         let (sender, receiver) = mpsc::channel(queue.max(1));
         let thread = std::thread::Builder::new()
             .name("deog-writer".into())
@@ -242,10 +246,14 @@ struct PendingMap {
     record_dirty: bool,
 }
 
+/// A robot's summary and the frames (sequence, encoded frame) added to it
+/// in this group.
+type PendingFrames = (RobotSummary, Vec<(u64, Vec<u8>)>);
+
 struct Group<'s, S> {
     store: &'s S,
     maps: HashMap<String, PendingMap>,
-    frames: BTreeMap<String, (RobotSummary, Vec<(u64, Vec<u8>)>)>,
+    frames: BTreeMap<String, PendingFrames>,
     poses: Vec<(String, u64, Vec<u8>)>,
     replies: Vec<Deferred>,
     map_events: Vec<(String, MapEvent)>,
@@ -414,7 +422,10 @@ impl<'s, S: Store> Group<'s, S> {
         if let Some(delta) = batch.deltas.iter().find(|d| d.raw().len() != size.area()) {
             return Err(StoreError::invalid(
                 "tiles.cells",
-                format!("tile ({}, {}) has the wrong number of cells", delta.key.x, delta.key.y),
+                format!(
+                    "tile ({}, {}) has the wrong number of cells",
+                    delta.key.x, delta.key.y
+                ),
             ));
         }
         let version = map.record.version + 1;

@@ -16,8 +16,14 @@ async fn maps_are_created_listed_cleared_and_deleted() {
     let server = TestServer::start().await;
     let mut client = server.client().await;
     let info = create_map(&mut client, "lab", 0).await;
-    assert_eq!((info.tile_size, info.resolution_m, info.version), (64, 0.05, 0));
-    assert_eq!((info.clamp_min_probability, info.clamp_max_probability), (0.12, 0.97));
+    assert_eq!(
+        (info.tile_size, info.resolution_m, info.version),
+        (64, 0.05, 0)
+    );
+    assert_eq!(
+        (info.clamp_min_probability, info.clamp_max_probability),
+        (0.12, 0.97)
+    );
     assert!(info.bounds_cells.is_none());
     create_map(&mut client, "hall", 16).await;
     let names: Vec<String> = client
@@ -31,11 +37,21 @@ async fn maps_are_created_listed_cleared_and_deleted() {
         .collect();
     assert_eq!(names, ["hall", "lab"]);
 
-    let cells: Vec<i16> = (0..64 * 64).map(|i| if i == 65 { 500 } else { 0 }).collect();
-    let (acks, error) = send_batches(&mut client, vec![batch("lab", "c", 1, vec![dense_delta(-1, 2, &cells)])]).await;
+    let cells: Vec<i16> = (0..64 * 64)
+        .map(|i| if i == 65 { 500 } else { 0 })
+        .collect();
+    let (acks, error) = send_batches(
+        &mut client,
+        vec![batch("lab", "c", 1, vec![dense_delta(-1, 2, &cells)])],
+    )
+    .await;
     assert!(error.is_none(), "{error:?}");
     assert_eq!(acks.len(), 1);
-    let info = client.get_map_info(pb::MapRef { name: "lab".into() }).await.unwrap().into_inner();
+    let info = client
+        .get_map_info(pb::MapRef { name: "lab".into() })
+        .await
+        .unwrap()
+        .into_inner();
     assert_eq!((info.version, info.tile_count, info.cell_count), (1, 1, 1));
     // Cell 65 of tile (-1, 2) is (ox 1, oy 1): cell (-63, 129).
     let b = info.bounds_cells.unwrap();
@@ -44,12 +60,25 @@ async fn maps_are_created_listed_cleared_and_deleted() {
     let m = info.bounds_m.unwrap();
     assert!((m.min_x + 3.15).abs() < 1e-9 && (m.max_y - 6.5).abs() < 1e-9);
 
-    let cleared = client.clear_map(pb::MapRef { name: "lab".into() }).await.unwrap().into_inner();
-    assert_eq!((cleared.version, cleared.tile_count, cleared.cell_count), (2, 0, 0));
+    let cleared = client
+        .clear_map(pb::MapRef { name: "lab".into() })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(
+        (cleared.version, cleared.tile_count, cleared.cell_count),
+        (2, 0, 0)
+    );
     assert!(all_tiles(&mut client, "lab").await.is_empty());
 
-    client.delete_map(pb::MapRef { name: "lab".into() }).await.unwrap();
-    let gone = client.get_map_info(pb::MapRef { name: "lab".into() }).await.unwrap_err();
+    client
+        .delete_map(pb::MapRef { name: "lab".into() })
+        .await
+        .unwrap();
+    let gone = client
+        .get_map_info(pb::MapRef { name: "lab".into() })
+        .await
+        .unwrap_err();
     assert_eq!(gone.code(), tonic::Code::NotFound);
     // The name is free again, and the new map starts empty.
     let again = create_map(&mut client, "lab", 0).await;
@@ -64,7 +93,13 @@ fn random_batch(rng: &mut ChaCha8Rng, size: TileSize, tiles: &[TileKey]) -> Vec<
             continue;
         }
         let raw = (0..size.area())
-            .map(|_| if rng.random_bool(0.5) { rng.random_range(-900..=900) } else { 0 })
+            .map(|_| {
+                if rng.random_bool(0.5) {
+                    rng.random_range(-900..=900)
+                } else {
+                    0
+                }
+            })
             .collect();
         out.push(TileDelta::from_raw(key, size, raw).unwrap());
     }
@@ -78,7 +113,10 @@ fn wire(deltas: &[TileDelta]) -> Vec<pb::TileDelta> {
 fn deog_robot_client_encode(delta: &TileDelta) -> pb::TileDelta {
     // Sparse when half the cells are zero, as clients send them.
     pb::TileDelta {
-        key: Some(pb::TileKey { x: delta.key.x, y: delta.key.y }),
+        key: Some(pb::TileKey {
+            x: delta.key.x,
+            y: delta.key.y,
+        }),
         encoding: pb::CellEncoding::SparseI16Le as i32,
         cells: delta.to_sparse_bytes().unwrap(),
     }
@@ -93,18 +131,32 @@ struct Sent {
 /// the same tiles at once. Returns every batch with the map version its ack
 /// carried.
 async fn eight_clients_at_once(server: &TestServer, map: &str, size: TileSize) -> Vec<Sent> {
-    let keys = [TileKey::new(0, 0), TileKey::new(-1, 0), TileKey::new(0, -1), TileKey::new(3, 7)];
+    let keys = [
+        TileKey::new(0, 0),
+        TileKey::new(-1, 0),
+        TileKey::new(0, -1),
+        TileKey::new(3, 7),
+    ];
     let mut tasks = Vec::new();
     for client_index in 0..8u64 {
         let mut client = server.client().await;
         let map = map.to_string();
         tasks.push(tokio::spawn(async move {
             let mut rng = ChaCha8Rng::seed_from_u64(client_index);
-            let plan: Vec<Vec<TileDelta>> = (0..25).map(|_| random_batch(&mut rng, size, &keys)).collect();
+            let plan: Vec<Vec<TileDelta>> = (0..25)
+                .map(|_| random_batch(&mut rng, size, &keys))
+                .collect();
             let batches = plan
                 .iter()
                 .enumerate()
-                .map(|(i, d)| batch(&map, &format!("robot-{client_index}"), i as u64 + 1, wire(d)))
+                .map(|(i, d)| {
+                    batch(
+                        &map,
+                        &format!("robot-{client_index}"),
+                        i as u64 + 1,
+                        wire(d),
+                    )
+                })
                 .collect();
             let (acks, error) = send_batches(&mut client, batches).await;
             assert!(error.is_none(), "{error:?}");
@@ -113,7 +165,10 @@ async fn eight_clients_at_once(server: &TestServer, map: &str, size: TileSize) -
                 .zip(acks)
                 .map(|(deltas, ack)| {
                     assert!(ack.applied);
-                    Sent { deltas, ack_version: ack.map_version }
+                    Sent {
+                        deltas,
+                        ack_version: ack.map_version,
+                    }
                 })
                 .collect::<Vec<_>>()
         }));
@@ -126,7 +181,10 @@ async fn eight_clients_at_once(server: &TestServer, map: &str, size: TileSize) -
 }
 
 fn server_cells(tiles: &[(pb::TileKey, u64, Vec<i16>)]) -> HashMap<TileKey, Vec<i16>> {
-    tiles.iter().map(|(k, _, cells)| (TileKey::new(k.x, k.y), cells.clone())).collect()
+    tiles
+        .iter()
+        .map(|(k, _, cells)| (TileKey::new(k.x, k.y), cells.clone()))
+        .collect()
 }
 
 #[tokio::test]
@@ -146,7 +204,11 @@ async fn concurrent_clients_clamped_map_equals_batches_applied_in_ack_order() {
     let mut expected: HashMap<TileKey, Tile> = HashMap::new();
     for s in &sent {
         for d in &s.deltas {
-            expected.entry(d.key).or_insert_with(|| Tile::unknown(size)).apply(d, limits).unwrap();
+            expected
+                .entry(d.key)
+                .or_insert_with(|| Tile::unknown(size))
+                .apply(d, limits)
+                .unwrap();
         }
     }
     let got = server_cells(&all_tiles(&mut client, "shared").await);
@@ -162,7 +224,13 @@ async fn concurrent_clients_clamped_map_equals_batches_applied_in_ack_order() {
     }
     // The test only means something if clamping actually happened.
     assert!(clamped > 100, "only {clamped} clamped cells");
-    let info = client.get_map_info(pb::MapRef { name: "shared".into() }).await.unwrap().into_inner();
+    let info = client
+        .get_map_info(pb::MapRef {
+            name: "shared".into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
     assert_eq!(info.version, 200);
     let observed: usize = expected.values().map(Tile::observed_count).sum();
     assert_eq!(info.cell_count, observed as u64);
@@ -191,7 +259,9 @@ async fn concurrent_clients_unclamped_map_is_the_exact_sum_in_any_order() {
     for s in &sent {
         for d in &s.deltas {
             let sum = sums.entry(d.key).or_insert_with(|| vec![0; size.area()]);
-            let seen = touched.entry(d.key).or_insert_with(|| vec![false; size.area()]);
+            let seen = touched
+                .entry(d.key)
+                .or_insert_with(|| vec![false; size.area()]);
             for (i, &v) in d.raw().iter().enumerate() {
                 sum[i] += i32::from(v);
                 seen[i] |= v != 0;
@@ -213,8 +283,9 @@ async fn resent_batches_after_a_reconnect_are_applied_once() {
     let mut first = server.client().await;
     create_map(&mut first, "once", 8).await;
     let cells = vec![100i16; 64];
-    let batches: Vec<pb::UpdateBatch> =
-        (1..=3).map(|s| batch("once", "carto/scout-1", s, vec![dense_delta(0, 0, &cells)])).collect();
+    let batches: Vec<pb::UpdateBatch> = (1..=3)
+        .map(|s| batch("once", "carto/scout-1", s, vec![dense_delta(0, 0, &cells)]))
+        .collect();
     let (acks, _) = send_batches(&mut first, batches.clone()).await;
     assert!(acks.iter().all(|a| a.applied));
     assert_eq!(acks.last().unwrap().map_version, 3);
@@ -223,21 +294,39 @@ async fn resent_batches_after_a_reconnect_are_applied_once() {
     // A new connection resends 2 and 3 (their acks were "lost"), then 4.
     let mut second = server.client().await;
     let cursor = second
-        .get_update_cursor(pb::UpdateCursorRequest { map: "once".into(), client_id: "carto/scout-1".into() })
+        .get_update_cursor(pb::UpdateCursorRequest {
+            map: "once".into(),
+            client_id: "carto/scout-1".into(),
+        })
         .await
         .unwrap()
         .into_inner();
     assert_eq!(cursor.last_sequence, 3);
     let mut again = batches[1..].to_vec();
-    again.push(batch("once", "carto/scout-1", 4, vec![dense_delta(0, 0, &cells)]));
+    again.push(batch(
+        "once",
+        "carto/scout-1",
+        4,
+        vec![dense_delta(0, 0, &cells)],
+    ));
     let (acks, error) = send_batches(&mut second, again).await;
     assert!(error.is_none());
-    let applied: Vec<(u64, bool, u64)> = acks.iter().map(|a| (a.sequence, a.applied, a.map_version)).collect();
+    let applied: Vec<(u64, bool, u64)> = acks
+        .iter()
+        .map(|a| (a.sequence, a.applied, a.map_version))
+        .collect();
     assert_eq!(applied, [(2, false, 3), (3, false, 3), (4, true, 4)]);
     let tiles = all_tiles(&mut second, "once").await;
-    assert!(tiles[0].2.iter().all(|&c| c == 400), "four batches of +100 each");
+    assert!(
+        tiles[0].2.iter().all(|&c| c == 400),
+        "four batches of +100 each"
+    );
     // Another client's sequences are its own.
-    let (acks, _) = send_batches(&mut second, vec![batch("once", "other", 1, vec![dense_delta(0, 0, &cells)])]).await;
+    let (acks, _) = send_batches(
+        &mut second,
+        vec![batch("once", "other", 1, vec![dense_delta(0, 0, &cells)])],
+    )
+    .await;
     assert!(acks[0].applied);
 }
 
@@ -247,18 +336,35 @@ async fn get_tiles_selects_by_region_and_keys_and_skips_cells_not_newer() {
     let mut client = server.client().await;
     create_map(&mut client, "q", 8).await;
     let ones = vec![10i16; 64];
-    let tiles = vec![dense_delta(0, 0, &ones), dense_delta(5, 5, &ones), dense_delta(-3, 1, &ones)];
+    let tiles = vec![
+        dense_delta(0, 0, &ones),
+        dense_delta(5, 5, &ones),
+        dense_delta(-3, 1, &ones),
+    ];
     send_batches(&mut client, vec![batch("q", "a", 1, tiles)]).await;
-    send_batches(&mut client, vec![batch("q", "a", 2, vec![dense_delta(5, 5, &ones)])]).await;
+    send_batches(
+        &mut client,
+        vec![batch("q", "a", 2, vec![dense_delta(5, 5, &ones)])],
+    )
+    .await;
 
     let region = |min_x, min_y, max_x, max_y| {
-        Some(pb::tile_query::Selection::Region(pb::CellBox { min_x, min_y, max_x, max_y }))
+        Some(pb::tile_query::Selection::Region(pb::CellBox {
+            min_x,
+            min_y,
+            max_x,
+            max_y,
+        }))
     };
     let fetch = |selection, newer_than_version| {
         let mut client = client.clone();
         async move {
             let mut stream = client
-                .get_tiles(pb::TileQuery { map: "q".into(), selection, newer_than_version })
+                .get_tiles(pb::TileQuery {
+                    map: "q".into(),
+                    selection,
+                    newer_than_version,
+                })
                 .await
                 .unwrap()
                 .into_inner();
@@ -271,8 +377,14 @@ async fn get_tiles_selects_by_region_and_keys_and_skips_cells_not_newer() {
         }
     };
     // Cells 0..=47 along both axes: tiles 0..=5.
-    assert_eq!(fetch(region(0, 0, 47, 47), 0).await, [(0, 0, 1, 128), (5, 5, 2, 128)]);
-    assert_eq!(fetch(region(-24, 0, 7, 15), 0).await, [(-3, 1, 1, 128), (0, 0, 1, 128)]);
+    assert_eq!(
+        fetch(region(0, 0, 47, 47), 0).await,
+        [(0, 0, 1, 128), (5, 5, 2, 128)]
+    );
+    assert_eq!(
+        fetch(region(-24, 0, 7, 15), 0).await,
+        [(-3, 1, 1, 128), (0, 0, 1, 128)]
+    );
     // Only tile (5, 5) changed after version 1.
     assert_eq!(
         fetch(region(-100, -100, 100, 100), 1).await,
@@ -302,7 +414,12 @@ async fn watchers_see_changes_in_their_region_and_clears() {
     let mut watch = client
         .watch_tiles(pb::WatchTilesRequest {
             map: "w".into(),
-            region: Some(pb::CellBox { min_x: 0, min_y: 0, max_x: 15, max_y: 15 }),
+            region: Some(pb::CellBox {
+                min_x: 0,
+                min_y: 0,
+                max_x: 15,
+                max_y: 15,
+            }),
             include_cells: true,
         })
         .await
@@ -310,8 +427,16 @@ async fn watchers_see_changes_in_their_region_and_clears() {
         .into_inner();
     let cells = vec![7i16; 64];
     // Tile (9, 9) is outside the region; (1, 1) is inside.
-    send_batches(&mut client, vec![batch("w", "a", 1, vec![dense_delta(9, 9, &cells)])]).await;
-    send_batches(&mut client, vec![batch("w", "a", 2, vec![dense_delta(1, 1, &cells)])]).await;
+    send_batches(
+        &mut client,
+        vec![batch("w", "a", 1, vec![dense_delta(9, 9, &cells)])],
+    )
+    .await;
+    send_batches(
+        &mut client,
+        vec![batch("w", "a", 2, vec![dense_delta(1, 1, &cells)])],
+    )
+    .await;
     match next_event(&mut watch).await {
         pb::tile_event::Event::Changed(tile) => {
             assert_eq!(tile.key, Some(pb::TileKey { x: 1, y: 1 }));
@@ -320,26 +445,43 @@ async fn watchers_see_changes_in_their_region_and_clears() {
         }
         other => panic!("unexpected {other:?}"),
     }
-    client.clear_map(pb::MapRef { name: "w".into() }).await.unwrap();
+    client
+        .clear_map(pb::MapRef { name: "w".into() })
+        .await
+        .unwrap();
     assert_eq!(
         next_event(&mut watch).await,
         pb::tile_event::Event::Cleared(pb::MapCleared { map_version: 3 })
     );
-    client.delete_map(pb::MapRef { name: "w".into() }).await.unwrap();
-    let end = tokio::time::timeout(Duration::from_secs(10), watch.message()).await.unwrap();
+    client
+        .delete_map(pb::MapRef { name: "w".into() })
+        .await
+        .unwrap();
+    let end = tokio::time::timeout(Duration::from_secs(10), watch.message())
+        .await
+        .unwrap();
     assert_eq!(end.unwrap_err().code(), tonic::Code::NotFound);
 }
 
 #[tokio::test]
 async fn a_slow_watcher_gets_one_resync_instead_of_an_unbounded_queue() {
-    let config = deog_server::ServerConfig { event_buffer: 16, stream_buffer: 4, ..Default::default() };
+    let config = deog_server::ServerConfig {
+        event_buffer: 16,
+        stream_buffer: 4,
+        ..Default::default()
+    };
     let server = TestServer::start_with(config).await;
     let mut client = server.client().await;
     create_map(&mut client, "busy", 8).await;
     let mut watch = client
         .watch_tiles(pb::WatchTilesRequest {
             map: "busy".into(),
-            region: Some(pb::CellBox { min_x: -1000, min_y: -1000, max_x: 1000, max_y: 1000 }),
+            region: Some(pb::CellBox {
+                min_x: -1000,
+                min_y: -1000,
+                max_x: 1000,
+                max_y: 1000,
+            }),
             include_cells: false,
         })
         .await
@@ -347,7 +489,16 @@ async fn a_slow_watcher_gets_one_resync_instead_of_an_unbounded_queue() {
         .into_inner();
     // The watcher reads nothing while 400 tiles change, one batch each.
     let cells = vec![1i16; 64];
-    let batches = (0..400).map(|i| batch("busy", "a", i + 1, vec![dense_delta(i as i32 % 40, i as i32 / 40, &cells)])).collect();
+    let batches = (0..400)
+        .map(|i| {
+            batch(
+                "busy",
+                "a",
+                i + 1,
+                vec![dense_delta(i as i32 % 40, i as i32 / 40, &cells)],
+            )
+        })
+        .collect();
     let (acks, _) = send_batches(&mut client, batches).await;
     assert_eq!(acks.len(), 400);
     // Then it reads: a bounded number of changes, then a resync.
@@ -359,11 +510,22 @@ async fn a_slow_watcher_gets_one_resync_instead_of_an_unbounded_queue() {
             other => panic!("unexpected {other:?}"),
         }
     };
-    assert!(changes_before_resync < 400, "{changes_before_resync} events were queued");
+    assert!(
+        changes_before_resync < 400,
+        "{changes_before_resync} events were queued"
+    );
     // The version when events were dropped: the watcher re-reads from there.
-    assert!((1..=400).contains(&resync.map_version), "{}", resync.map_version);
+    assert!(
+        (1..=400).contains(&resync.map_version),
+        "{}",
+        resync.map_version
+    );
     // After the resync, live events flow again.
-    send_batches(&mut client, vec![batch("busy", "a", 401, vec![dense_delta(0, 0, &cells)])]).await;
+    send_batches(
+        &mut client,
+        vec![batch("busy", "a", 401, vec![dense_delta(0, 0, &cells)])],
+    )
+    .await;
     loop {
         if let pb::tile_event::Event::Changed(t) = next_event(&mut watch).await
             && t.version == 401

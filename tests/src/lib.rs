@@ -3,10 +3,14 @@
 //!
 //! # Layout
 //! - [`deog_binary`]: the `deog` executable, built once per test run.
+//! - [`ServerProcess`]: a `deog server` child process on a free loopback
+//!   port, ready once its health service says so; killed when dropped.
 
-use std::path::PathBuf;
-use std::process::Command;
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
 use std::sync::OnceLock;
+use std::time::Duration;
 
 /// Path of a freshly built `deog` binary (the debug profile), building it
 /// with the same cargo that runs the tests on first use. Panics with cargo's
@@ -34,4 +38,125 @@ pub fn deog_binary() -> PathBuf {
                 .join(format!("deog{}", std::env::consts::EXE_SUFFIX))
         })
         .clone()
+}
+
+/// A free port on 127.0.0.1: bound, then released for a child to bind.
+pub fn free_loopback_addr() -> SocketAddr {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").expect("bind a free port");
+    listener.local_addr().expect("local address")
+}
+
+/// A running `deog server` process.
+#[derive(Debug)]
+pub struct ServerProcess {
+    /// Where it listens.
+    pub addr: SocketAddr,
+    child: Option<Child>,
+}
+
+impl ServerProcess {
+    /// Starts `deog server --listen <free port> --data <data>` plus `extra`
+    /// arguments and waits until its health service reports the map service
+    /// as serving (bounded: 30 s).
+    pub async fn start(data: &Path, extra: &[&str]) -> Self {
+        Self::start_on(free_loopback_addr(), data, extra).await
+    }
+
+    /// As [`ServerProcess::start`], on a given address (a restart).
+    pub async fn start_on(addr: SocketAddr, data: &Path, extra: &[&str]) -> Self {
+        let child = Command::new(deog_binary())
+            .arg("server")
+            .arg("--listen")
+            .arg(addr.to_string())
+            .arg("--data")
+            .arg(data)
+            .args(extra)
+            // Quiet unless a test run asks for more.
+            .env(
+                "RUST_LOG",
+                std::env::var("RUST_LOG").unwrap_or_else(|_| "warn".into()),
+            )
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("start deog server");
+        let server = Self {
+            addr,
+            child: Some(child),
+        };
+        server.wait_ready().await;
+        server
+    }
+
+    /// `http://<addr>`.
+    pub fn url(&self) -> String {
+        format!("http://{}", self.addr)
+    }
+
+    /// The process id.
+    pub fn pid(&self) -> u32 {
+        self.child.as_ref().map_or(0, Child::id)
+    }
+
+    async fn wait_ready(&self) {
+        for _ in 0..300 {
+            if let Ok(endpoint) = tonic::transport::Channel::from_shared(self.url())
+                && let Ok(channel) = endpoint.connect().await
+            {
+                let mut health = tonic_health::pb::health_client::HealthClient::new(channel);
+                let request = tonic_health::pb::HealthCheckRequest {
+                    service: "deog.v1.MapService".into(),
+                };
+                if let Ok(reply) = health.check(request).await
+                    && reply.into_inner().status
+                        == tonic_health::pb::health_check_response::ServingStatus::Serving as i32
+                {
+                    return;
+                }
+            }
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+        panic!("deog server on {} never became ready", self.addr);
+    }
+
+    /// SIGKILL: the process ends at once, with no chance to flush.
+    pub fn kill(mut self) {
+        if let Some(mut child) = self.child.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+
+    /// SIGTERM, then waits (bounded: 30 s) for the process to exit; returns
+    /// whether it exited successfully.
+    pub fn terminate(mut self) -> bool {
+        let Some(mut child) = self.child.take() else {
+            return false;
+        };
+        let sent = Command::new("kill")
+            .args(["-TERM", &child.id().to_string()])
+            .status()
+            .is_ok_and(|s| s.success());
+        if sent {
+            for _ in 0..300 {
+                if let Ok(Some(status)) = child.try_wait() {
+                    return status.success();
+                }
+                std::thread::sleep(Duration::from_millis(100));
+            }
+        }
+        let _ = child.kill();
+        let _ = child.wait();
+        false
+    }
+}
+
+impl Drop for ServerProcess {
+    fn drop(&mut self) {
+        if let Some(mut child) = self.child.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
 }

@@ -253,7 +253,8 @@ mod tests {
 
     #[test]
     fn map_record_round_trips() {
-        let settings = MapSettings::new(Resolution::DEFAULT, TileSize::DEFAULT, (0.2, 0.9)).unwrap();
+        let settings =
+            MapSettings::new(Resolution::DEFAULT, TileSize::DEFAULT, (0.2, 0.9)).unwrap();
         let mut record = MapRecord::new("lab".into(), settings);
         record.version = 7;
         record.tile_count = 3;
@@ -277,7 +278,10 @@ mod tests {
     #[test]
     fn robot_summary_tracks_range() {
         let s = RobotSummary::default().with(5).with(3).with(9);
-        assert_eq!((s.first_sequence, s.last_sequence, s.frame_count), (3, 9, 3));
+        assert_eq!(
+            (s.first_sequence, s.last_sequence, s.frame_count),
+            (3, 9, 3)
+        );
         assert_eq!(RobotSummary::decode(&s.encode()).unwrap(), s);
     }
 }

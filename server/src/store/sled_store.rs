@@ -255,12 +255,11 @@ impl Store for SledStore {
         let to = tile_key_bytes(range.max);
         for entry in tree.range(from..=to) {
             let (key_bytes, value) = entry?;
-            let key = TileKey::from_store_bytes(&key_bytes[1..]).map_err(|e| {
-                StoreError::Corrupt {
+            let key =
+                TileKey::from_store_bytes(&key_bytes[1..]).map_err(|e| StoreError::Corrupt {
                     what: format!("tile key in map {:?}", map.name),
                     reason: e.to_string(),
-                }
-            })?;
+                })?;
             // Keys sort by x, then y: the x band is contiguous, y is filtered.
             if !range.contains(key) {
                 continue;
@@ -277,7 +276,11 @@ impl Store for SledStore {
         let tree = self.tree(name)?;
         Ok(tree
             .get(cursor_key(client))?
-            .and_then(|b| b.as_ref().first_chunk::<8>().map(|b| u64::from_le_bytes(*b)))
+            .and_then(|b| {
+                b.as_ref()
+                    .first_chunk::<8>()
+                    .map(|b| u64::from_le_bytes(*b))
+            })
             .unwrap_or(0))
     }
 

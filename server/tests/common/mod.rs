@@ -36,13 +36,20 @@ impl TestServer {
     /// A server over an existing directory (a restart).
     pub async fn start_at(path: PathBuf, config: ServerConfig) -> Self {
         let store = SledStore::open(&SledConfig::new(&path)).expect("open store");
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+            .await
+            .expect("bind");
         let addr = listener.local_addr().expect("addr");
         let (stop, stopped) = oneshot::channel::<()>();
         let plain = config.tls.is_none();
-        let task = tokio::spawn(deog_server::serve(Arc::new(store), listener, config, async {
-            let _ = stopped.await;
-        }));
+        let task = tokio::spawn(deog_server::serve(
+            Arc::new(store),
+            listener,
+            config,
+            async {
+                let _ = stopped.await;
+            },
+        ));
         let server = Self {
             addr,
             dir: None,
@@ -63,7 +70,11 @@ impl TestServer {
     /// Waits on the health service, with a bounded number of tries.
     pub async fn wait_ready(&self) {
         for _ in 0..100 {
-            if let Ok(channel) = Channel::from_shared(self.url()).expect("url").connect().await {
+            if let Ok(channel) = Channel::from_shared(self.url())
+                .expect("url")
+                .connect()
+                .await
+            {
                 let mut health = tonic_health::pb::health_client::HealthClient::new(channel);
                 let request = tonic_health::pb::HealthCheckRequest {
                     service: deog_server::MAP_SERVICE_NAME.into(),
@@ -108,7 +119,11 @@ impl Drop for TestServer {
     }
 }
 
-pub async fn create_map(client: &mut MapServiceClient<Channel>, name: &str, tile_size: u32) -> pb::MapInfo {
+pub async fn create_map(
+    client: &mut MapServiceClient<Channel>,
+    name: &str,
+    tile_size: u32,
+) -> pb::MapInfo {
     client
         .create_map(pb::CreateMapRequest {
             name: name.into(),
@@ -159,7 +174,10 @@ pub async fn send_batches(
 }
 
 /// Every stored tile of the map, decoded to raw cells.
-pub async fn all_tiles(client: &mut MapServiceClient<Channel>, map: &str) -> Vec<(pb::TileKey, u64, Vec<i16>)> {
+pub async fn all_tiles(
+    client: &mut MapServiceClient<Channel>,
+    map: &str,
+) -> Vec<(pb::TileKey, u64, Vec<i16>)> {
     let mut stream = client
         .get_tiles(pb::TileQuery {
             map: map.into(),

@@ -1,0 +1,274 @@
+//! Frames and pose estimates: stored per robot, read by range, followed live.
+
+mod common;
+
+use common::TestServer;
+use deog_proto::v1 as pb;
+use std::time::Duration;
+
+fn frame(robot: &str, sequence: u64) -> pb::SonarFrame {
+    pb::SonarFrame {
+        robot: robot.into(),
+        sequence,
+        time_s: sequence as f64 * 0.1,
+        odometry: Some(pb::Pose2 {
+            x: sequence as f64,
+            y: 0.5,
+            theta: 0.1,
+        }),
+        true_pose: Some(pb::Pose2 {
+            x: sequence as f64 + 0.01,
+            y: 0.5,
+            theta: 0.1,
+        }),
+        ranges: (0..16).map(|i| 1.0 + f64::from(i) * 0.1).collect(),
+    }
+}
+
+fn pose(robot: &str, frame_sequence: u64) -> pb::PoseEstimate {
+    pb::PoseEstimate {
+        robot: robot.into(),
+        map: "m".into(),
+        frame_sequence,
+        time_s: frame_sequence as f64 * 0.1,
+        pose: Some(pb::Pose2 {
+            x: 1.0,
+            y: 2.0,
+            theta: 0.3,
+        }),
+        covariance: vec![0.01, 0.0, 0.0, 0.0, 0.01, 0.0, 0.0, 0.0, 0.001],
+        particle_count: 500,
+        converged: frame_sequence > 2,
+        lost_score: 0.1,
+    }
+}
+
+async fn collect<T>(mut stream: tonic::Streaming<T>) -> Vec<T> {
+    let mut out = Vec::new();
+    while let Some(item) = stream.message().await.unwrap() {
+        out.push(item);
+    }
+    out
+}
+
+async fn next<T>(stream: &mut tonic::Streaming<T>) -> T {
+    tokio::time::timeout(Duration::from_secs(10), stream.message())
+        .await
+        .expect("in time")
+        .expect("ok")
+        .expect("open")
+}
+
+#[tokio::test]
+async fn frames_are_stored_per_robot_deduplicated_and_read_by_range() {
+    let server = TestServer::start().await;
+    let mut client = server.client().await;
+    let frames: Vec<_> = (1..=10)
+        .map(|s| frame("scout-1", s))
+        .chain((1..=3).map(|s| frame("scout-2", s)))
+        .collect();
+    let reply = client
+        .publish_frames(pb::PublishFramesRequest {
+            frames: frames.clone(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!((reply.stored, reply.duplicates), (13, 0));
+    // A resend, plus one new frame.
+    let mut again = frames[8..10].to_vec();
+    again.push(frame("scout-1", 11));
+    let reply = client
+        .publish_frames(pb::PublishFramesRequest { frames: again })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!((reply.stored, reply.duplicates), (1, 2));
+
+    let robots = client
+        .list_robots(pb::ListRobotsRequest {})
+        .await
+        .unwrap()
+        .into_inner()
+        .robots;
+    let summary: Vec<_> = robots
+        .iter()
+        .map(|r| {
+            (
+                r.robot.as_str(),
+                r.first_sequence,
+                r.last_sequence,
+                r.frame_count,
+            )
+        })
+        .collect();
+    assert_eq!(summary, [("scout-1", 1, 11, 11), ("scout-2", 1, 3, 3)]);
+
+    let reader = client.clone();
+    let read = |from, to, limit| {
+        let mut client = reader.clone();
+        async move {
+            let request = pb::ReadFramesRequest {
+                robot: "scout-1".into(),
+                from_sequence: from,
+                to_sequence: to,
+                limit,
+            };
+            collect(client.read_frames(request).await.unwrap().into_inner()).await
+        }
+    };
+    let all = read(0, 0, 0).await;
+    assert_eq!(all.len(), 11);
+    assert_eq!(all[3], frames[3], "a frame reads back exactly as published");
+    let seqs = |v: Vec<pb::SonarFrame>| v.iter().map(|f| f.sequence).collect::<Vec<_>>();
+    assert_eq!(seqs(read(4, 6, 0).await), [4, 5, 6]);
+    assert_eq!(seqs(read(9, 0, 0).await), [9, 10, 11]);
+    assert_eq!(seqs(read(2, 0, 2).await), [2, 3]);
+    // Robot names that merely share a prefix do not mix.
+    client
+        .publish_frames(pb::PublishFramesRequest {
+            frames: vec![frame("scout-10", 1)],
+        })
+        .await
+        .unwrap();
+    assert_eq!(read(0, 0, 0).await.len(), 11);
+}
+
+#[tokio::test]
+async fn subscribers_replay_from_a_sequence_then_follow_live() {
+    let server = TestServer::start().await;
+    let mut client = server.client().await;
+    client
+        .publish_frames(pb::PublishFramesRequest {
+            frames: (1..=5).map(|s| frame("r", s)).collect(),
+        })
+        .await
+        .unwrap();
+
+    let mut replay = client
+        .subscribe_frames(pb::SubscribeFramesRequest {
+            robot: "r".into(),
+            from_sequence: 3,
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let mut live_only = client
+        .subscribe_frames(pb::SubscribeFramesRequest {
+            robot: "r".into(),
+            from_sequence: 0,
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    for expected in 3..=5 {
+        assert_eq!(next(&mut replay).await.sequence, expected);
+    }
+    // Frames of another robot are not sent.
+    client
+        .publish_frames(pb::PublishFramesRequest {
+            frames: vec![frame("other", 1)],
+        })
+        .await
+        .unwrap();
+    client
+        .publish_frames(pb::PublishFramesRequest {
+            frames: vec![frame("r", 6), frame("r", 7)],
+        })
+        .await
+        .unwrap();
+    assert_eq!(next(&mut replay).await.sequence, 6);
+    assert_eq!(next(&mut replay).await.sequence, 7);
+    assert_eq!(next(&mut live_only).await.sequence, 6);
+    assert_eq!(next(&mut live_only).await.sequence, 7);
+}
+
+#[tokio::test]
+async fn a_subscriber_that_falls_behind_misses_no_frame() {
+    let config = deog_server::ServerConfig {
+        event_buffer: 8,
+        stream_buffer: 2,
+        ..Default::default()
+    };
+    let server = TestServer::start_with(config).await;
+    let mut client = server.client().await;
+    let mut stream = client
+        .subscribe_frames(pb::SubscribeFramesRequest {
+            robot: "r".into(),
+            from_sequence: 1,
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    // 300 frames, one request each, while the subscriber reads nothing.
+    for s in 1..=300 {
+        client
+            .publish_frames(pb::PublishFramesRequest {
+                frames: vec![frame("r", s)],
+            })
+            .await
+            .unwrap();
+    }
+    for expected in 1..=300 {
+        assert_eq!(next(&mut stream).await.sequence, expected);
+    }
+}
+
+#[tokio::test]
+async fn poses_are_stored_read_by_range_and_watched() {
+    let server = TestServer::start().await;
+    let mut client = server.client().await;
+    let mut all = client
+        .watch_poses(pb::WatchPosesRequest {
+            robot: String::new(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let mut one = client
+        .watch_poses(pb::WatchPosesRequest { robot: "b".into() })
+        .await
+        .unwrap()
+        .into_inner();
+    for s in 1..=4 {
+        client.publish_pose(pose("a", s)).await.unwrap();
+    }
+    client.publish_pose(pose("b", 1)).await.unwrap();
+    for s in 1..=4 {
+        assert_eq!(next(&mut all).await, pose("a", s));
+    }
+    assert_eq!(next(&mut all).await, pose("b", 1));
+    assert_eq!(next(&mut one).await, pose("b", 1));
+
+    let read = collect(
+        client
+            .read_poses(pb::ReadPosesRequest {
+                robot: "a".into(),
+                from_sequence: 2,
+                to_sequence: 3,
+            })
+            .await
+            .unwrap()
+            .into_inner(),
+    )
+    .await;
+    assert_eq!(read, [pose("a", 2), pose("a", 3)]);
+    // A new estimate for the same frame replaces the old one.
+    let mut better = pose("a", 2);
+    better.converged = true;
+    client.publish_pose(better.clone()).await.unwrap();
+    let read = collect(
+        client
+            .read_poses(pb::ReadPosesRequest {
+                robot: "a".into(),
+                from_sequence: 0,
+                to_sequence: 0,
+            })
+            .await
+            .unwrap()
+            .into_inner(),
+    )
+    .await;
+    assert_eq!(read.len(), 4);
+    assert_eq!(read[1], better);
+}
