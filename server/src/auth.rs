@@ -3,7 +3,8 @@
 use tonic::service::Interceptor;
 use tonic::{Request, Status};
 
-/// Accepts requests whose `authorization` metadata is `Bearer <token>`.
+/// Accepts requests whose `authorization` metadata is `Bearer <token>`
+/// (the scheme in any case, as HTTP's auth schemes are).
 #[derive(Clone)]
 pub struct BearerAuth {
     expected: Option<Vec<u8>>,
@@ -22,9 +23,16 @@ impl BearerAuth {
     /// Checks for `token`, or lets everything through when `None`.
     pub fn new(token: Option<String>) -> Self {
         Self {
-            expected: token.map(|t| format!("Bearer {}", t.trim()).into_bytes()),
+            expected: token.map(|t| t.trim().as_bytes().to_vec()),
         }
     }
+}
+
+/// The token of a `Bearer <token>` header value.
+fn bearer_token(value: &[u8]) -> Option<&[u8]> {
+    let (scheme, token) = value.split_at_checked(6)?;
+    let token = token.strip_prefix(b" ")?;
+    scheme.eq_ignore_ascii_case(b"bearer").then_some(token)
 }
 
 /// Compares in time independent of where the inputs differ.
@@ -38,7 +46,12 @@ impl Interceptor for BearerAuth {
             return Ok(request);
         };
         match request.metadata().get("authorization") {
-            Some(given) if constant_time_eq(given.as_bytes(), expected) => Ok(request),
+            Some(given)
+                if bearer_token(given.as_bytes())
+                    .is_some_and(|t| constant_time_eq(t, expected)) =>
+            {
+                Ok(request)
+            }
             Some(_) => Err(Status::unauthenticated("the bearer token is not valid")),
             None => Err(Status::unauthenticated(
                 "this server needs an `authorization: Bearer <token>` header",
@@ -75,6 +88,20 @@ mod tests {
             .metadata_mut()
             .insert("authorization", "Bearer s3cret".parse().unwrap());
         assert!(auth.call(right).is_ok());
+        for (value, ok) in [
+            ("bearer s3cret", true),
+            ("BEARER s3cret", true),
+            ("Bearer  s3cret", false),
+            ("Basic s3cret", false),
+            ("s3cret", false),
+            ("Bearer", false),
+        ] {
+            let mut request = Request::new(());
+            request
+                .metadata_mut()
+                .insert("authorization", value.parse().unwrap());
+            assert_eq!(auth.call(request).is_ok(), ok, "{value:?}");
+        }
         assert!(BearerAuth::new(None).call(Request::new(())).is_ok());
     }
 }

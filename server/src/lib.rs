@@ -11,11 +11,14 @@
 //! - [`convert`]: wire messages to checked domain values; request [`Limits`].
 //! - [`service`]: the thin `MapService` handlers.
 //! - [`auth`]: the optional bearer-token check.
+//! - [`connection`]: accepted connections the server can cut when a
+//!   shutdown's grace period runs out.
 //! - [`serve`](mod@serve): [`serve()`] with health, reflection and TLS, until a
 //!   shutdown future resolves.
 //! - [`error`]: [`StoreError`] and its one mapping to a gRPC status.
 
 pub mod auth;
+pub mod connection;
 pub mod convert;
 pub mod error;
 pub mod events;

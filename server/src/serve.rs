@@ -1,6 +1,7 @@
 //! Running the map server on a listener until a shutdown future resolves.
 
 use crate::auth::BearerAuth;
+use crate::connection;
 use crate::convert::Limits;
 use crate::events::Events;
 use crate::service::MapServer;
@@ -12,12 +13,13 @@ use std::sync::Arc;
 use std::time::Duration;
 use thiserror::Error;
 use tokio::net::TcpListener;
-use tokio_stream::wrappers::TcpListenerStream;
 use tokio_util::sync::CancellationToken;
 use tonic::transport::{Identity, Server, ServerTlsConfig};
 
 /// The gRPC name of the map service, as the health service reports it.
 pub const MAP_SERVICE_NAME: &str = "deog.v1.MapService";
+const HEALTH_SERVICE_NAME: &str = "grpc.health.v1.Health";
+const REFLECTION_SERVICE_NAME: &str = "grpc.reflection.v1.ServerReflection";
 
 /// A certificate chain and private key, PEM.
 #[derive(Clone)]
@@ -120,8 +122,14 @@ pub async fn serve<S: Store>(
     health
         .set_service_status(MAP_SERVICE_NAME, tonic_health::ServingStatus::Serving)
         .await;
+    // Advertise exactly what this process serves: the deog descriptor set
+    // also describes the simulator's service, which lives elsewhere.
     let reflection = tonic_reflection::server::Builder::configure()
         .register_encoded_file_descriptor_set(deog_proto::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .with_service_name(MAP_SERVICE_NAME)
+        .with_service_name(HEALTH_SERVICE_NAME)
+        .with_service_name(REFLECTION_SERVICE_NAME)
         .build_v1()
         .map_err(|e| std::io::Error::other(e.to_string()))?;
 
@@ -138,7 +146,9 @@ pub async fn serve<S: Store>(
         .add_service(health_service)
         .add_service(reflection)
         .add_service(map_service);
-    let serving = router.serve_with_incoming_shutdown(TcpListenerStream::new(listener), async {
+    let cut_connections = CancellationToken::new();
+    let incoming = connection::incoming(listener, cut_connections.clone());
+    let serving = router.serve_with_incoming_shutdown(incoming, async {
         let _ = stop_rx.await;
     });
     tokio::pin!(serving);
@@ -153,6 +163,10 @@ pub async fn serve<S: Store>(
                 Ok(result) => result,
                 Err(_) => {
                     tracing::warn!("calls still open after the grace period; closing them");
+                    cut_connections.cancel();
+                    // Connections end at their next poll; give them a moment
+                    // so that their tasks let go of the store.
+                    let _ = tokio::time::timeout(Duration::from_secs(1), &mut serving).await;
                     Ok(())
                 }
             }

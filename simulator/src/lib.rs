@@ -1,6 +1,16 @@
-//! The Scout simulator.
+//! The Scout simulator: a world of polygon obstacles, differential-drive
+//! Super Scout II robots with a ring of 16 sonars, and the gRPC
+//! `RobotService` that client programs drive them through.
 //!
 //! # Layout
-//! This crate will hold worlds of polygon obstacles, differential-drive Scout
-//! robots with a ring of 16 sonars, and the gRPC `RobotService`. The sonar
-//! ring's geometry it will use is [`deog_grid::SensorRing`]. It holds no code yet.
+//! - [`geometry`]: points, wall segments and polygons.
+//! - [`world`]: [`World`], obstacles inside an optional boundary.
+//! - [`error`]: the crate's one error type, [`SimError`].
+
+pub mod error;
+pub mod geometry;
+pub mod world;
+
+pub use error::SimError;
+pub use geometry::{Point2, Polygon, Segment};
+pub use world::World;
