@@ -1,9 +1,14 @@
 //! `deog`: every process of the system as a subcommand.
 
 mod bench;
+mod connection;
 mod demo;
+mod frames;
+mod import;
 mod server;
 mod signal;
+mod sim;
+mod wander;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -25,20 +30,46 @@ enum Command {
     /// Runs the map server: maps, frames and poses in an embedded store,
     /// served over gRPC.
     Server(server::ServerArgs),
+    /// Runs the Scout simulator: a world and its robots, driven over gRPC.
+    Sim(sim::SimArgs),
+    /// Drives one simulated robot about at random and publishes its sonar
+    /// frames to the map server.
+    Wander(wander::WanderArgs),
+    /// Lists the robots whose frames the map server holds, or prints one
+    /// robot's frames (--follow: as they arrive).
+    Frames(frames::FramesArgs),
+    /// Imports recorded data (a wanderer data file) into the map server.
+    Import(import::ImportArgs),
     /// Runs the release benchmarks of the map server.
     Bench(bench::BenchArgs),
 }
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
             EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
         )
         .with_writer(std::io::stderr)
         .init();
-    match Cli::parse().command {
+    match run(Cli::parse().command) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(error) => {
+            // The chain of causes on one line, without a backtrace: this is
+            // for the person at the terminal.
+            eprintln!("error: {error:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(command: Command) -> Result<()> {
+    match command {
         Command::Demo(args) => demo::run(args),
         Command::Server(args) => server::run(args),
+        Command::Sim(args) => sim::run(args),
+        Command::Wander(args) => wander::run(args),
+        Command::Import(args) => import::run(args),
+        Command::Frames(args) => frames::run(args),
         Command::Bench(args) => bench::run(args),
     }
 }

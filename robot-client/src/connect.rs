@@ -158,7 +158,7 @@ pub async fn connect(config: &ClientConfig) -> Result<(Channel, TokenInterceptor
             Ok(channel) => return Ok((channel, TokenInterceptor { header })),
             Err(error) => {
                 let last_error = error_chain(&error);
-                tracing::debug!(attempt, %last_error, endpoint = %config.endpoint, "map server not reachable yet");
+                tracing::debug!(attempt, %last_error, endpoint = %config.endpoint, "server not reachable yet");
                 if !config.retry.allows(attempt + 1) {
                     return Err(ClientError::Unreachable {
                         endpoint: config.endpoint.clone(),

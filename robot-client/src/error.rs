@@ -9,7 +9,7 @@ pub enum ClientError {
     #[error("invalid client configuration: {0}")]
     Config(String),
     /// The server could not be reached within the retry policy.
-    #[error("cannot reach the map server at {endpoint} after {attempts} attempts: {last_error}")]
+    #[error("cannot reach {endpoint} after {attempts} attempts: {last_error}")]
     Unreachable {
         /// The address tried.
         endpoint: String,
@@ -19,7 +19,7 @@ pub enum ClientError {
         last_error: String,
     },
     /// The server refused a call.
-    #[error("the map server refused the call: {0}")]
+    #[error("the server refused the call: {0}")]
     Status(#[from] tonic::Status),
     /// A tile from the server could not be decoded.
     #[error("bad tile from the server: {0}")]

@@ -6,17 +6,21 @@
 //! - [`client`]: [`MapClient`], typed calls (maps, frames, poses, tiles).
 //! - [`updates`]: [`UpdateSender`], batched and pipelined tile updates that
 //!   are resent after a reconnect and applied exactly once.
+//! - [`sim_client`]: [`SimClient`], the simulator's `RobotService` (spawn,
+//!   drive, state, teleport, watch).
 //! - [`tile_cache`]: [`TileCache`], a versioned copy of a map's tiles.
 //! - [`error`]: [`ClientError`], and which failures are worth a retry.
 
 pub mod client;
 pub mod connect;
 pub mod error;
+pub mod sim_client;
 pub mod tile_cache;
 pub mod updates;
 
 pub use client::MapClient;
 pub use connect::{ClientConfig, RawMapClient, RetryPolicy};
 pub use error::ClientError;
+pub use sim_client::SimClient;
 pub use tile_cache::TileCache;
 pub use updates::{AckState, UpdateSender, UpdateSenderConfig, encode_delta};

@@ -8,6 +8,57 @@ pub enum SimError {
     /// A world with neither a boundary nor an obstacle has no extent.
     #[error("world {0:?} has neither a boundary nor obstacles")]
     EmptyWorld(String),
+    /// No robot of that name is in the world.
+    #[error("no robot named {0:?} in the world")]
+    UnknownRobot(String),
+    /// A robot of that name is already in the world.
+    #[error("a robot named {0:?} is already in the world")]
+    RobotExists(String),
+    /// The request is valid but the world does not allow it (a pose inside
+    /// an obstacle, no free place left).
+    #[error("{0}")]
+    Blocked(String),
+    /// A line of a wanderer data file is malformed.
+    #[error("{file}:{line}: {field}: {reason}")]
+    DataFile {
+        /// The file, as named to the parser.
+        file: String,
+        /// 1-based line number.
+        line: usize,
+        /// The column: `x`, `y`, `theta`, `s1` ... or `ranges`.
+        field: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// The gRPC server failed.
+    #[error("serving failed: {0}")]
+    Serve(String),
+    /// A world file (TOML) is malformed: bad syntax, an unknown key, or a
+    /// value out of range.
+    #[error("{file}:{line}: {field}: {reason}")]
+    WorldFile {
+        /// The file, as named to the parser.
+        file: String,
+        /// 1-based line number.
+        line: usize,
+        /// The key, with its place: `name`, `boundary`, `obstacle[1].points`.
+        field: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// A world file could not be read.
+    #[error("{file}: {source}")]
+    ReadWorld {
+        /// The file, as named.
+        file: String,
+        /// What the operating system said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A ROS map_server map (YAML + PGM) could not be read; the error names
+    /// the file, and for the YAML the line and key.
+    #[error(transparent)]
+    MapFile(#[from] deog_mapfile::MapFileError),
     /// A value given to the simulator is out of range or malformed.
     #[error("{field}: {reason}")]
     Invalid {

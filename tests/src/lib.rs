@@ -3,9 +3,10 @@
 //!
 //! # Layout
 //! - [`deog_binary`]: the `deog` executable, built once per test run.
-//! - [`ServerProcess`]: a `deog server` child process on a free loopback
+//! - [`ServerProcess`]: a `deog server` or `deog sim` child process on a free loopback
 //!   port, ready once its health service says so; killed when dropped.
 
+use std::ffi::OsString;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -46,12 +47,14 @@ pub fn free_loopback_addr() -> SocketAddr {
     listener.local_addr().expect("local address")
 }
 
-/// A running `deog server` process.
+/// A running serving `deog` process: the map server or the simulator.
 #[derive(Debug)]
 pub struct ServerProcess {
     /// Where it listens.
     pub addr: SocketAddr,
     child: Option<Child>,
+    /// The service its health reports on.
+    service: &'static str,
 }
 
 impl ServerProcess {
@@ -64,13 +67,29 @@ impl ServerProcess {
 
     /// As [`ServerProcess::start`], on a given address (a restart).
     pub async fn start_on(addr: SocketAddr, data: &Path, extra: &[&str]) -> Self {
+        let mut args: Vec<OsString> =
+            vec!["server".into(), "--listen".into(), addr.to_string().into()];
+        args.push("--data".into());
+        args.push(data.into());
+        args.extend(extra.iter().map(OsString::from));
+        Self::spawn(args, addr, "deog.v1.MapService").await
+    }
+
+    /// Starts `deog sim --world <world> --listen <free port>` plus `extra`
+    /// arguments and waits until its health service reports the robot
+    /// service as serving (bounded: 30 s).
+    pub async fn start_sim(world: &str, extra: &[&str]) -> Self {
+        let addr = free_loopback_addr();
+        let mut args: Vec<OsString> = vec!["sim".into(), "--world".into(), world.into()];
+        args.push("--listen".into());
+        args.push(addr.to_string().into());
+        args.extend(extra.iter().map(OsString::from));
+        Self::spawn(args, addr, "deog.v1.RobotService").await
+    }
+
+    async fn spawn(args: Vec<OsString>, addr: SocketAddr, service: &'static str) -> Self {
         let child = Command::new(deog_binary())
-            .arg("server")
-            .arg("--listen")
-            .arg(addr.to_string())
-            .arg("--data")
-            .arg(data)
-            .args(extra)
+            .args(&args)
             // Quiet unless a test run asks for more.
             .env(
                 "RUST_LOG",
@@ -80,10 +99,11 @@ impl ServerProcess {
             .stdout(Stdio::null())
             .stderr(Stdio::inherit())
             .spawn()
-            .expect("start deog server");
+            .expect("start deog");
         let server = Self {
             addr,
             child: Some(child),
+            service,
         };
         server.wait_ready().await;
         server
@@ -106,7 +126,7 @@ impl ServerProcess {
             {
                 let mut health = tonic_health::pb::health_client::HealthClient::new(channel);
                 let request = tonic_health::pb::HealthCheckRequest {
-                    service: "deog.v1.MapService".into(),
+                    service: self.service.into(),
                 };
                 if let Ok(reply) = health.check(request).await
                     && reply.into_inner().status

@@ -1,0 +1,95 @@
+//! `deog frames`: what the map server holds of the robots' sonar frames:
+//! each robot's count and range, or one robot's frames, followed live.
+
+use anyhow::{Context, Result};
+use clap::Args;
+use deog_proto::v1 as pb;
+use deog_robot_client::MapClient;
+
+use crate::connection::ConnectionArgs;
+
+/// Options of `deog frames`.
+#[derive(Debug, Args)]
+pub struct FramesArgs {
+    /// Print this robot's frames, one line each; without it, list robots.
+    #[arg(long)]
+    pub robot: Option<String>,
+    /// First sequence number to print.
+    #[arg(long, default_value_t = 1)]
+    pub from: u64,
+    /// Keep printing frames as they arrive, until ctrl-c.
+    #[arg(long, requires = "robot")]
+    pub follow: bool,
+    #[command(flatten)]
+    pub connection: ConnectionArgs,
+}
+
+fn line(frame: &pb::SonarFrame) -> String {
+    let pose = frame.true_pose.or(frame.odometry).unwrap_or_default();
+    let ranges: Vec<String> = frame.ranges.iter().map(|r| format!("{r:.2}")).collect();
+    format!(
+        "{} #{} t={:.2}s pose=({:.3}, {:.3}, {:.3}) ranges=[{}]",
+        frame.robot,
+        frame.sequence,
+        frame.time_s,
+        pose.x,
+        pose.y,
+        pose.theta,
+        ranges.join(" ")
+    )
+}
+
+/// Runs the listing.
+pub fn run(args: FramesArgs) -> Result<()> {
+    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    runtime.block_on(async {
+        let map = MapClient::connect(args.connection.client_config()?)
+            .await
+            .with_context(|| {
+                format!("connecting to the map server at {}", args.connection.server)
+            })?;
+        let Some(robot) = &args.robot else {
+            let robots = map
+                .raw()
+                .list_robots(pb::ListRobotsRequest {})
+                .await?
+                .into_inner()
+                .robots;
+            if robots.is_empty() {
+                println!("no frames stored yet");
+            }
+            for r in robots {
+                println!(
+                    "{}: {} frames, sequences {}..={}",
+                    r.robot, r.frame_count, r.first_sequence, r.last_sequence
+                );
+            }
+            return Ok(());
+        };
+        if !args.follow {
+            for frame in map.read_frames(robot, args.from, 0).await? {
+                println!("{}", line(&frame));
+            }
+            return Ok(());
+        }
+        let mut frames = map
+            .raw()
+            .subscribe_frames(pb::SubscribeFramesRequest {
+                robot: robot.clone(),
+                from_sequence: args.from,
+            })
+            .await?
+            .into_inner();
+        let shutdown = crate::signal::shutdown();
+        tokio::pin!(shutdown);
+        loop {
+            tokio::select! {
+                () = &mut shutdown => return Ok(()),
+                frame = frames.message() => match frame? {
+                    Some(frame) => println!("{}", line(&frame)),
+                    None => return Ok(()),
+                },
+            }
+        }
+    })
+}

@@ -1,0 +1,137 @@
+//! `deog sim`: the Scout simulator process.
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+use deog_simulator::serve::{SimServeConfig, serve_sim};
+use deog_simulator::simulation::{SimConfig, Simulation};
+use deog_simulator::sonar::Specular;
+use deog_simulator::{World, world_file};
+use std::net::SocketAddr;
+use std::path::Path;
+
+/// The worlds built into the binary, by name: `--world map2` works from any
+/// directory.
+const BUILT_IN_WORLDS: [(&str, &str); 3] = [
+    ("map1", include_str!("../../worlds/map1.toml")),
+    ("map2", include_str!("../../worlds/map2.toml")),
+    ("office", include_str!("../../worlds/office.toml")),
+];
+
+/// What a wall struck past the specular angle does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SpecularMode {
+    /// Every wall echoes.
+    Off,
+    /// No echo from that wall.
+    Lost,
+    /// The echo comes back long.
+    Long,
+}
+
+/// Options of `deog sim`.
+#[derive(Debug, Args)]
+pub struct SimArgs {
+    /// World: a built-in name (map1, map2, office), a world file (.toml) or
+    /// a map_server map (.yaml).
+    #[arg(long, env = "DEOG_WORLD", default_value = "map2")]
+    pub world: String,
+    /// Address to serve RobotService on.
+    #[arg(long, env = "DEOG_SIM_LISTEN", default_value = "127.0.0.1:50052")]
+    pub listen: SocketAddr,
+    /// Simulated seconds per wall-clock second.
+    #[arg(long, env = "DEOG_SIM_SPEED", default_value_t = 1.0)]
+    pub speed: f64,
+    /// Seed of every random choice (noise, spawn poses).
+    #[arg(long, env = "DEOG_SEED", default_value_t = 1)]
+    pub seed: u64,
+    /// Robots to place at random free poses at start, named scout-1 ...
+    /// (more can be spawned over gRPC).
+    #[arg(long, default_value_t = 0)]
+    pub robots: usize,
+    /// Sonar range noise, a fraction of the range (uniform ±).
+    #[arg(long, default_value_t = 0.01)]
+    pub sonar_noise: f64,
+    /// Specular reflection past --specular-angle.
+    #[arg(long, value_enum, default_value_t = SpecularMode::Off)]
+    pub specular: SpecularMode,
+    /// Incidence angle past which specular reflection sets in, degrees.
+    #[arg(long, default_value_t = 60.0)]
+    pub specular_angle: f64,
+    /// How much longer a specular echo comes back (with --specular long).
+    #[arg(long, default_value_t = 1.5)]
+    pub specular_factor: f64,
+    /// Probability that a reading is lost (reads the maximum range).
+    #[arg(long, default_value_t = 0.0)]
+    pub dropout: f64,
+    /// Scale of the odometry noise (0 turns it off, 1 is the default model).
+    #[arg(long, default_value_t = 1.0)]
+    pub odometry_noise: f64,
+}
+
+/// Loads a world by built-in name or path.
+pub fn load_world(spec: &str) -> Result<World> {
+    let path = Path::new(spec);
+    if path.exists() {
+        return world_file::load_world_any(path)
+            .with_context(|| format!("loading world {}", path.display()));
+    }
+    if let Some((name, text)) = BUILT_IN_WORLDS.iter().find(|(name, _)| *name == spec) {
+        return world_file::parse_world(text, &format!("worlds/{name}.toml"))
+            .with_context(|| format!("loading built-in world {name}"));
+    }
+    let names: Vec<&str> = BUILT_IN_WORLDS.iter().map(|(n, _)| *n).collect();
+    bail!(
+        "no world {spec:?}: give a file (.toml world or .yaml map_server map) or one of {}",
+        names.join(", ")
+    )
+}
+
+/// The simulation's figures from the options.
+pub fn sim_config(args: &SimArgs) -> Result<SimConfig> {
+    let mut config = SimConfig::default();
+    config.sonar.noise_fraction = args.sonar_noise;
+    config.sonar.dropout_probability = args.dropout;
+    let max_incidence = args.specular_angle.to_radians();
+    config.sonar.specular = match args.specular {
+        SpecularMode::Off => Specular::Off,
+        SpecularMode::Lost => Specular::Lost { max_incidence },
+        SpecularMode::Long => Specular::Long {
+            max_incidence,
+            factor: args.specular_factor,
+        },
+    };
+    config.sonar.validate().context("sonar options")?;
+    config.odometry = config
+        .odometry
+        .scaled(args.odometry_noise)
+        .context("--odometry-noise")?;
+    Ok(config)
+}
+
+/// Runs the simulator until ctrl-c or SIGTERM.
+pub fn run(args: SimArgs) -> Result<()> {
+    let world = load_world(&args.world)?;
+    let config = sim_config(&args)?;
+    let mut sim = Simulation::new(world, config, args.seed).context("setting up the simulation")?;
+    for i in 1..=args.robots {
+        let name = format!("scout-{i}");
+        let state = sim
+            .spawn(&name, None)
+            .with_context(|| format!("placing {name}"))?;
+        tracing::info!(robot = %name, x = state.true_pose.x, y = state.true_pose.y, "robot placed");
+    }
+    let serve_config = SimServeConfig {
+        speed: args.speed,
+        ..SimServeConfig::default()
+    };
+    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    runtime.block_on(async move {
+        let listener = tokio::net::TcpListener::bind(args.listen)
+            .await
+            .with_context(|| format!("binding {}", args.listen))?;
+        let addr = listener.local_addr()?;
+        tracing::info!(%addr, world = %sim.world().name(), speed = args.speed, robots = sim.robot_count(), "simulator listening");
+        serve_sim(sim, listener, serve_config, crate::signal::shutdown()).await?;
+        Ok(())
+    })
+}

@@ -1,0 +1,293 @@
+//! `deog wander`: drives one robot about its world at random without
+//! hitting anything, and publishes every sonar frame to the map server.
+
+use std::io::Write as _;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+use deog_grid::{Pose2, SensorRing};
+use deog_proto::v1 as pb;
+use deog_robot_client::{ClientConfig, MapClient, SimClient};
+use deog_simulator::data_file::{DataUnits, format_line};
+use deog_simulator::{WanderParams, Wanderer};
+use tokio::sync::mpsc;
+
+use crate::connection::ConnectionArgs;
+
+/// Which pose a data file line holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PoseSource {
+    /// The simulator's true pose (as the thesis's mapper used).
+    True,
+    /// The robot's odometry.
+    Odometry,
+}
+
+/// Options of `deog wander`.
+#[derive(Debug, Args)]
+pub struct WanderArgs {
+    /// The robot to drive.
+    #[arg(long, env = "DEOG_ROBOT")]
+    pub robot: String,
+    /// The simulator's address.
+    #[arg(long, env = "DEOG_SIM", default_value = "127.0.0.1:50052")]
+    pub sim: String,
+    /// Place the robot first (at --start, or at a random free pose); without
+    /// it the robot must exist.
+    #[arg(long)]
+    pub spawn: bool,
+    /// Where to place it with --spawn: x,y,theta (metres, radians).
+    #[arg(long, value_parser = parse_pose, requires = "spawn")]
+    pub start: Option<Pose2>,
+    /// Seed of the wandering's random turns.
+    #[arg(long, env = "DEOG_SEED", default_value_t = 1)]
+    pub seed: u64,
+    /// Stop after this many simulated seconds (0: run until ctrl-c).
+    #[arg(long, default_value_t = 0.0)]
+    pub duration: f64,
+    /// Cruising speed, m/s.
+    #[arg(long, default_value_t = 0.5)]
+    pub speed: f64,
+    /// Do not publish frames to the map server.
+    #[arg(long)]
+    pub no_publish: bool,
+    /// Also write the thesis's data file (`x y theta s1 ... s16` per line).
+    #[arg(long)]
+    pub data_file: Option<PathBuf>,
+    /// Units of the data file.
+    #[arg(long, default_value = "si")]
+    pub data_units: DataUnits,
+    /// Which pose the data file holds.
+    #[arg(long, value_enum, default_value_t = PoseSource::True)]
+    pub data_pose: PoseSource,
+    #[command(flatten)]
+    pub connection: ConnectionArgs,
+}
+
+/// `x,y,theta` in metres and radians.
+pub fn parse_pose(text: &str) -> Result<Pose2, String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let [x, y, theta] = parts.as_slice() else {
+        return Err(format!("expected x,y,theta, got {text:?}"));
+    };
+    let number = |name: &str, s: &str| -> Result<f64, String> {
+        s.parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("{name}: not a finite number: {s:?}"))
+    };
+    Ok(Pose2::new(
+        number("x", x)?,
+        number("y", y)?,
+        number("theta", theta)?,
+    ))
+}
+
+fn pose_of(p: Option<&pb::Pose2>) -> Pose2 {
+    p.map_or(Pose2::new(0.0, 0.0, 0.0), |p| Pose2::new(p.x, p.y, p.theta))
+}
+
+/// What the wanderer did.
+#[derive(Debug, Default)]
+struct Summary {
+    frames: u64,
+    published: u64,
+    bumps: u64,
+    distance_m: f64,
+    sim_seconds: f64,
+}
+
+/// Runs the wanderer until its duration passes, ctrl-c or SIGTERM.
+pub fn run(args: WanderArgs) -> Result<()> {
+    if !(args.duration.is_finite() && args.duration >= 0.0) {
+        bail!("--duration must be zero or positive, got {}", args.duration);
+    }
+    deog_simulator::convert::robot_name("--robot", &args.robot)?;
+    let params = WanderParams {
+        cruise_speed: args.speed,
+        ..WanderParams::default()
+    };
+    let mut wanderer = Wanderer::new(params, &SensorRing::scout(), args.seed)?;
+    let mut data_file = match &args.data_file {
+        Some(path) => Some(std::io::BufWriter::new(
+            std::fs::File::create(path)
+                .with_context(|| format!("creating data file {}", path.display()))?,
+        )),
+        None => None,
+    };
+    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    let summary = runtime.block_on(async {
+        let sim = SimClient::connect(ClientConfig::new(args.sim.clone()))
+            .await
+            .with_context(|| format!("connecting to the simulator at {}", args.sim))?;
+        if args.spawn {
+            let state = sim.spawn(&args.robot, args.start).await?;
+            let p = pose_of(state.true_pose.as_ref());
+            tracing::info!(robot = %args.robot, x = p.x, y = p.y, theta = p.theta, "spawned");
+        }
+        let publisher = if args.no_publish {
+            None
+        } else {
+            let config = args.connection.client_config()?;
+            let map = MapClient::connect(config).await.with_context(|| {
+                format!("connecting to the map server at {}", args.connection.server)
+            })?;
+            Some(spawn_publisher(map))
+        };
+        let mut states = spawn_state_reader(sim.watch(&args.robot).await?);
+        let shutdown = crate::signal::shutdown();
+        tokio::pin!(shutdown);
+        let mut summary = Summary::default();
+        let (mut start_time, mut last_control, mut last_pose) = (None, None::<f64>, None::<Pose2>);
+        let mut last_sequence = 0;
+        let mut was_bumped = false;
+        let mut backlog = Vec::new();
+        'run: loop {
+            let first = tokio::select! {
+                () = &mut shutdown => break,
+                state = states.0.recv() => match state {
+                    Some(state) => state,
+                    None => {
+                        states.1.await.context("the state reader panicked")??;
+                        bail!("the simulator ended the state stream");
+                    }
+                },
+            };
+            // Everything that queued up while we were busy: each frame is
+            // recorded, but only the newest steers, or a busy machine would
+            // have the robot react to where it was.
+            backlog.clear();
+            backlog.push(first);
+            while let Ok(state) = states.0.try_recv() {
+                backlog.push(state);
+            }
+            let mut newest = None;
+            for state in backlog.drain(..) {
+                if state.sequence == 0 || state.sequence <= last_sequence {
+                    continue;
+                }
+                last_sequence = state.sequence;
+                let true_pose = pose_of(state.true_pose.as_ref());
+                let start = *start_time.get_or_insert(state.time_s);
+                if let Some(previous) = last_pose {
+                    summary.distance_m +=
+                        (true_pose.x - previous.x).hypot(true_pose.y - previous.y);
+                }
+                last_pose = Some(true_pose);
+                if state.bumper && !was_bumped {
+                    summary.bumps += 1;
+                }
+                was_bumped = state.bumper;
+                summary.frames += 1;
+                summary.sim_seconds = state.time_s - start;
+                if let Some(file) = data_file.as_mut() {
+                    let pose = match args.data_pose {
+                        PoseSource::True => true_pose,
+                        PoseSource::Odometry => pose_of(state.odometry.as_ref()),
+                    };
+                    file.write_all(format_line(&pose, &state.ranges, args.data_units).as_bytes())
+                        .context("writing the data file")?;
+                }
+                let done = args.duration > 0.0 && summary.sim_seconds >= args.duration;
+                if let Some((frames, _)) = &publisher {
+                    let frame = pb::SonarFrame {
+                        robot: args.robot.clone(),
+                        sequence: state.sequence,
+                        time_s: state.time_s,
+                        odometry: state.odometry,
+                        true_pose: state.true_pose,
+                        ranges: state.ranges.clone(),
+                    };
+                    if frames.send(frame).await.is_err() {
+                        break 'run;
+                    }
+                }
+                if done {
+                    break 'run;
+                }
+                newest = Some(state);
+            }
+            let Some(state) = newest else {
+                continue;
+            };
+            let dt = last_control.map_or(0.1, |t| (state.time_s - t).max(1e-3));
+            last_control = Some(state.time_s);
+            let (linear, angular) = wanderer.command(&state.ranges, state.bumper, dt)?;
+            sim.drive(&args.robot, linear, angular).await?;
+        }
+        // Leave the robot standing, not driving into the next wall.
+        if let Err(error) = sim.drive(&args.robot, 0.0, 0.0).await {
+            tracing::warn!(%error, "could not stop the robot");
+        }
+        if let Some((frames, task)) = publisher {
+            drop(frames);
+            summary.published = task.await.context("the frame publisher panicked")??;
+        }
+        anyhow::Ok(summary)
+    })?;
+    if let Some(mut file) = data_file {
+        file.flush().context("writing the data file")?;
+    }
+    println!(
+        "{}: {} frames over {:.1} simulated s, {:.1} m driven, {} bumps, {} frames published",
+        args.robot,
+        summary.frames,
+        summary.sim_seconds,
+        summary.distance_m,
+        summary.bumps,
+        summary.published
+    );
+    Ok(())
+}
+
+type StateReader = (
+    mpsc::Receiver<pb::RobotState>,
+    tokio::task::JoinHandle<Result<()>>,
+);
+
+/// Reads the simulator's state stream into a queue as fast as it comes, so
+/// the driving loop can take everything that arrived at once.
+fn spawn_state_reader(mut stream: tonic::Streaming<pb::RobotState>) -> StateReader {
+    let (tx, rx) = mpsc::channel(4096);
+    let task = tokio::spawn(async move {
+        while let Some(state) = stream
+            .message()
+            .await
+            .context("the simulator's state stream failed")?
+        {
+            if tx.send(state).await.is_err() {
+                break;
+            }
+        }
+        Ok(())
+    });
+    (rx, task)
+}
+
+type Publisher = (
+    mpsc::Sender<pb::SonarFrame>,
+    tokio::task::JoinHandle<Result<u64>>,
+);
+
+/// Publishes frames in batches of whatever has queued up, so the driving
+/// loop never waits on the map server's disk.
+fn spawn_publisher(map: MapClient) -> Publisher {
+    let (tx, mut rx) = mpsc::channel::<pb::SonarFrame>(4096);
+    let task = tokio::spawn(async move {
+        let mut published = 0u64;
+        let mut batch = Vec::new();
+        while rx.recv_many(&mut batch, 256).await > 0 {
+            let (stored, duplicates) = map
+                .publish_frames(std::mem::take(&mut batch))
+                .await
+                .context("publishing frames")?;
+            if duplicates > 0 {
+                tracing::debug!(duplicates, "frames already stored");
+            }
+            published += u64::from(stored);
+        }
+        Ok(published)
+    });
+    (tx, task)
+}

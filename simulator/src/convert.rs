@@ -1,0 +1,105 @@
+//! Wire messages of `RobotService` to checked values and back. Every
+//! refusal names the field.
+
+use deog_grid::Pose2;
+use deog_proto::v1 as pb;
+use tonic::{Code, Status};
+
+use crate::error::SimError;
+use crate::simulation::RobotSnapshot;
+
+/// Poses farther than this from the origin are refused, metres.
+const MAX_ABS_COORDINATE: f64 = 1e6;
+
+impl From<SimError> for Status {
+    fn from(error: SimError) -> Self {
+        let code = match &error {
+            SimError::Invalid { .. } => Code::InvalidArgument,
+            SimError::UnknownRobot(_) => Code::NotFound,
+            SimError::RobotExists(_) => Code::AlreadyExists,
+            SimError::Blocked(_) => Code::FailedPrecondition,
+            _ => Code::Internal,
+        };
+        Status::new(code, error.to_string())
+    }
+}
+
+/// A robot name: 1 to 128 characters of `[A-Za-z0-9_.-]`.
+pub fn robot_name(field: &str, value: &str) -> Result<String, SimError> {
+    if value.is_empty() || value.len() > 128 {
+        return Err(SimError::invalid(
+            field,
+            format!("must be 1 to 128 characters, got {}", value.len()),
+        ));
+    }
+    if let Some(bad) = value
+        .chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '_' | '.' | '-')))
+    {
+        return Err(SimError::invalid(
+            field,
+            format!("character {bad:?} is not allowed (use A-Z a-z 0-9 _ . -)"),
+        ));
+    }
+    Ok(value.to_string())
+}
+
+fn finite(field: &str, value: f64, limit: f64) -> Result<f64, SimError> {
+    if !value.is_finite() {
+        return Err(SimError::invalid(
+            field,
+            format!("must be a finite number, got {value}"),
+        ));
+    }
+    if value.abs() > limit {
+        return Err(SimError::invalid(
+            field,
+            format!("must be within ±{limit}, got {value}"),
+        ));
+    }
+    Ok(value)
+}
+
+/// A required pose.
+pub fn pose(field: &str, value: Option<&pb::Pose2>) -> Result<Pose2, SimError> {
+    let p = value.ok_or_else(|| SimError::invalid(field, "is required"))?;
+    Ok(Pose2::new(
+        finite(&format!("{field}.x"), p.x, MAX_ABS_COORDINATE)?,
+        finite(&format!("{field}.y"), p.y, MAX_ABS_COORDINATE)?,
+        finite(&format!("{field}.theta"), p.theta, MAX_ABS_COORDINATE)?,
+    ))
+}
+
+/// A required velocity command: (linear m/s, angular rad/s).
+pub fn twist(field: &str, value: Option<&pb::Twist2>) -> Result<(f64, f64), SimError> {
+    let t = value.ok_or_else(|| SimError::invalid(field, "is required"))?;
+    Ok((
+        finite(&format!("{field}.linear"), t.linear, 1e3)?,
+        finite(&format!("{field}.angular"), t.angular, 1e3)?,
+    ))
+}
+
+fn pose_to_wire(p: &Pose2) -> pb::Pose2 {
+    pb::Pose2 {
+        x: p.x,
+        y: p.y,
+        theta: p.theta,
+    }
+}
+
+/// A robot's state on the wire.
+pub fn robot_state(s: &RobotSnapshot) -> pb::RobotState {
+    pb::RobotState {
+        name: s.name.clone(),
+        time_s: s.time_s,
+        true_pose: Some(pose_to_wire(&s.true_pose)),
+        odometry: Some(pose_to_wire(&s.odometry)),
+        ranges: s.ranges.clone(),
+        sequence: s.sequence,
+        velocity: Some(pb::Twist2 {
+            linear: s.velocity.0,
+            angular: s.velocity.1,
+        }),
+        bumper: s.bumper,
+    }
+}

@@ -1,0 +1,353 @@
+//! A world with robots in it, advanced in fixed physics steps; every robot's
+//! sonar ring fires on a fixed period.
+//!
+//! Each robot draws from its own random stream, seeded from the simulation's
+//! seed and the robot's name, so a robot's run does not depend on which other
+//! robots share the world. Robots do not see or bump into each other: each
+//! senses the static world only, which is what the maps are built of.
+
+use std::collections::BTreeMap;
+
+use deog_grid::{Pose2, SensorRing};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::error::SimError;
+use crate::geometry::Point2;
+use crate::robot::{OdometryNoise, Robot, ScoutParams};
+use crate::segment_index::SegmentIndex;
+use crate::sonar::{SonarParams, SonarRing};
+use crate::world::World;
+
+/// Figures of a simulation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimConfig {
+    /// Physics step, seconds.
+    pub step_s: f64,
+    /// Time between two firings of a robot's sonar ring, seconds (rounded
+    /// to whole physics steps).
+    pub sonar_period_s: f64,
+    /// The robots' body and speed limits.
+    pub scout: ScoutParams,
+    /// The sonars' figures, noise and failure modes.
+    pub sonar: SonarParams,
+    /// Odometry error model.
+    pub odometry: OdometryNoise,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            step_s: 0.01,
+            sonar_period_s: 0.1,
+            scout: ScoutParams::default(),
+            sonar: SonarParams::default(),
+            odometry: OdometryNoise::default(),
+        }
+    }
+}
+
+/// One robot as the outside sees it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotSnapshot {
+    /// The robot's name.
+    pub name: String,
+    /// Simulated time, seconds since the simulation started.
+    pub time_s: f64,
+    /// Where it really is.
+    pub true_pose: Pose2,
+    /// Where its odometry says it is.
+    pub odometry: Pose2,
+    /// The latest ranges, metres, sonar 0 forward then counter-clockwise.
+    pub ranges: Vec<f64>,
+    /// Number of the firing these ranges came from, from 1 (0: none yet).
+    pub sequence: u64,
+    /// Velocity being executed (m/s, rad/s).
+    pub velocity: (f64, f64),
+    /// Whether it is pressed against an obstacle.
+    pub bumper: bool,
+}
+
+struct SimRobot {
+    robot: Robot,
+    rng: ChaCha8Rng,
+    ranges: Vec<f64>,
+    sequence: u64,
+}
+
+/// The simulation: a world, its robots and the clock.
+pub struct Simulation {
+    world: World,
+    index: SegmentIndex,
+    sonar: SonarRing,
+    config: SimConfig,
+    seed: u64,
+    robots: BTreeMap<String, SimRobot>,
+    /// Physics steps so far: time is counted in steps so it does not drift.
+    steps: u64,
+    /// Physics steps between two firings of the sonars.
+    fire_every: u64,
+    /// Time left over from the last advance, less than one physics step.
+    carry_s: f64,
+}
+
+impl std::fmt::Debug for Simulation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Simulation")
+            .field("world", &self.world.name())
+            .field("robots", &self.robots.len())
+            .field("time_s", &self.time_s())
+            .finish_non_exhaustive()
+    }
+}
+
+/// FNV-1a: a hash of a robot's name that is the same on every platform and
+/// every build, so seeded runs repeat.
+fn stable_hash(name: &str) -> u64 {
+    name.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+impl Simulation {
+    /// A simulation of `world` with no robots yet.
+    pub fn new(world: World, config: SimConfig, seed: u64) -> Result<Self, SimError> {
+        let positive = |field: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(SimError::invalid(
+                    field,
+                    format!("must be positive, got {v}"),
+                ))
+            }
+        };
+        positive("step_s", config.step_s)?;
+        positive("sonar_period_s", config.sonar_period_s)?;
+        if config.sonar_period_s < config.step_s {
+            return Err(SimError::invalid(
+                "sonar_period_s",
+                format!(
+                    "must be at least one physics step ({} s), got {}",
+                    config.step_s, config.sonar_period_s
+                ),
+            ));
+        }
+        let sonar = SonarRing::new(SensorRing::scout(), config.sonar)?;
+        Ok(Self {
+            index: SegmentIndex::new(world.walls()),
+            world,
+            sonar,
+            config: config.clone(),
+            seed,
+            robots: BTreeMap::new(),
+            steps: 0,
+            fire_every: (config.sonar_period_s / config.step_s).round().max(1.0) as u64,
+            carry_s: 0.0,
+        })
+    }
+
+    /// The world.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// The figures it runs with.
+    pub fn config(&self) -> &SimConfig {
+        &self.config
+    }
+
+    /// The sonar ring every robot carries.
+    pub fn sonar(&self) -> &SonarRing {
+        &self.sonar
+    }
+
+    /// Simulated seconds since the start.
+    pub fn time_s(&self) -> f64 {
+        self.steps as f64 * self.config.step_s
+    }
+
+    /// Whether a robot's body fits at `p`: in free space and at least its
+    /// radius (plus a hair) from every wall.
+    pub fn fits(&self, p: Point2) -> bool {
+        let radius = self.config.scout.radius;
+        self.world.is_free(p) && self.index.min_distance(p, radius + 0.05) > radius + 0.01
+    }
+
+    /// Places a robot named `name` at `pose`, or at a random free pose
+    /// (drawn from its own random stream) when `None`; its sonars fire at
+    /// once so its first state has ranges.
+    pub fn spawn(&mut self, name: &str, pose: Option<Pose2>) -> Result<RobotSnapshot, SimError> {
+        if self.robots.contains_key(name) {
+            return Err(SimError::RobotExists(name.to_string()));
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(self.seed ^ stable_hash(name));
+        let pose = match pose {
+            Some(pose) => {
+                check_pose("pose", &pose)?;
+                if !self.fits(Point2::new(pose.x, pose.y)) {
+                    return Err(SimError::Blocked(format!(
+                        "a robot does not fit at ({:.3}, {:.3}): too close to or inside an obstacle",
+                        pose.x, pose.y
+                    )));
+                }
+                pose
+            }
+            None => self.random_free_pose(&mut rng)?,
+        };
+        let robot = Robot::new(pose, self.config.scout, self.config.odometry)?;
+        let mut entry = SimRobot {
+            robot,
+            rng,
+            ranges: vec![0.0; self.sonar.len()],
+            sequence: 0,
+        };
+        self.fire(&mut entry)?;
+        self.robots.insert(name.to_string(), entry);
+        self.snapshot(name)
+    }
+
+    /// Sets a robot's velocity command (clamped to the Scout's limits).
+    pub fn drive(
+        &mut self,
+        name: &str,
+        linear: f64,
+        angular: f64,
+    ) -> Result<RobotSnapshot, SimError> {
+        let entry = self
+            .robots
+            .get_mut(name)
+            .ok_or_else(|| SimError::UnknownRobot(name.to_string()))?;
+        entry.robot.set_command(linear, angular)?;
+        self.snapshot(name)
+    }
+
+    /// Moves a robot to `pose` without telling its odometry (a kidnapping).
+    pub fn teleport(&mut self, name: &str, pose: Pose2) -> Result<RobotSnapshot, SimError> {
+        check_pose("pose", &pose)?;
+        if !self.robots.contains_key(name) {
+            return Err(SimError::UnknownRobot(name.to_string()));
+        }
+        if !self.fits(Point2::new(pose.x, pose.y)) {
+            return Err(SimError::Blocked(format!(
+                "a robot does not fit at ({:.3}, {:.3}): too close to or inside an obstacle",
+                pose.x, pose.y
+            )));
+        }
+        if let Some(entry) = self.robots.get_mut(name) {
+            entry.robot.teleport(pose)?;
+        }
+        self.snapshot(name)
+    }
+
+    /// A robot's current state.
+    pub fn snapshot(&self, name: &str) -> Result<RobotSnapshot, SimError> {
+        let entry = self
+            .robots
+            .get(name)
+            .ok_or_else(|| SimError::UnknownRobot(name.to_string()))?;
+        Ok(snapshot_of(name, entry, self.time_s()))
+    }
+
+    /// Every robot's state, by name.
+    pub fn snapshots(&self) -> Vec<RobotSnapshot> {
+        self.robots
+            .iter()
+            .map(|(name, entry)| snapshot_of(name, entry, self.time_s()))
+            .collect()
+    }
+
+    /// Number of robots.
+    pub fn robot_count(&self) -> usize {
+        self.robots.len()
+    }
+
+    /// Advances the clock by `dt` seconds in physics steps (a remainder
+    /// shorter than a step waits for the next call); each time the sonars
+    /// fire, pushes every robot's new state onto `fired`.
+    pub fn advance(&mut self, dt: f64, fired: &mut Vec<RobotSnapshot>) -> Result<(), SimError> {
+        if !(dt.is_finite() && dt >= 0.0) {
+            return Err(SimError::invalid(
+                "dt",
+                format!("must be zero or positive, got {dt}"),
+            ));
+        }
+        let step = self.config.step_s;
+        self.carry_s += dt;
+        while self.carry_s >= step {
+            self.carry_s -= step;
+            self.steps += 1;
+            let fire = self.steps % self.fire_every == 0;
+            let now = self.time_s();
+            let names: Vec<String> = self.robots.keys().cloned().collect();
+            for name in names {
+                let Some(mut entry) = self.robots.remove(&name) else {
+                    continue;
+                };
+                let mut result = entry
+                    .robot
+                    .step(step, &self.index, &self.world, &mut entry.rng);
+                if fire && result.is_ok() {
+                    result = self.fire(&mut entry);
+                    fired.push(snapshot_of(&name, &entry, now));
+                }
+                self.robots.insert(name, entry);
+                result?;
+            }
+        }
+        Ok(())
+    }
+
+    fn fire(&self, entry: &mut SimRobot) -> Result<(), SimError> {
+        let pose = entry.robot.true_pose();
+        self.sonar
+            .fire(&self.index, &pose, &mut entry.rng, &mut entry.ranges)?;
+        entry.sequence += 1;
+        Ok(())
+    }
+
+    fn random_free_pose(&self, rng: &mut ChaCha8Rng) -> Result<Pose2, SimError> {
+        let (min, max) = self.world.bounds();
+        for _ in 0..100_000 {
+            let p = Point2::new(
+                rng.random_range(min.x..=max.x),
+                rng.random_range(min.y..=max.y),
+            );
+            // A little more room than the body needs, so the first moves
+            // are free.
+            if self.fits(p) && self.index.min_distance(p, 1.0) > self.config.scout.radius + 0.2 {
+                let theta = rng.random_range(-std::f64::consts::PI..std::f64::consts::PI);
+                return Ok(Pose2::new(p.x, p.y, theta));
+            }
+        }
+        Err(SimError::Blocked(format!(
+            "found no free place for a robot in world {:?}",
+            self.world.name()
+        )))
+    }
+}
+
+fn snapshot_of(name: &str, entry: &SimRobot, time_s: f64) -> RobotSnapshot {
+    RobotSnapshot {
+        name: name.to_string(),
+        time_s,
+        true_pose: entry.robot.true_pose(),
+        odometry: entry.robot.odometry(),
+        ranges: entry.ranges.clone(),
+        sequence: entry.sequence,
+        velocity: entry.robot.velocity(),
+        bumper: entry.robot.bumper(),
+    }
+}
+
+fn check_pose(field: &str, pose: &Pose2) -> Result<(), SimError> {
+    for (part, v) in [("x", pose.x), ("y", pose.y), ("theta", pose.theta)] {
+        if !v.is_finite() {
+            return Err(SimError::invalid(
+                format!("{field}.{part}"),
+                format!("must be a finite number, got {v}"),
+            ));
+        }
+    }
+    Ok(())
+}

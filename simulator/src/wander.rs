@@ -1,0 +1,338 @@
+//! The wanderer's policy: from one frame of sonar ranges to a velocity
+//! command that keeps a round robot moving about without touching anything.
+//!
+//! Pure and seeded: the `deog wander` process feeds it each frame and sends
+//! the command it returns.
+
+use deog_grid::{SensorRing, normalize_angle};
+use rand::Rng;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::error::SimError;
+
+/// How the wanderer drives.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WanderParams {
+    /// Forward speed with open space ahead, m/s.
+    pub cruise_speed: f64,
+    /// Turning rate in place, rad/s.
+    pub turn_rate: f64,
+    /// Clearance ahead below which the robot stops and turns, metres
+    /// (sonar range, measured from the sonar ring).
+    pub stop_distance: f64,
+    /// Clearance ahead below which it slows down, metres.
+    pub slow_distance: f64,
+    /// Clearance at the sides below which it steers away, metres.
+    pub side_distance: f64,
+    /// Mean number of spontaneous turns per second of cruising: the
+    /// randomness that makes it explore rather than follow walls.
+    pub random_turns_per_s: f64,
+}
+
+impl Default for WanderParams {
+    fn default() -> Self {
+        Self {
+            cruise_speed: 0.5,
+            turn_rate: 1.0,
+            stop_distance: 0.55,
+            slow_distance: 1.2,
+            side_distance: 0.45,
+            random_turns_per_s: 0.15,
+        }
+    }
+}
+
+/// What the wanderer is doing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Mode {
+    Cruise,
+    /// Turning in place through the given angle (signed, radians; what is
+    /// left of it).
+    Turn {
+        remaining_rad: f64,
+    },
+    /// Backing away after the bumper touched.
+    Reverse {
+        remaining_s: f64,
+    },
+}
+
+/// The wandering policy of one robot.
+#[derive(Debug, Clone)]
+pub struct Wanderer {
+    params: WanderParams,
+    /// Robot-frame bearing of each sonar, radians.
+    bearings: Vec<f64>,
+    mode: Mode,
+    rng: ChaCha8Rng,
+}
+
+impl Wanderer {
+    /// A wanderer for a robot with `ring`, seeded.
+    pub fn new(params: WanderParams, ring: &SensorRing, seed: u64) -> Result<Self, SimError> {
+        let positive = |field: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(SimError::invalid(
+                    field,
+                    format!("must be positive, got {v}"),
+                ))
+            }
+        };
+        positive("cruise_speed", params.cruise_speed)?;
+        positive("turn_rate", params.turn_rate)?;
+        positive("stop_distance", params.stop_distance)?;
+        positive("side_distance", params.side_distance)?;
+        if !(params.slow_distance.is_finite() && params.slow_distance > params.stop_distance) {
+            return Err(SimError::invalid(
+                "slow_distance",
+                format!(
+                    "must exceed stop_distance ({}), got {}",
+                    params.stop_distance, params.slow_distance
+                ),
+            ));
+        }
+        if !(params.random_turns_per_s.is_finite() && params.random_turns_per_s >= 0.0) {
+            return Err(SimError::invalid(
+                "random_turns_per_s",
+                format!(
+                    "must be zero or positive, got {}",
+                    params.random_turns_per_s
+                ),
+            ));
+        }
+        Ok(Self {
+            params,
+            bearings: ring
+                .mounts()
+                .iter()
+                .map(|m| normalize_angle(m.theta))
+                .collect(),
+            mode: Mode::Cruise,
+            rng: ChaCha8Rng::seed_from_u64(seed),
+        })
+    }
+
+    /// The command (linear m/s, angular rad/s) for the next `dt` seconds,
+    /// given this frame's ranges (one per sonar) and the bumper.
+    pub fn command(
+        &mut self,
+        ranges: &[f64],
+        bumper: bool,
+        dt: f64,
+    ) -> Result<(f64, f64), SimError> {
+        if ranges.len() != self.bearings.len() {
+            return Err(SimError::invalid(
+                "ranges",
+                format!(
+                    "expected {} readings, got {}",
+                    self.bearings.len(),
+                    ranges.len()
+                ),
+            ));
+        }
+        if let Some(bad) = ranges.iter().find(|r| !r.is_finite() || **r < 0.0) {
+            return Err(SimError::invalid(
+                "ranges",
+                format!("must be finite and not negative, got {bad}"),
+            ));
+        }
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(SimError::invalid(
+                "dt",
+                format!("must be positive, got {dt}"),
+            ));
+        }
+        let p = self.params;
+        // Clearance within a sector: the shortest reading of the sonars
+        // whose bearing lies in [from, to] (radians, robot frame).
+        let clearance = |from: f64, to: f64| {
+            self.bearings
+                .iter()
+                .zip(ranges)
+                .filter(|(b, _)| **b >= from - 1e-9 && **b <= to + 1e-9)
+                .map(|(_, r)| *r)
+                .fold(f64::INFINITY, f64::min)
+        };
+        let ahead = clearance(-0.45, 0.45);
+        let front_wide = clearance(-0.8, 0.8);
+        let left = clearance(0.7, 1.7);
+        let right = clearance(-1.7, -0.7);
+        let behind = clearance(2.6, 3.2).min(clearance(-3.2, -2.6));
+
+        if bumper && !matches!(self.mode, Mode::Reverse { .. }) {
+            self.mode = Mode::Reverse { remaining_s: 0.6 };
+        }
+        loop {
+            match self.mode {
+                Mode::Reverse { remaining_s } => {
+                    if remaining_s <= 0.0 || behind < 0.3 {
+                        self.mode = Mode::Turn {
+                            remaining_rad: self.open_bearing(ranges),
+                        };
+                        continue;
+                    }
+                    self.mode = Mode::Reverse {
+                        remaining_s: remaining_s - dt,
+                    };
+                    return Ok((-0.15, 0.0));
+                }
+                Mode::Turn { remaining_rad } => {
+                    if remaining_rad.abs() < 0.05 {
+                        if ahead < p.stop_distance {
+                            // Still facing a wall (the opening was too narrow
+                            // to judge from afar): look again.
+                            let bearing = self.open_bearing(ranges);
+                            if bearing.abs() >= 0.05 {
+                                self.mode = Mode::Turn {
+                                    remaining_rad: bearing,
+                                };
+                                continue;
+                            }
+                            // Nowhere better: creep on, the bumper guards.
+                            self.mode = Mode::Cruise;
+                            return Ok((0.05, 0.0));
+                        }
+                        self.mode = Mode::Cruise;
+                        continue;
+                    }
+                    let step = (p.turn_rate * dt).min(remaining_rad.abs());
+                    let direction = remaining_rad.signum();
+                    self.mode = Mode::Turn {
+                        remaining_rad: remaining_rad - direction * step,
+                    };
+                    return Ok((0.0, direction * p.turn_rate));
+                }
+                Mode::Cruise => {
+                    if ahead < p.stop_distance || front_wide < p.stop_distance * 0.8 {
+                        let bearing = self.open_bearing(ranges);
+                        if bearing.abs() >= 0.05 {
+                            self.mode = Mode::Turn {
+                                remaining_rad: bearing,
+                            };
+                            continue;
+                        }
+                        return Ok((0.05, 0.0));
+                    }
+                    let turn_chance = p.random_turns_per_s * dt;
+                    if self.rng.random_bool(turn_chance.clamp(0.0, 1.0)) {
+                        let angle = self.rng.random_range(0.8..std::f64::consts::PI);
+                        let direction = if self.rng.random_bool(0.5) { 1.0 } else { -1.0 };
+                        self.mode = Mode::Turn {
+                            remaining_rad: direction * angle,
+                        };
+                        continue;
+                    }
+                    let slow = ((ahead - p.stop_distance) / (p.slow_distance - p.stop_distance))
+                        .clamp(0.3, 1.0);
+                    // Steer away from a close side; drift a little at random
+                    // so that straight corridors are not followed forever.
+                    let mut w: f64 = self.rng.random_range(-0.15..0.15);
+                    if left < p.side_distance {
+                        w -= 0.6;
+                    }
+                    if right < p.side_distance {
+                        w += 0.6;
+                    }
+                    return Ok((p.cruise_speed * slow, w.clamp(-p.turn_rate, p.turn_rate)));
+                }
+            }
+        }
+    }
+
+    /// The bearing (robot frame, radians) of an opening to turn toward:
+    /// each sonar scores the shortest reading of itself and its two
+    /// neighbours (an opening as wide as the robot shows in all three);
+    /// one of the directions scoring within 80% of the best is picked at
+    /// random, so the robot does not always leave a place the same way.
+    fn open_bearing(&mut self, ranges: &[f64]) -> f64 {
+        let n = ranges.len();
+        let score = |i: usize| {
+            ranges[(i + n - 1) % n]
+                .min(ranges[i])
+                .min(ranges[(i + 1) % n])
+        };
+        let best = (0..n).map(score).fold(0.0, f64::max);
+        let candidates: Vec<usize> = (0..n).filter(|&i| score(i) >= 0.8 * best).collect();
+        let pick = candidates[self.rng.random_range(0..candidates.len())];
+        self.bearings[pick]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn wanderer(seed: u64) -> Wanderer {
+        Wanderer::new(WanderParams::default(), &SensorRing::scout(), seed).expect("wanderer")
+    }
+
+    #[test]
+    fn open_space_means_forward() {
+        let mut w = wanderer(1);
+        let mut forward = 0;
+        for _ in 0..100 {
+            let (v, _) = w.command(&[5.0; 16], false, 0.1).expect("command");
+            if v > 0.0 {
+                forward += 1;
+            }
+        }
+        assert!(forward > 70, "{forward}");
+    }
+
+    #[test]
+    fn a_wall_ahead_stops_and_turns_in_place() {
+        let mut w = wanderer(2);
+        let mut ranges = [3.0; 16];
+        // Wall ahead; the right side (sonars 12..15) is close too.
+        for i in [0, 1, 15] {
+            ranges[i] = 0.4;
+        }
+        ranges[12..15].fill(0.8);
+        let (v, omega) = w.command(&ranges, false, 0.1).expect("command");
+        assert_eq!(v, 0.0);
+        assert!(omega != 0.0, "turns in place: {omega}");
+    }
+
+    #[test]
+    fn the_bumper_backs_off_first() {
+        let mut w = wanderer(3);
+        let (v, omega) = w.command(&[0.2; 16], true, 0.1).expect("command");
+        // Everything is close behind too, so it turns rather than reverses.
+        assert!(v <= 0.0 && (v < 0.0 || omega != 0.0));
+        let mut w = wanderer(3);
+        let mut ranges = [2.0; 16];
+        ranges[0] = 0.2;
+        let (v, _) = w.command(&ranges, true, 0.1).expect("command");
+        assert!(v < 0.0);
+    }
+
+    #[test]
+    fn the_same_seed_gives_the_same_commands() {
+        let (mut a, mut b) = (wanderer(9), wanderer(9));
+        for i in 0..200 {
+            let ranges: Vec<f64> = (0..16)
+                .map(|s| 0.5 + ((i * 7 + s * 3) % 30) as f64 * 0.1)
+                .collect();
+            assert_eq!(
+                a.command(&ranges, i % 50 == 0, 0.1).expect("a"),
+                b.command(&ranges, i % 50 == 0, 0.1).expect("b")
+            );
+        }
+    }
+
+    #[test]
+    fn bad_input_is_an_error() {
+        let mut w = wanderer(4);
+        assert!(w.command(&[1.0; 15], false, 0.1).is_err());
+        assert!(w.command(&[f64::NAN; 16], false, 0.1).is_err());
+        assert!(w.command(&[1.0; 16], false, 0.0).is_err());
+        let bad = WanderParams {
+            slow_distance: 0.1,
+            ..WanderParams::default()
+        };
+        assert!(Wanderer::new(bad, &SensorRing::scout(), 0).is_err());
+    }
+}
