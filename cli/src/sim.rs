@@ -91,6 +91,12 @@ pub fn sim_config(args: &SimArgs) -> Result<SimConfig> {
     let mut config = SimConfig::default();
     config.sonar.noise_fraction = args.sonar_noise;
     config.sonar.dropout_probability = args.dropout;
+    if !(0.0..=90.0).contains(&args.specular_angle) {
+        bail!(
+            "--specular-angle must be within 0 to 90 degrees, got {}",
+            args.specular_angle
+        );
+    }
     let max_incidence = args.specular_angle.to_radians();
     config.sonar.specular = match args.specular {
         SpecularMode::Off => Specular::Off,

@@ -274,8 +274,11 @@ impl Simulation {
         }
         let step = self.config.step_s;
         self.carry_s += dt;
-        while self.carry_s >= step {
-            self.carry_s -= step;
+        // Whole steps, with a hair of tolerance so that 20 s of 10 ms steps
+        // is 2000 steps despite rounding.
+        let whole = (self.carry_s / step + 1e-9).floor();
+        self.carry_s = (self.carry_s - whole * step).max(0.0);
+        for _ in 0..whole as u64 {
             self.steps += 1;
             let fire = self.steps % self.fire_every == 0;
             let now = self.time_s();
@@ -350,4 +353,88 @@ fn check_pose(field: &str, pose: &Pose2) -> Result<(), SimError> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Polygon;
+
+    fn room() -> World {
+        World::new(
+            "room",
+            Some(Polygon::rectangle(
+                Point2::new(0.0, 0.0),
+                Point2::new(10.0, 8.0),
+            )),
+            vec![Polygon::rectangle(
+                Point2::new(4.0, 4.0),
+                Point2::new(5.0, 5.0),
+            )],
+        )
+        .expect("world")
+    }
+
+    /// Drives `names` in circles for 20 simulated seconds; returns the
+    /// firings of robot "a".
+    fn run(seed: u64, names: &[&str]) -> Vec<RobotSnapshot> {
+        let mut sim = Simulation::new(room(), SimConfig::default(), seed).expect("sim");
+        for name in names {
+            sim.spawn(name, None).expect("spawn");
+            sim.drive(name, 0.4, 0.3).expect("drive");
+        }
+        let mut fired = Vec::new();
+        sim.advance(20.0, &mut fired).expect("advance");
+        fired.into_iter().filter(|s| s.name == "a").collect()
+    }
+
+    #[test]
+    fn a_seed_repeats_a_run_and_other_robots_do_not_change_it() {
+        let alone = run(3, &["a"]);
+        assert_eq!(alone.len(), 200, "20 s at 10 firings per second");
+        assert_eq!(alone, run(3, &["a"]));
+        assert_eq!(alone, run(3, &["a", "b", "c"]));
+        assert_ne!(alone, run(4, &["a"]));
+        let sequences: Vec<u64> = alone.iter().map(|s| s.sequence).collect();
+        assert_eq!(sequences, (2..=201).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn time_is_counted_in_steps_and_remainders_carry_over() {
+        let mut sim = Simulation::new(room(), SimConfig::default(), 1).expect("sim");
+        sim.spawn("a", Some(Pose2::new(1.0, 1.0, 0.0)))
+            .expect("spawn");
+        let mut fired = Vec::new();
+        for _ in 0..1000 {
+            sim.advance(0.0037, &mut fired).expect("advance");
+        }
+        // 3.7 s: 370 steps, 37 firings.
+        assert!((sim.time_s() - 3.7).abs() < 1e-9, "{}", sim.time_s());
+        assert_eq!(fired.len(), 37);
+        assert!(sim.advance(f64::NAN, &mut fired).is_err());
+        assert!(sim.advance(-1.0, &mut fired).is_err());
+    }
+
+    #[test]
+    fn spawning_checks_names_and_room() {
+        let mut sim = Simulation::new(room(), SimConfig::default(), 1).expect("sim");
+        sim.spawn("a", None).expect("spawn");
+        assert!(matches!(
+            sim.spawn("a", None),
+            Err(SimError::RobotExists(_))
+        ));
+        assert!(matches!(
+            sim.spawn("b", Some(Pose2::new(4.5, 4.5, 0.0))),
+            Err(SimError::Blocked(_))
+        ));
+        assert!(matches!(
+            sim.spawn("b", Some(Pose2::new(f64::NAN, 1.0, 0.0))),
+            Err(SimError::Invalid { .. })
+        ));
+        assert!(matches!(
+            sim.drive("nobody", 0.1, 0.0),
+            Err(SimError::UnknownRobot(_))
+        ));
+        assert_eq!(sim.robot_count(), 1);
+    }
 }
