@@ -5,6 +5,7 @@ mod connection;
 mod demo;
 mod frames;
 mod import;
+mod map;
 mod server;
 mod signal;
 mod sim;
@@ -38,6 +39,9 @@ enum Command {
     /// Lists the robots whose frames the map server holds, or prints one
     /// robot's frames (--follow: as they arrive).
     Frames(frames::FramesArgs),
+    /// The cartographer: follows a robot's frames and builds a map on the
+    /// server from them.
+    Map(map::MapArgs),
     /// Imports recorded data (a wanderer data file) into the map server.
     Import(import::ImportArgs),
     /// Runs the release benchmarks of the map server.
@@ -69,6 +73,7 @@ fn run(command: Command) -> Result<()> {
         Command::Sim(args) => sim::run(args),
         Command::Wander(args) => wander::run(args),
         Command::Import(args) => import::run(args),
+        Command::Map(args) => map::run(args),
         Command::Frames(args) => frames::run(args),
         Command::Bench(args) => bench::run(args),
     }

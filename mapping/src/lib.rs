@@ -3,8 +3,20 @@
 //! world's ground truth. Pure: the processes in `cli/` do the I/O.
 //!
 //! # Layout
+//! - [`cartographer`]: [`Cartographer`], one frame to per-tile deltas from
+//!   the chosen pose ([`PoseChoice`]).
+//! - [`map_export`]: [`export_map`], a map's tiles to a trinary map_server
+//!   image covering its observed cells ([`MapExport`]).
+//! - [`map_import`]: [`import_map`], a map_server image to tile deltas at
+//!   the map's clamp limits ([`MapImport`]).
 //! - [`error`]: the crate's one error type, [`MappingError`].
 
+pub mod cartographer;
 pub mod error;
+pub mod map_export;
+pub mod map_import;
 
+pub use cartographer::{Cartographer, FrameInput, PoseChoice};
 pub use error::MappingError;
+pub use map_export::{ExportCounts, MapExport, export_map};
+pub use map_import::{ImportTarget, MapImport, import_map};

@@ -141,12 +141,33 @@ impl UpdateSender {
         Ok(())
     }
 
+    /// Tiles in the batch being filled.
+    pub fn pending_tiles(&self) -> usize {
+        self.current.len()
+    }
+
     /// Sends the current batch, if it holds anything, without waiting for
     /// its acknowledgement.
     pub async fn send_batch(&mut self) -> Result<(), ClientError> {
+        self.send_batch_as(self.next_sequence).await
+    }
+
+    /// Sends the current batch under `sequence`, which must not be below
+    /// [`UpdateSender::next_sequence`]; later batches follow it. A client
+    /// whose batches stand for numbered inputs (the cartographer: a batch
+    /// per run of frames, numbered by its last frame) can then resume from
+    /// the server's cursor. Sequences may skip numbers.
+    pub async fn send_batch_as(&mut self, sequence: u64) -> Result<(), ClientError> {
         if self.current.is_empty() {
             return Ok(());
         }
+        if sequence < self.next_sequence {
+            return Err(ClientError::Config(format!(
+                "batch sequence {sequence} is below the next free one, {}",
+                self.next_sequence
+            )));
+        }
+        self.next_sequence = sequence;
         self.check_failure()?;
         self.index.clear();
         let tiles = std::mem::take(&mut self.current)

@@ -1,0 +1,254 @@
+//! `deog map`: the cartographer process. Follows one robot's frames from the
+//! map server, turns each into tile deltas and streams them back as update
+//! batches, each numbered by the last frame it holds, so that a restart
+//! resumes after the last frame the server applied and none is applied twice.
+
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+use deog_grid::{Pose2, Resolution, TileSize};
+use deog_mapping::{Cartographer, FrameInput, PoseChoice};
+use deog_proto::v1 as pb;
+use deog_robot_client::{MapClient, UpdateSenderConfig};
+
+use crate::connection::ConnectionArgs;
+
+/// Which pose to map from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PoseArg {
+    /// The simulator's true pose (the thesis's choice).
+    True,
+    /// The robot's odometry.
+    Odometry,
+}
+
+/// Options of `deog map`.
+#[derive(Debug, Args)]
+pub struct MapArgs {
+    /// The robot whose frames to map.
+    #[arg(long, env = "DEOG_ROBOT")]
+    pub robot: String,
+    /// The map to build; created with --resolution and --tile-size if it
+    /// does not exist.
+    #[arg(long, env = "DEOG_MAP")]
+    pub map: String,
+    /// The pose to map from.
+    #[arg(long, value_enum, default_value_t = PoseArg::True)]
+    pub pose: PoseArg,
+    /// Start from this frame (frames the server already applied for this
+    /// robot and map are skipped whatever this says).
+    #[arg(long, default_value_t = 1)]
+    pub from: u64,
+    /// Stop after this frame (0: no end).
+    #[arg(long, default_value_t = 0)]
+    pub to: u64,
+    /// Stop once no frame has arrived for this many seconds (0: follow
+    /// until ctrl-c).
+    #[arg(long, default_value_t = 0.0)]
+    pub idle_exit: f64,
+    /// Cell size of a new map, metres.
+    #[arg(long, default_value_t = 0.05)]
+    pub resolution: f64,
+    /// Cells per tile side of a new map.
+    #[arg(long, default_value_t = 64)]
+    pub tile_size: u32,
+    /// Frames per update batch at most (fewer when frames arrive slowly).
+    #[arg(long, default_value_t = 20)]
+    pub batch_frames: usize,
+    /// Update batches in flight before the cartographer waits for the
+    /// server (backpressure).
+    #[arg(long, default_value_t = 8)]
+    pub window: usize,
+    #[command(flatten)]
+    pub connection: ConnectionArgs,
+}
+
+/// Tiles a batch may reach before it is sent at the next frame boundary:
+/// well inside the server's message limit even with dense tiles.
+const MAX_BATCH_TILES: usize = 256;
+
+fn pose_of(p: Option<pb::Pose2>) -> Option<Pose2> {
+    p.map(|p| Pose2::new(p.x, p.y, p.theta))
+}
+
+/// Runs the cartographer.
+pub fn run(args: MapArgs) -> Result<()> {
+    deog_simulator::convert::robot_name("--robot", &args.robot)?;
+    if args.batch_frames == 0 {
+        bail!("--batch-frames must be at least 1");
+    }
+    if !(args.idle_exit.is_finite() && args.idle_exit >= 0.0) {
+        bail!("--idle-exit must be zero or positive, got {}", args.idle_exit);
+    }
+    let client_id = format!("carto/{}", args.robot);
+    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    runtime.block_on(async {
+        let client = MapClient::connect(args.connection.client_config()?)
+            .await
+            .with_context(|| format!("connecting to the map server at {}", args.connection.server))?;
+        let info = client
+            .ensure_map(pb::CreateMapRequest {
+                name: args.map.clone(),
+                resolution_m: args.resolution,
+                tile_size: args.tile_size,
+                ..Default::default()
+            })
+            .await
+            .with_context(|| format!("opening map {}", args.map))?;
+        let resolution = Resolution::new(info.resolution_m)?;
+        let tile_size = TileSize::new(info.tile_size)?;
+        let pose = match args.pose {
+            PoseArg::True => PoseChoice::True,
+            PoseArg::Odometry => PoseChoice::Odometry,
+        };
+        let mut cartographer = Cartographer::new(resolution, tile_size, pose)?;
+        let mut sender = client
+            .updates(
+                &args.map,
+                &client_id,
+                UpdateSenderConfig {
+                    // Batches are cut here, at frame boundaries only.
+                    max_batch_tiles: usize::MAX,
+                    window: args.window.max(1),
+                },
+            )
+            .await?;
+        let applied = sender.next_sequence() - 1;
+        let start = args.from.max(applied + 1);
+        if applied > 0 {
+            tracing::info!(robot = %args.robot, map = %args.map, last_applied = applied, "resuming after the last frame the server applied");
+        }
+        let frames = client
+            .raw()
+            .subscribe_frames(pb::SubscribeFramesRequest {
+                robot: args.robot.clone(),
+                from_sequence: start,
+            })
+            .await
+            .context("following the robot's frames")?
+            .into_inner();
+        let (mut queue, reader) = spawn_frame_reader(frames);
+
+        let shutdown = crate::signal::shutdown();
+        tokio::pin!(shutdown);
+        let idle = (args.idle_exit > 0.0).then(|| Duration::from_secs_f64(args.idle_exit));
+        // Timed from the first frame to the last acknowledgement: the
+        // rate of the pipeline, not of waiting for frames.
+        let mut began: Option<Instant> = None;
+        let mut worked_until = Instant::now();
+        let (mut integrated, mut cells, mut last) = (0u64, 0u64, 0u64);
+        let mut deltas = Vec::new();
+        let mut batch = Vec::new();
+        'follow: loop {
+            let next = async {
+                match idle {
+                    Some(idle) => tokio::time::timeout(idle, queue.recv()).await.ok(),
+                    None => Some(queue.recv().await),
+                }
+            };
+            let first = tokio::select! {
+                () = &mut shutdown => break,
+                frame = next => match frame {
+                    None => {
+                        tracing::info!("no frame for {:.1} s; stopping", args.idle_exit);
+                        break;
+                    }
+                    Some(Some(frame)) => frame,
+                    Some(None) => {
+                        reader.await.context("the frame reader panicked")??;
+                        break;
+                    }
+                },
+            };
+            began.get_or_insert_with(Instant::now);
+            // One batch: this frame and those already waiting, up to
+            // --batch-frames, so a slow robot's frames reach the map at once
+            // and a fast one's go in bulk.
+            batch.clear();
+            batch.push(first);
+            while batch.len() < args.batch_frames {
+                match queue.try_recv() {
+                    Ok(frame) => batch.push(frame),
+                    Err(_) => break,
+                }
+            }
+            let mut stop = false;
+            for frame in batch.drain(..) {
+                if frame.sequence < start || frame.sequence <= last {
+                    continue;
+                }
+                if args.to > 0 && frame.sequence > args.to {
+                    stop = true;
+                    break;
+                }
+                deltas.clear();
+                let input = FrameInput {
+                    sequence: frame.sequence,
+                    true_pose: pose_of(frame.true_pose),
+                    odometry: pose_of(frame.odometry).unwrap_or_default(),
+                    ranges: &frame.ranges,
+                };
+                cells += cartographer.integrate(&input, &mut deltas)? as u64;
+                for delta in deltas.drain(..) {
+                    sender.push(delta).await?;
+                }
+                last = frame.sequence;
+                integrated += 1;
+                if sender.pending_tiles() >= MAX_BATCH_TILES {
+                    sender.send_batch_as(last).await?;
+                }
+                if args.to > 0 && frame.sequence >= args.to {
+                    stop = true;
+                    break;
+                }
+            }
+            if last > 0 {
+                sender.send_batch_as(last).await?;
+            }
+            worked_until = Instant::now();
+            if stop {
+                break 'follow;
+            }
+        }
+        let closing = Instant::now();
+        let state = sender.close().await?;
+        let seconds = began.map_or(0.0, |t| {
+            (worked_until - t + closing.elapsed()).as_secs_f64()
+        });
+        println!(
+            "{} -> {}: {integrated} frames integrated ({:.0} frames/s), {cells} cell updates, {} batches applied, {} already applied, map version {}",
+            args.robot,
+            args.map,
+            integrated as f64 / seconds.max(1e-9),
+            state.applied,
+            state.duplicates,
+            state.map_version
+        );
+        Ok(())
+    })
+}
+
+type FrameReader = (
+    tokio::sync::mpsc::Receiver<pb::SonarFrame>,
+    tokio::task::JoinHandle<Result<()>>,
+);
+
+/// Reads the frame stream into a queue as fast as it comes, so the main
+/// loop can take whatever has arrived as one batch.
+fn spawn_frame_reader(mut stream: tonic::Streaming<pb::SonarFrame>) -> FrameReader {
+    let (tx, rx) = tokio::sync::mpsc::channel(1024);
+    let task = tokio::spawn(async move {
+        while let Some(frame) = stream
+            .message()
+            .await
+            .context("the frame stream failed")?
+        {
+            if tx.send(frame).await.is_err() {
+                break;
+            }
+        }
+        Ok(())
+    });
+    (rx, task)
+}

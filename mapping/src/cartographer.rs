@@ -1,0 +1,137 @@
+//! The cartographer's step: one sonar frame to per-tile log-odds deltas,
+//! from the pose the user chose (the thesis maps from the simulator's true
+//! pose; a real robot has only its odometry).
+
+use deog_grid::{
+    FrameIntegrator, Pose2, Resolution, SensorRing, SonarModel, SonarModelParams, TileDelta,
+    TileSize,
+};
+
+use crate::error::MappingError;
+
+/// Which pose of a frame the map is built from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PoseChoice {
+    /// The simulator's true pose, as the thesis's mapper used.
+    #[default]
+    True,
+    /// The robot's odometry.
+    Odometry,
+}
+
+/// A frame as the cartographer needs it.
+#[derive(Debug, Clone, Copy)]
+pub struct FrameInput<'a> {
+    /// Sequence number, for messages.
+    pub sequence: u64,
+    /// The true pose, if the frame has one.
+    pub true_pose: Option<Pose2>,
+    /// The odometry pose.
+    pub odometry: Pose2,
+    /// One range per sonar, metres.
+    pub ranges: &'a [f64],
+}
+
+/// Turns frames into tile deltas for one map.
+#[derive(Debug)]
+pub struct Cartographer {
+    integrator: FrameIntegrator,
+    pose: PoseChoice,
+}
+
+impl Cartographer {
+    /// A cartographer for a map of `resolution` and `tile_size`, with the
+    /// Scout's sonar model and ring.
+    pub fn new(
+        resolution: Resolution,
+        tile_size: TileSize,
+        pose: PoseChoice,
+    ) -> Result<Self, MappingError> {
+        let model = SonarModel::new(SonarModelParams::default())?;
+        Ok(Self {
+            integrator: FrameIntegrator::new(model, SensorRing::scout(), resolution, tile_size),
+            pose,
+        })
+    }
+
+    /// The pose the map is built from.
+    pub fn pose_choice(&self) -> PoseChoice {
+        self.pose
+    }
+
+    /// Appends the frame's deltas to `out`, one per touched tile; returns
+    /// how many cells they touch. Fails, appending nothing, on a frame that
+    /// lacks the chosen pose or holds bad numbers.
+    pub fn integrate(
+        &mut self,
+        frame: &FrameInput<'_>,
+        out: &mut Vec<TileDelta>,
+    ) -> Result<usize, MappingError> {
+        let pose = match self.pose {
+            PoseChoice::True => frame.true_pose.ok_or_else(|| {
+                MappingError::invalid(
+                    format!("frame {}.true_pose", frame.sequence),
+                    "is missing; map from odometry (--pose odometry) for frames without one",
+                )
+            })?,
+            PoseChoice::Odometry => frame.odometry,
+        };
+        let stats = self
+            .integrator
+            .integrate(&pose, frame.ranges, out)
+            .map_err(|e| MappingError::invalid(format!("frame {}", frame.sequence), e.to_string()))?;
+        Ok(stats.cells)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_chosen_pose_places_the_cells() {
+        let mut by_true =
+            Cartographer::new(Resolution::DEFAULT, TileSize::DEFAULT, PoseChoice::True)
+                .expect("cartographer");
+        let mut by_odometry =
+            Cartographer::new(Resolution::DEFAULT, TileSize::DEFAULT, PoseChoice::Odometry)
+                .expect("cartographer");
+        let ranges = [2.0; 16];
+        let frame = FrameInput {
+            sequence: 1,
+            true_pose: Some(Pose2::new(0.0, 0.0, 0.0)),
+            odometry: Pose2::new(10.0, 0.0, 0.0),
+            ranges: &ranges,
+        };
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        assert!(by_true.integrate(&frame, &mut a).expect("true") > 0);
+        assert!(by_odometry.integrate(&frame, &mut b).expect("odometry") > 0);
+        let keys = |d: &[TileDelta]| d.iter().map(|t| t.key).collect::<Vec<_>>();
+        assert_ne!(keys(&a), keys(&b), "10 m apart, different tiles");
+    }
+
+    #[test]
+    fn a_frame_without_the_chosen_pose_or_with_bad_ranges_is_refused() {
+        let mut c = Cartographer::new(Resolution::DEFAULT, TileSize::DEFAULT, PoseChoice::True)
+            .expect("cartographer");
+        let ranges = [2.0; 16];
+        let mut out = Vec::new();
+        let no_true = FrameInput {
+            sequence: 7,
+            true_pose: None,
+            odometry: Pose2::new(0.0, 0.0, 0.0),
+            ranges: &ranges,
+        };
+        let error = c.integrate(&no_true, &mut out).expect_err("no true pose");
+        assert!(error.to_string().contains("frame 7.true_pose"), "{error}");
+        let short = [2.0; 15];
+        let bad = FrameInput {
+            sequence: 8,
+            true_pose: Some(Pose2::new(0.0, 0.0, 0.0)),
+            odometry: Pose2::new(0.0, 0.0, 0.0),
+            ranges: &short,
+        };
+        assert!(c.integrate(&bad, &mut out).is_err());
+        assert!(out.is_empty());
+    }
+}

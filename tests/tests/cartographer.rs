@@ -1,0 +1,155 @@
+//! `deog map`, the cartographer, as a real process against a real server:
+//! the map it builds equals the frames applied one after another, and a
+//! restart resumes after the last frame the server applied, never applying
+//! one twice.
+
+use deog_grid::{
+    ClampLimits, FrameIntegrator, Pose2, Resolution, SensorRing, SonarModel, SonarModelParams,
+    TileMap, TileSize,
+};
+use deog_proto::v1 as pb;
+use deog_robot_client::{ClientConfig, MapClient};
+use deog_simulator::simulation::{SimConfig, Simulation};
+use deog_simulator::world_file::load_world;
+use deog_simulator::{WanderParams, Wanderer};
+use deog_tests::{ServerProcess, deog_binary};
+use std::process::Command;
+
+/// `count` frames of a robot wandering in map2, as the wanderer would
+/// publish them.
+fn wander_frames(robot: &str, count: usize) -> Vec<pb::SonarFrame> {
+    let path = format!("{}/../worlds/map2.toml", env!("CARGO_MANIFEST_DIR"));
+    let world = load_world(std::path::Path::new(&path)).expect("world");
+    let mut sim = Simulation::new(world, SimConfig::default(), 21).expect("sim");
+    let mut state = sim.spawn(robot, None).expect("spawn");
+    let mut wanderer =
+        Wanderer::new(WanderParams::default(), &SensorRing::scout(), 21).expect("wanderer");
+    let mut frames = Vec::new();
+    let mut fired = Vec::new();
+    let pose = |p: Pose2| pb::Pose2 {
+        x: p.x,
+        y: p.y,
+        theta: p.theta,
+    };
+    while frames.len() < count {
+        let (v, w) = wanderer
+            .command(&state.ranges, state.bumper, 0.1)
+            .expect("command");
+        sim.drive(robot, v, w).expect("drive");
+        fired.clear();
+        while fired.is_empty() {
+            sim.advance(0.1, &mut fired).expect("advance");
+        }
+        state = fired.pop().expect("firing");
+        frames.push(pb::SonarFrame {
+            robot: robot.into(),
+            sequence: state.sequence,
+            time_s: state.time_s,
+            odometry: Some(pose(state.odometry)),
+            true_pose: Some(pose(state.true_pose)),
+            ranges: state.ranges.clone(),
+        });
+    }
+    frames
+}
+
+fn map_run(server: &ServerProcess, extra: &[&str]) -> String {
+    let output = Command::new(deog_binary())
+        .args(["map", "--robot", "r", "--map", "m", "--idle-exit", "1", "--batch-frames", "1"])
+        .args(extra)
+        .env("DEOG_SERVER", server.addr.to_string())
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("run deog map");
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_map_is_the_frames_applied_in_order_and_a_restart_resumes_exactly() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let server = ServerProcess::start(&dir.path().join("data"), &[]).await;
+    let client = MapClient::connect(ClientConfig::new(server.addr.to_string()))
+        .await
+        .expect("client");
+    let frames = wander_frames("r", 160);
+    let (first, last) = (frames[0].sequence, frames[159].sequence);
+    client
+        .publish_frames(frames.clone())
+        .await
+        .expect("publish");
+
+    // Half, then the rest after a "restart", then once more: nothing left.
+    let middle = (first + 79).to_string();
+    let out = map_run(&server, &["--to", &middle]);
+    assert!(out.contains(": 80 frames integrated"), "{out}");
+    let out = map_run(&server, &[]);
+    assert!(out.contains(": 80 frames integrated"), "{out}");
+    let out = map_run(&server, &[]);
+    assert!(out.contains(": 0 frames integrated"), "{out}");
+    let cursor = client.update_cursor("m", "carto/r").await.expect("cursor");
+    assert_eq!(cursor, last);
+    let info = client.map_info("m").await.expect("info");
+    assert_eq!(info.version, 160, "one batch per frame, each applied once");
+
+    // The reference: the same frames integrated here and applied one by one.
+    let size = TileSize::new(info.tile_size).expect("size");
+    let resolution = Resolution::new(info.resolution_m).expect("resolution");
+    let limits = ClampLimits::from_probabilities(
+        info.clamp_min_probability,
+        info.clamp_max_probability,
+    )
+    .expect("limits");
+    let mut reference = TileMap::new(resolution, size, limits);
+    let model = SonarModel::new(SonarModelParams::default()).expect("model");
+    let mut integrator = FrameIntegrator::new(model, SensorRing::scout(), resolution, size);
+    let mut deltas = Vec::new();
+    for frame in &frames {
+        let p = frame.true_pose.expect("pose");
+        deltas.clear();
+        integrator
+            .integrate(&Pose2::new(p.x, p.y, p.theta), &frame.ranges, &mut deltas)
+            .expect("integrate");
+        for delta in &deltas {
+            reference.apply(delta).expect("apply");
+        }
+    }
+    let tiles = client
+        .tiles(pb::TileQuery {
+            map: "m".into(),
+            selection: Some(pb::tile_query::Selection::Region(pb::CellBox {
+                min_x: i32::MIN,
+                min_y: i32::MIN,
+                max_x: i32::MAX,
+                max_y: i32::MAX,
+            })),
+            newer_than_version: 0,
+        })
+        .await
+        .expect("tiles");
+    let expected: Vec<_> = reference.tiles().collect();
+    assert_eq!(tiles.len(), expected.len());
+    let mut compared = 0;
+    for tile in &tiles {
+        let key = tile.key.expect("key");
+        let key = deog_grid::TileKey::new(key.x, key.y);
+        let want = expected
+            .iter()
+            .find(|(k, _)| **k == key)
+            .map(|(_, t)| t.raw_cells())
+            .expect("tile in the reference");
+        let got: Vec<i16> = tile
+            .cells
+            .chunks_exact(2)
+            .map(|b| i16::from_le_bytes([b[0], b[1]]))
+            .collect();
+        assert_eq!(got.as_slice(), want, "tile {key:?}");
+        compared += got.len();
+    }
+    assert!(compared > 10_000, "{compared}");
+    drop(server);
+}
