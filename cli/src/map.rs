@@ -79,7 +79,10 @@ pub fn run(args: MapArgs) -> Result<()> {
         bail!("--batch-frames must be at least 1");
     }
     if !(args.idle_exit.is_finite() && args.idle_exit >= 0.0) {
-        bail!("--idle-exit must be zero or positive, got {}", args.idle_exit);
+        bail!(
+            "--idle-exit must be zero or positive, got {}",
+            args.idle_exit
+        );
     }
     let client_id = format!("carto/{}", args.robot);
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
@@ -239,11 +242,7 @@ type FrameReader = (
 fn spawn_frame_reader(mut stream: tonic::Streaming<pb::SonarFrame>) -> FrameReader {
     let (tx, rx) = tokio::sync::mpsc::channel(1024);
     let task = tokio::spawn(async move {
-        while let Some(frame) = stream
-            .message()
-            .await
-            .context("the frame stream failed")?
-        {
+        while let Some(frame) = stream.message().await.context("the frame stream failed")? {
             if tx.send(frame).await.is_err() {
                 break;
             }

@@ -79,7 +79,9 @@ impl Cartographer {
         let stats = self
             .integrator
             .integrate(&pose, frame.ranges, out)
-            .map_err(|e| MappingError::invalid(format!("frame {}", frame.sequence), e.to_string()))?;
+            .map_err(|e| {
+                MappingError::invalid(format!("frame {}", frame.sequence), e.to_string())
+            })?;
         Ok(stats.cells)
     }
 }

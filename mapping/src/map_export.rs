@@ -354,6 +354,9 @@ mod tests {
         let mut map = empty_map();
         set(&mut map, &[(-(1 << 20), 0, 3000), (1 << 20, 1 << 10, 3000)]);
         let e = export_map(&map).expect_err("too big");
-        assert!(e.to_string().starts_with("map: its observed cells span"), "{e}");
+        assert!(
+            e.to_string().starts_with("map: its observed cells span"),
+            "{e}"
+        );
     }
 }

@@ -129,10 +129,7 @@ pub fn import_map(image: &MapImage, target: &ImportTarget) -> Result<MapImport, 
             };
             // In range: `whole_cells` checked origin + extent against
             // MAX_ABS_CELL, far inside i32.
-            let cell = CellIndex::new(
-                origin_cell.x + col as i32,
-                origin_cell.y + row as i32,
-            );
+            let cell = CellIndex::new(origin_cell.x + col as i32, origin_cell.y + row as i32);
             let (key, offset) = size.split(cell);
             let cells = tiles.entry(key).or_insert_with(|| vec![0; size.area()]);
             cells[offset.index(size)] = delta;
@@ -335,7 +332,10 @@ mod tests {
         let mut far = image.clone();
         far.origin.1 = 1e9;
         let e = import_map(&far, &target(0.1)).expect_err("far");
-        assert!(e.to_string().starts_with("origin: y: the image spans"), "{e}");
+        assert!(
+            e.to_string().starts_with("origin: y: the image spans"),
+            "{e}"
+        );
         let mut nan = image.clone();
         nan.origin.0 = f64::NAN;
         assert!(import_map(&nan, &target(0.1)).is_err());
@@ -358,7 +358,10 @@ mod tests {
 
     /// Loads one of the real maps kept for the mapfile crate's tests.
     fn real_map(path: &str) -> MapImage {
-        let path = format!("{}/../mapfile/tests/data/{path}", env!("CARGO_MANIFEST_DIR"));
+        let path = format!(
+            "{}/../mapfile/tests/data/{path}",
+            env!("CARGO_MANIFEST_DIR")
+        );
         MapImage::load(&path).expect("real map loads")
     }
 

@@ -55,7 +55,17 @@ fn wander_frames(robot: &str, count: usize) -> Vec<pb::SonarFrame> {
 
 fn map_run(server: &ServerProcess, extra: &[&str]) -> String {
     let output = Command::new(deog_binary())
-        .args(["map", "--robot", "r", "--map", "m", "--idle-exit", "1", "--batch-frames", "1"])
+        .args([
+            "map",
+            "--robot",
+            "r",
+            "--map",
+            "m",
+            "--idle-exit",
+            "1",
+            "--batch-frames",
+            "1",
+        ])
         .args(extra)
         .env("DEOG_SERVER", server.addr.to_string())
         .env("RUST_LOG", "warn")
@@ -99,11 +109,9 @@ async fn the_map_is_the_frames_applied_in_order_and_a_restart_resumes_exactly() 
     // The reference: the same frames integrated here and applied one by one.
     let size = TileSize::new(info.tile_size).expect("size");
     let resolution = Resolution::new(info.resolution_m).expect("resolution");
-    let limits = ClampLimits::from_probabilities(
-        info.clamp_min_probability,
-        info.clamp_max_probability,
-    )
-    .expect("limits");
+    let limits =
+        ClampLimits::from_probabilities(info.clamp_min_probability, info.clamp_max_probability)
+            .expect("limits");
     let mut reference = TileMap::new(resolution, size, limits);
     let model = SonarModel::new(SonarModelParams::default()).expect("model");
     let mut integrator = FrameIntegrator::new(model, SensorRing::scout(), resolution, size);
