@@ -3,6 +3,8 @@
 mod bench;
 mod connection;
 mod demo;
+mod eval;
+mod export;
 mod frames;
 mod import;
 mod map;
@@ -42,8 +44,15 @@ enum Command {
     /// The cartographer: follows a robot's frames and builds a map on the
     /// server from them.
     Map(map::MapArgs),
-    /// Imports recorded data (a wanderer data file) into the map server.
+    /// Imports recorded data into the map server: a wanderer data file as
+    /// a robot's frames (--robot), or a map_server map as a map (--map).
     Import(import::ImportArgs),
+    /// Exports a map, even one still being built, to map_server files
+    /// (PGM + YAML) and a PNG.
+    Export(export::ExportArgs),
+    /// Evaluation reports: `eval map` judges a map on the server against
+    /// a world's ground truth.
+    Eval(eval::EvalArgs),
     /// Runs the release benchmarks of the map server.
     Bench(bench::BenchArgs),
 }
@@ -73,8 +82,10 @@ fn run(command: Command) -> Result<()> {
         Command::Sim(args) => sim::run(args),
         Command::Wander(args) => wander::run(args),
         Command::Import(args) => import::run(args),
+        Command::Export(args) => export::run(args),
         Command::Map(args) => map::run(args),
         Command::Frames(args) => frames::run(args),
+        Command::Eval(args) => eval::run(args),
         Command::Bench(args) => bench::run(args),
     }
 }

@@ -9,14 +9,18 @@
 //!   image covering its observed cells ([`MapExport`]).
 //! - [`map_import`]: [`import_map`], a map_server image to tile deltas at
 //!   the map's clamp limits ([`MapImport`]).
+//! - [`quality`]: [`map_quality`], a map judged against a world's ground
+//!   truth ([`QualityInput`] in, [`MapQuality`] out).
 //! - [`error`]: the crate's one error type, [`MappingError`].
 
 pub mod cartographer;
 pub mod error;
 pub mod map_export;
 pub mod map_import;
+pub mod quality;
 
 pub use cartographer::{Cartographer, FrameInput, PoseChoice};
 pub use error::MappingError;
 pub use map_export::{ExportCounts, MapExport, export_map};
-pub use map_import::{ImportTarget, MapImport, import_map};
+pub use map_import::{ImportTarget, MapImport, image_origin_cell, import_map};
+pub use quality::{Confusion, MapQuality, QualityInput, map_quality};

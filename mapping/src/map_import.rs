@@ -69,38 +69,7 @@ pub struct MapImport {
 /// be lost on export).
 pub fn import_map(image: &MapImage, target: &ImportTarget) -> Result<MapImport, MappingError> {
     check_limits(target.limits)?;
-    let res = target.resolution.metres();
-    let image_res = image.resolution;
-    if !(image_res.is_finite() && (image_res - res).abs() <= RESOLUTION_TOLERANCE * res) {
-        return Err(MappingError::invalid(
-            "resolution",
-            format!("the image has {image_res} m per pixel, the map {res} m per cell"),
-        ));
-    }
-    let (ox, oy, yaw) = image.origin;
-    if yaw != 0.0 {
-        return Err(MappingError::invalid(
-            "origin",
-            format!("yaw must be 0 (rotated maps cannot be imported), got {yaw}"),
-        ));
-    }
-    let origin_cell = CellIndex::new(
-        whole_cells("origin", "x", ox, res, image.width)?,
-        whole_cells("origin", "y", oy, res, image.height)?,
-    );
-    let expected = u64::from(image.width) * u64::from(image.height);
-    if image.pixels.len() as u64 != expected {
-        return Err(MappingError::invalid(
-            "pixels",
-            format!(
-                "{} x {} needs {expected} pixels, the image holds {}",
-                image.width,
-                image.height,
-                image.pixels.len()
-            ),
-        ));
-    }
-
+    let origin_cell = image_origin_cell(image, target.resolution)?;
     let (occupied_delta, free_delta) = (target.limits.max().raw(), target.limits.min().raw());
     let size = target.tile_size;
     let mut tiles: BTreeMap<TileKey, Vec<i16>> = BTreeMap::new();
@@ -140,6 +109,48 @@ pub fn import_map(image: &MapImage, target: &ImportTarget) -> Result<MapImport, 
         .map(|(key, cells)| TileDelta::from_raw(key, size, cells))
         .collect::<Result<_, _>>()?;
     Ok(result)
+}
+
+/// The cell of `image`'s lower-left pixel in a map of cells of
+/// `resolution`, after checking that the image fits that map's grid: the
+/// checks of [`import_map`] that do not depend on the map's tile size or
+/// clamp limits, so a caller can run them before creating the map.
+pub fn image_origin_cell(
+    image: &MapImage,
+    resolution: Resolution,
+) -> Result<CellIndex, MappingError> {
+    let res = resolution.metres();
+    let image_res = image.resolution;
+    if !(image_res.is_finite() && (image_res - res).abs() <= RESOLUTION_TOLERANCE * res) {
+        return Err(MappingError::invalid(
+            "resolution",
+            format!("the image has {image_res} m per pixel, the map {res} m per cell"),
+        ));
+    }
+    let (ox, oy, yaw) = image.origin;
+    if yaw != 0.0 {
+        return Err(MappingError::invalid(
+            "origin",
+            format!("yaw must be 0 (rotated maps cannot be imported), got {yaw}"),
+        ));
+    }
+    let origin_cell = CellIndex::new(
+        whole_cells("origin", "x", ox, res, image.width)?,
+        whole_cells("origin", "y", oy, res, image.height)?,
+    );
+    let expected = u64::from(image.width) * u64::from(image.height);
+    if image.width == 0 || image.height == 0 || image.pixels.len() as u64 != expected {
+        return Err(MappingError::invalid(
+            "pixels",
+            format!(
+                "{} x {} needs {expected} pixels (and neither may be 0), the image holds {}",
+                image.width,
+                image.height,
+                image.pixels.len()
+            ),
+        ));
+    }
+    Ok(origin_cell)
 }
 
 /// Occupied and free cells at the clamp limits must read back as such.
@@ -343,6 +354,9 @@ mod tests {
         short.pixels.pop();
         let e = import_map(&short, &target(0.1)).expect_err("pixels");
         assert!(e.to_string().starts_with("pixels: 10 x 6 needs 60"), "{e}");
+        let mut none = image.clone();
+        (none.width, none.pixels) = (0, Vec::new());
+        assert!(import_map(&none, &target(0.1)).is_err());
     }
 
     #[test]

@@ -1,0 +1,123 @@
+//! `deog export`: a map on the server to ROS map_server files (PGM + YAML)
+//! and a PNG, the thesis's "pgm creator". Works while the map is still being
+//! built: the server sends each tile whole, so the export is a consistent
+//! copy of every tile, each as of the moment it was read.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use deog_grid::{ClampLimits, Resolution, Tile, TileKey, TileMap, TileSize};
+use deog_mapfile::{to_png, write_map};
+use deog_mapping::export_map;
+use deog_proto::v1 as pb;
+use deog_robot_client::{ClientError, MapClient};
+
+use crate::connection::ConnectionArgs;
+
+/// Options of `deog export`.
+#[derive(Debug, Args)]
+pub struct ExportArgs {
+    /// The map to export.
+    #[arg(long, env = "DEOG_MAP")]
+    pub map: String,
+    /// Folder to write into (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// File name stem: writes STEM.pgm, STEM.yaml and STEM.png. Defaults to
+    /// the map's name.
+    #[arg(long)]
+    pub name: Option<String>,
+    #[command(flatten)]
+    pub connection: ConnectionArgs,
+}
+
+/// Runs the export.
+pub fn run(args: ExportArgs) -> Result<()> {
+    let stem = args.name.clone().unwrap_or_else(|| args.map.clone());
+    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    let map = runtime.block_on(fetch(&args))?;
+    if map.observed_count() == 0 {
+        bail!(
+            "map {:?} is empty: no cell has been observed yet, so there is nothing to export",
+            args.map
+        );
+    }
+    let export = export_map(&map).with_context(|| format!("exporting map {:?}", args.map))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let yaml = write_map(&args.out, &stem, &export.image)?;
+    let png = args.out.join(format!("{stem}.png"));
+    to_png(&png, &export.image)?;
+    let (image, counts) = (&export.image, &export.counts);
+    println!(
+        "map {}: {} x {} pixels of {} m, origin ({}, {}): {} cells occupied, {} free, {} unknown ({} observed but uncertain); wrote {} with its .pgm and .png",
+        args.map,
+        image.width,
+        image.height,
+        image.resolution,
+        image.origin.0,
+        image.origin.1,
+        counts.occupied,
+        counts.free,
+        counts.unknown(),
+        counts.uncertain,
+        yaml.display()
+    );
+    Ok(())
+}
+
+/// Every tile of the map, as a [`TileMap`] with the map's settings.
+async fn fetch(args: &ExportArgs) -> Result<TileMap> {
+    let client = MapClient::connect(args.connection.client_config()?)
+        .await
+        .with_context(|| format!("connecting to the map server at {}", args.connection.server))?;
+    let info = match client.map_info(&args.map).await {
+        Err(ClientError::Status(status)) if status.code() == tonic::Code::NotFound => {
+            bail!(
+                "no map named {:?} on the map server at {}",
+                args.map,
+                args.connection.server
+            )
+        }
+        other => other.with_context(|| format!("reading the settings of map {:?}", args.map))?,
+    };
+    let resolution = Resolution::new(info.resolution_m).context("the map's resolution_m")?;
+    let tile_size = TileSize::new(info.tile_size).context("the map's tile_size")?;
+    let limits =
+        ClampLimits::from_probabilities(info.clamp_min_probability, info.clamp_max_probability)
+            .context("the map's clamp limits")?;
+    let mut map = TileMap::new(resolution, tile_size, limits);
+    // No bounds: nothing observed yet, so no tile to fetch.
+    let Some(region) = info.bounds_cells else {
+        return Ok(map);
+    };
+    let tiles = client
+        .tiles(pb::TileQuery {
+            map: args.map.clone(),
+            selection: Some(pb::tile_query::Selection::Region(region)),
+            // Every tile in full.
+            newer_than_version: 0,
+        })
+        .await
+        .with_context(|| format!("reading the tiles of map {:?}", args.map))?;
+    for tile in tiles {
+        let key = tile
+            .key
+            .map(|k| TileKey::new(k.x, k.y))
+            .context("the server sent a tile without a key")?;
+        if tile.encoding != pb::CellEncoding::DenseI16Le as i32 {
+            bail!(
+                "the server sent tile ({}, {}) in encoding {}, expected dense",
+                key.x,
+                key.y,
+                tile.encoding
+            );
+        }
+        let cells = Tile::from_dense_bytes(tile_size, &tile.cells)
+            .with_context(|| format!("decoding tile ({}, {})", key.x, key.y))?;
+        map.insert(key, cells)
+            .with_context(|| format!("storing tile ({}, {})", key.x, key.y))?;
+    }
+    Ok(map)
+}
