@@ -4,9 +4,9 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
-use deog_grid::{ClampLimits, Resolution, Tile, TileKey, TileMap, TileSize};
+use deog_grid::TileMap;
 use deog_mapping::quality::DEFAULT_ROBOT_RADIUS_M;
 use deog_mapping::{QualityInput, map_quality};
 use deog_proto::v1 as pb;
@@ -95,48 +95,10 @@ fn run_map(args: EvalMapArgs) -> Result<()> {
 
 /// Every stored tile of `name`, as a tile map with the map's settings.
 async fn fetch_map(client: &MapClient, name: &str) -> Result<TileMap> {
-    let info = client
-        .map_info(name)
+    let (_, map) = client
+        .download(name)
         .await
         .with_context(|| format!("reading map {name}"))?;
-    let resolution = Resolution::new(info.resolution_m)?;
-    let tile_size = TileSize::new(info.tile_size)?;
-    let limits =
-        ClampLimits::from_probabilities(info.clamp_min_probability, info.clamp_max_probability)?;
-    // The whole i32 plane: every tile the map has.
-    let everything = pb::CellBox {
-        min_x: i32::MIN,
-        min_y: i32::MIN,
-        max_x: i32::MAX,
-        max_y: i32::MAX,
-    };
-    let tiles = client
-        .tiles(pb::TileQuery {
-            map: name.to_string(),
-            selection: Some(pb::tile_query::Selection::Region(everything)),
-            newer_than_version: 0,
-        })
-        .await
-        .with_context(|| format!("reading the tiles of map {name}"))?;
-    let mut map = TileMap::new(resolution, tile_size, limits);
-    for tile in tiles {
-        let Some(key) = tile.key else {
-            bail!("map {name}: the server sent a tile without a key");
-        };
-        let key = TileKey::new(key.x, key.y);
-        if tile.encoding != pb::CellEncoding::DenseI16Le as i32 {
-            bail!(
-                "map {name}: tile ({}, {}) has cell encoding {}, expected dense",
-                key.x,
-                key.y,
-                tile.encoding
-            );
-        }
-        let cells = Tile::from_dense_bytes(tile_size, &tile.cells)
-            .with_context(|| format!("map {name}: tile ({}, {})", key.x, key.y))?;
-        map.insert(key, cells)
-            .with_context(|| format!("map {name}: tile ({}, {})", key.x, key.y))?;
-    }
     Ok(map)
 }
 

@@ -7,10 +7,9 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use deog_grid::{ClampLimits, Resolution, Tile, TileKey, TileMap, TileSize};
+use deog_grid::TileMap;
 use deog_mapfile::{to_png, write_map};
 use deog_mapping::export_map;
-use deog_proto::v1 as pb;
 use deog_robot_client::{ClientError, MapClient};
 
 use crate::connection::ConnectionArgs;
@@ -72,52 +71,18 @@ async fn fetch(args: &ExportArgs) -> Result<TileMap> {
     let client = MapClient::connect(args.connection.client_config()?)
         .await
         .with_context(|| format!("connecting to the map server at {}", args.connection.server))?;
-    let info = match client.map_info(&args.map).await {
-        Err(ClientError::Status(status)) if status.code() == tonic::Code::NotFound => {
-            bail!(
-                "no map named {:?} on the map server at {}",
-                args.map,
-                args.connection.server
-            )
-        }
-        other => other.with_context(|| format!("reading the settings of map {:?}", args.map))?,
-    };
-    let resolution = Resolution::new(info.resolution_m).context("the map's resolution_m")?;
-    let tile_size = TileSize::new(info.tile_size).context("the map's tile_size")?;
-    let limits =
-        ClampLimits::from_probabilities(info.clamp_min_probability, info.clamp_max_probability)
-            .context("the map's clamp limits")?;
-    let mut map = TileMap::new(resolution, tile_size, limits);
-    // No bounds: nothing observed yet, so no tile to fetch.
-    let Some(region) = info.bounds_cells else {
-        return Ok(map);
-    };
-    let tiles = client
-        .tiles(pb::TileQuery {
-            map: args.map.clone(),
-            selection: Some(pb::tile_query::Selection::Region(region)),
-            // Every tile in full.
-            newer_than_version: 0,
-        })
+    if let Err(ClientError::Status(status)) = client.map_info(&args.map).await
+        && status.code() == tonic::Code::NotFound
+    {
+        bail!(
+            "no map named {:?} on the map server at {}",
+            args.map,
+            args.connection.server
+        )
+    }
+    let (_, map) = client
+        .download(&args.map)
         .await
         .with_context(|| format!("reading the tiles of map {:?}", args.map))?;
-    for tile in tiles {
-        let key = tile
-            .key
-            .map(|k| TileKey::new(k.x, k.y))
-            .context("the server sent a tile without a key")?;
-        if tile.encoding != pb::CellEncoding::DenseI16Le as i32 {
-            bail!(
-                "the server sent tile ({}, {}) in encoding {}, expected dense",
-                key.x,
-                key.y,
-                tile.encoding
-            );
-        }
-        let cells = Tile::from_dense_bytes(tile_size, &tile.cells)
-            .with_context(|| format!("decoding tile ({}, {})", key.x, key.y))?;
-        map.insert(key, cells)
-            .with_context(|| format!("storing tile ({}, {})", key.x, key.y))?;
-    }
     Ok(map)
 }

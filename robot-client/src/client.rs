@@ -3,6 +3,7 @@
 use crate::connect::{ClientConfig, RawMapClient, connect, with_retry};
 use crate::error::ClientError;
 use crate::updates::{UpdateSender, UpdateSenderConfig};
+use deog_grid::{ClampLimits, Resolution, Tile, TileKey, TileMap, TileSize};
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_client::MapServiceClient;
 use tokio_stream::StreamExt;
@@ -52,6 +53,44 @@ impl MapClient {
             }
             Err(e) => Err(e),
         }
+    }
+
+    /// A whole map: its settings and every stored tile, as a [`TileMap`]
+    /// with the map's resolution, tile size and clamp limits. Each tile
+    /// comes whole, so this works while the map is still being built.
+    pub async fn download(&self, name: &str) -> Result<(pb::MapInfo, TileMap), ClientError> {
+        let info = self.map_info(name).await?;
+        let resolution = Resolution::new(info.resolution_m)?;
+        let tile_size = TileSize::new(info.tile_size)?;
+        let limits = ClampLimits::from_probabilities(
+            info.clamp_min_probability,
+            info.clamp_max_probability,
+        )?;
+        let mut map = TileMap::new(resolution, tile_size, limits);
+        // No bounds: nothing observed yet, so no tile to fetch.
+        let Some(region) = info.bounds_cells else {
+            return Ok((info, map));
+        };
+        let tiles = self
+            .tiles(pb::TileQuery {
+                map: name.to_string(),
+                selection: Some(pb::tile_query::Selection::Region(region)),
+                newer_than_version: 0,
+            })
+            .await?;
+        for tile in tiles {
+            let key = tile.key.map(|k| TileKey::new(k.x, k.y)).ok_or_else(|| {
+                ClientError::Config("the server sent a tile without a key".into())
+            })?;
+            if tile.encoding != pb::CellEncoding::DenseI16Le as i32 {
+                return Err(ClientError::Config(format!(
+                    "the server sent tile ({}, {}) in encoding {}, expected dense",
+                    key.x, key.y, tile.encoding
+                )));
+            }
+            map.insert(key, Tile::from_dense_bytes(tile_size, &tile.cells)?)?;
+        }
+        Ok((info, map))
     }
 
     /// A map's settings and counts.

@@ -9,7 +9,7 @@
 use std::ffi::OsString;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 use std::sync::OnceLock;
 use std::time::Duration;
 
@@ -39,6 +39,35 @@ pub fn deog_binary() -> PathBuf {
                 .join(format!("deog{}", std::env::consts::EXE_SUFFIX))
         })
         .clone()
+}
+
+/// Runs `deog <args>` to its end with `env` set, the `DEOG_*` variables
+/// of the test's own environment removed (so they cannot change what a
+/// test means) and logs quiet.
+pub fn run_deog(args: &[&str], env: &[(&str, String)]) -> Output {
+    let mut command = Command::new(deog_binary());
+    command.args(args).env("RUST_LOG", "warn");
+    for (key, _) in std::env::vars() {
+        if key.starts_with("DEOG_") {
+            command.env_remove(key);
+        }
+    }
+    for (key, value) in env {
+        command.env(key, value);
+    }
+    command.output().expect("run deog")
+}
+
+/// The stdout of a run that must have succeeded; panics with its stderr
+/// otherwise.
+pub fn succeeded(output: &Output) -> String {
+    assert!(
+        output.status.success(),
+        "deog failed: {}\n{}",
+        String::from_utf8_lossy(&output.stderr),
+        String::from_utf8_lossy(&output.stdout)
+    );
+    String::from_utf8_lossy(&output.stdout).into_owned()
 }
 
 /// A free port on 127.0.0.1: bound, then released for a child to bind.

@@ -7,29 +7,16 @@ use deog_grid::{CellIndex, ClampLimits, LogOdds, Resolution, Tile, TileKey, Tile
 use deog_mapfile::{Cell, MapImage};
 use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient};
-use deog_tests::{ServerProcess, deog_binary};
+use deog_tests::{ServerProcess, run_deog, succeeded};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 fn deog(args: &[&str], server: &ServerProcess) -> Output {
-    Command::new(deog_binary())
-        .args(args)
-        .env("DEOG_SERVER", server.addr.to_string())
-        .env_remove("DEOG_ROBOT")
-        .env_remove("DEOG_MAP")
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("run deog")
+    run_deog(args, &[("DEOG_SERVER", server.addr.to_string())])
 }
 
 fn stdout(output: &Output) -> String {
-    assert!(
-        output.status.success(),
-        "deog failed: {}\n{}",
-        String::from_utf8_lossy(&output.stderr),
-        String::from_utf8_lossy(&output.stdout)
-    );
-    String::from_utf8_lossy(&output.stdout).into_owned()
+    succeeded(output)
 }
 
 /// The stderr of a run that must fail.

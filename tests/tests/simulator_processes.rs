@@ -4,27 +4,21 @@
 
 use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient, SimClient};
-use deog_tests::{ServerProcess, deog_binary};
+use deog_tests::{ServerProcess, deog_binary, run_deog, succeeded};
 use std::process::{Command, Output};
 
 fn deog(args: &[&str], server: &ServerProcess, sim: &ServerProcess) -> Output {
-    Command::new(deog_binary())
-        .args(args)
-        .env("DEOG_SERVER", server.addr.to_string())
-        .env("DEOG_SIM", sim.addr.to_string())
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("run deog")
+    run_deog(
+        args,
+        &[
+            ("DEOG_SERVER", server.addr.to_string()),
+            ("DEOG_SIM", sim.addr.to_string()),
+        ],
+    )
 }
 
 fn stdout(output: &Output) -> String {
-    assert!(
-        output.status.success(),
-        "deog failed: {}\n{}",
-        String::from_utf8_lossy(&output.stderr),
-        String::from_utf8_lossy(&output.stdout)
-    );
-    String::from_utf8_lossy(&output.stdout).into_owned()
+    succeeded(output)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
