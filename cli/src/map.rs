@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
-use deog_grid::{Pose2, Resolution, TileSize};
+use deog_grid::{Pose2, Resolution, SonarModelParams, TileSize};
 use deog_mapping::{Cartographer, FrameInput, PoseChoice};
 use deog_proto::v1 as pb;
 use deog_robot_client::{MapClient, UpdateSenderConfig};
@@ -60,9 +60,31 @@ pub struct MapArgs {
     /// server (backpressure).
     #[arg(long, default_value_t = 8)]
     pub window: usize,
+    /// Write each batch's acknowledgement (batch sequence, map version,
+    /// applied) to this file, one line each. Each batch then waits for its
+    /// acknowledgement before the next is sent, so the log is complete and
+    /// in order: for auditing and for replaying the map in the server's
+    /// commit order.
+    #[arg(long)]
+    pub ack_log: Option<std::path::PathBuf>,
+    /// The sonar model's strongest occupied belief from one reading
+    /// (thesis eq. 3.1's Max_occupied). The thesis's 0.98 lets one echo's
+    /// whole 30° arc read as a wall; 0.6 lets many readings decide, which
+    /// measured far better maps (BENCHMARKS.md, map quality).
+    #[arg(long, default_value_t = DEFAULT_MAX_OCCUPIED)]
+    pub max_occupied: f64,
+    /// The sonar model's strongest empty belief from one reading.
+    #[arg(long, default_value_t = SonarModelParams::default().max_empty)]
+    pub max_empty: f64,
+    /// Half the depth of the sonar model's region I, metres.
+    #[arg(long, default_value_t = SonarModelParams::default().region_i_tolerance)]
+    pub region_tolerance: f64,
     #[command(flatten)]
     pub connection: ConnectionArgs,
 }
+
+/// The cartographer's Max_occupied; see `--max-occupied`.
+const DEFAULT_MAX_OCCUPIED: f64 = 0.6;
 
 /// Tiles a batch may reach before it is sent at the next frame boundary:
 /// well inside the server's message limit even with dense tiles.
@@ -105,7 +127,14 @@ pub fn run(args: MapArgs) -> Result<()> {
             PoseArg::True => PoseChoice::True,
             PoseArg::Odometry => PoseChoice::Odometry,
         };
-        let mut cartographer = Cartographer::new(resolution, tile_size, pose)?;
+        let params = SonarModelParams {
+            max_occupied: args.max_occupied,
+            max_empty: args.max_empty,
+            region_i_tolerance: args.region_tolerance,
+            ..SonarModelParams::default()
+        };
+        let mut cartographer = Cartographer::with_model(resolution, tile_size, pose, params)
+            .context("the sonar model's figures")?;
         let mut sender = client
             .updates(
                 &args.map,
@@ -122,6 +151,13 @@ pub fn run(args: MapArgs) -> Result<()> {
         if applied > 0 {
             tracing::info!(robot = %args.robot, map = %args.map, last_applied = applied, "resuming after the last frame the server applied");
         }
+        let mut ack_log = match &args.ack_log {
+            Some(path) => Some(std::io::BufWriter::new(
+                std::fs::File::create(path)
+                    .with_context(|| format!("creating {}", path.display()))?,
+            )),
+            None => None,
+        };
         let frames = client
             .raw()
             .subscribe_frames(pb::SubscribeFramesRequest {
@@ -199,7 +235,7 @@ pub fn run(args: MapArgs) -> Result<()> {
                 last = frame.sequence;
                 integrated += 1;
                 if sender.pending_tiles() >= MAX_BATCH_TILES {
-                    sender.send_batch_as(last).await?;
+                    send(&mut sender, last, &mut ack_log).await?;
                 }
                 if args.to > 0 && frame.sequence >= args.to {
                     stop = true;
@@ -207,7 +243,7 @@ pub fn run(args: MapArgs) -> Result<()> {
                 }
             }
             if last > 0 {
-                sender.send_batch_as(last).await?;
+                send(&mut sender, last, &mut ack_log).await?;
             }
             worked_until = Instant::now();
             if stop {
@@ -230,6 +266,34 @@ pub fn run(args: MapArgs) -> Result<()> {
         );
         Ok(())
     })
+}
+
+/// Sends the batch being filled under `sequence`; with an ack log, waits
+/// for its acknowledgement and writes it down.
+async fn send(
+    sender: &mut deog_robot_client::UpdateSender,
+    sequence: u64,
+    ack_log: &mut Option<std::io::BufWriter<std::fs::File>>,
+) -> Result<()> {
+    use std::io::Write as _;
+    if sender.pending_tiles() == 0 {
+        return Ok(());
+    }
+    sender.send_batch_as(sequence).await?;
+    if let Some(log) = ack_log {
+        let before = sender.acks();
+        let after = sender.flush().await?;
+        writeln!(
+            log,
+            "{} {} {}",
+            after.last_acked,
+            after.map_version,
+            after.applied > before.applied
+        )
+        .context("writing the ack log")?;
+        log.flush().context("writing the ack log")?;
+    }
+    Ok(())
 }
 
 type FrameReader = (

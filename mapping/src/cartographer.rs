@@ -47,7 +47,17 @@ impl Cartographer {
         tile_size: TileSize,
         pose: PoseChoice,
     ) -> Result<Self, MappingError> {
-        let model = SonarModel::new(SonarModelParams::default())?;
+        Self::with_model(resolution, tile_size, pose, SonarModelParams::default())
+    }
+
+    /// As [`Cartographer::new`] with the sonar model's figures given.
+    pub fn with_model(
+        resolution: Resolution,
+        tile_size: TileSize,
+        pose: PoseChoice,
+        params: SonarModelParams,
+    ) -> Result<Self, MappingError> {
+        let model = SonarModel::new(params)?;
         Ok(Self {
             integrator: FrameIntegrator::new(model, SensorRing::scout(), resolution, tile_size),
             pose,

@@ -3,6 +3,8 @@
 //!
 //! # Layout
 //! - [`deog_binary`]: the `deog` executable, built once per test run.
+//! - [`wander_frames`]: frames of a robot wandering in map2, made
+//!   in-process.
 //! - [`ServerProcess`]: a `deog server` or `deog sim` child process on a free loopback
 //!   port, ready once its health service says so; killed when dropped.
 
@@ -208,4 +210,51 @@ impl Drop for ServerProcess {
             let _ = child.wait();
         }
     }
+}
+
+/// `count` frames of robot `robot` wandering in `worlds/map2.toml` from a
+/// random start (seeded), as `deog wander` would publish them: computed
+/// in-process with the simulator's library, so tests need no simulator
+/// process to have frames.
+pub fn wander_frames(robot: &str, seed: u64, count: usize) -> Vec<deog_proto::v1::SonarFrame> {
+    use deog_proto::v1 as pb;
+    use deog_simulator::simulation::{SimConfig, Simulation};
+    use deog_simulator::{WanderParams, Wanderer};
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/map2.toml");
+    let world = deog_simulator::world_file::load_world(&path).expect("map2 loads");
+    let mut sim = Simulation::new(world, SimConfig::default(), seed).expect("simulation");
+    let mut state = sim.spawn(robot, None).expect("spawn");
+    let mut wanderer = Wanderer::new(
+        WanderParams::default(),
+        &deog_grid::SensorRing::scout(),
+        seed,
+    )
+    .expect("wanderer");
+    let pose = |p: deog_grid::Pose2| pb::Pose2 {
+        x: p.x,
+        y: p.y,
+        theta: p.theta,
+    };
+    let mut frames = Vec::new();
+    let mut fired = Vec::new();
+    while frames.len() < count {
+        let (v, w) = wanderer
+            .command(&state.ranges, state.bumper, 0.1)
+            .expect("command");
+        sim.drive(robot, v, w).expect("drive");
+        fired.clear();
+        while fired.is_empty() {
+            sim.advance(0.1, &mut fired).expect("advance");
+        }
+        state = fired.pop().expect("a firing");
+        frames.push(pb::SonarFrame {
+            robot: robot.into(),
+            sequence: state.sequence,
+            time_s: state.time_s,
+            odometry: Some(pose(state.odometry)),
+            true_pose: Some(pose(state.true_pose)),
+            ranges: state.ranges.clone(),
+        });
+    }
+    frames
 }

@@ -9,49 +9,8 @@ use deog_grid::{
 };
 use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient};
-use deog_simulator::simulation::{SimConfig, Simulation};
-use deog_simulator::world_file::load_world;
-use deog_simulator::{WanderParams, Wanderer};
-use deog_tests::{ServerProcess, deog_binary};
+use deog_tests::{ServerProcess, deog_binary, wander_frames};
 use std::process::Command;
-
-/// `count` frames of a robot wandering in map2, as the wanderer would
-/// publish them.
-fn wander_frames(robot: &str, count: usize) -> Vec<pb::SonarFrame> {
-    let path = format!("{}/../worlds/map2.toml", env!("CARGO_MANIFEST_DIR"));
-    let world = load_world(std::path::Path::new(&path)).expect("world");
-    let mut sim = Simulation::new(world, SimConfig::default(), 21).expect("sim");
-    let mut state = sim.spawn(robot, None).expect("spawn");
-    let mut wanderer =
-        Wanderer::new(WanderParams::default(), &SensorRing::scout(), 21).expect("wanderer");
-    let mut frames = Vec::new();
-    let mut fired = Vec::new();
-    let pose = |p: Pose2| pb::Pose2 {
-        x: p.x,
-        y: p.y,
-        theta: p.theta,
-    };
-    while frames.len() < count {
-        let (v, w) = wanderer
-            .command(&state.ranges, state.bumper, 0.1)
-            .expect("command");
-        sim.drive(robot, v, w).expect("drive");
-        fired.clear();
-        while fired.is_empty() {
-            sim.advance(0.1, &mut fired).expect("advance");
-        }
-        state = fired.pop().expect("firing");
-        frames.push(pb::SonarFrame {
-            robot: robot.into(),
-            sequence: state.sequence,
-            time_s: state.time_s,
-            odometry: Some(pose(state.odometry)),
-            true_pose: Some(pose(state.true_pose)),
-            ranges: state.ranges.clone(),
-        });
-    }
-    frames
-}
 
 fn map_run(server: &ServerProcess, extra: &[&str]) -> String {
     let output = Command::new(deog_binary())
@@ -86,7 +45,7 @@ async fn the_map_is_the_frames_applied_in_order_and_a_restart_resumes_exactly() 
     let client = MapClient::connect(ClientConfig::new(server.addr.to_string()))
         .await
         .expect("client");
-    let frames = wander_frames("r", 160);
+    let frames = wander_frames("r", 21, 160);
     let (first, last) = (frames[0].sequence, frames[159].sequence);
     client
         .publish_frames(frames.clone())
@@ -113,7 +72,11 @@ async fn the_map_is_the_frames_applied_in_order_and_a_restart_resumes_exactly() 
         ClampLimits::from_probabilities(info.clamp_min_probability, info.clamp_max_probability)
             .expect("limits");
     let mut reference = TileMap::new(resolution, size, limits);
-    let model = SonarModel::new(SonarModelParams::default()).expect("model");
+    let model = SonarModel::new(SonarModelParams {
+        max_occupied: 0.6,
+        ..SonarModelParams::default()
+    })
+    .expect("model");
     let mut integrator = FrameIntegrator::new(model, SensorRing::scout(), resolution, size);
     let mut deltas = Vec::new();
     for frame in &frames {
