@@ -10,7 +10,6 @@ use deog_grid::{
     ClampLimits, FrameIntegrator, Pose2, Resolution, SensorRing, SonarModel, SonarModelParams,
     TileDelta, TileKey, TileMap, TileSize,
 };
-use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient};
 use deog_tests::{ServerProcess, deog_binary, wander_frames};
 use std::collections::HashMap;
