@@ -28,6 +28,12 @@ pub struct WanderParams {
     /// Mean number of spontaneous turns per second of cruising: the
     /// randomness that makes it explore rather than follow walls.
     pub random_turns_per_s: f64,
+    /// Mean number of times per second of cruising beside a wall that it
+    /// starts following that wall for a while: following a wall leads
+    /// round corners and through doors, which random driving seldom finds.
+    pub wall_follows_per_s: f64,
+    /// Distance kept from a followed wall, metres (sonar range).
+    pub follow_distance: f64,
 }
 
 impl Default for WanderParams {
@@ -39,6 +45,8 @@ impl Default for WanderParams {
             slow_distance: 1.2,
             side_distance: 0.45,
             random_turns_per_s: 0.15,
+            wall_follows_per_s: 0.2,
+            follow_distance: 0.6,
         }
     }
 }
@@ -54,6 +62,11 @@ enum Mode {
     },
     /// Backing away after the bumper touched.
     Reverse {
+        remaining_s: f64,
+    },
+    /// Following the wall on one side (+1 left, -1 right) for a while.
+    Follow {
+        side: f64,
         remaining_s: f64,
     },
 }
@@ -85,6 +98,16 @@ impl Wanderer {
         positive("turn_rate", params.turn_rate)?;
         positive("stop_distance", params.stop_distance)?;
         positive("side_distance", params.side_distance)?;
+        positive("follow_distance", params.follow_distance)?;
+        if !(params.wall_follows_per_s.is_finite() && params.wall_follows_per_s >= 0.0) {
+            return Err(SimError::invalid(
+                "wall_follows_per_s",
+                format!(
+                    "must be zero or positive, got {}",
+                    params.wall_follows_per_s
+                ),
+            ));
+        }
         if !(params.slow_distance.is_finite() && params.slow_distance > params.stop_distance) {
             return Err(SimError::invalid(
                 "slow_distance",
@@ -161,6 +184,19 @@ impl Wanderer {
         let left = clearance(0.7, 1.7);
         let right = clearance(-1.7, -0.7);
         let behind = clearance(2.6, 3.2).min(clearance(-3.2, -2.6));
+        // Distance to the wall on each side, from the sonars facing it.
+        let side_wall = |side: f64| {
+            self.bearings
+                .iter()
+                .zip(ranges)
+                .filter(|(b, _)| {
+                    let b = **b * side;
+                    (0.7..=2.4).contains(&b)
+                })
+                .map(|(b, r)| r * b.sin().abs())
+                .fold(f64::INFINITY, f64::min)
+        };
+        let (wall_left, wall_right) = (side_wall(1.0), side_wall(-1.0));
 
         if bumper && !matches!(self.mode, Mode::Reverse { .. }) {
             self.mode = Mode::Reverse { remaining_s: 0.6 };
@@ -205,6 +241,29 @@ impl Wanderer {
                     };
                     return Ok((0.0, direction * p.turn_rate));
                 }
+                Mode::Follow { side, remaining_s } => {
+                    if remaining_s <= 0.0 {
+                        self.mode = Mode::Cruise;
+                        continue;
+                    }
+                    self.mode = Mode::Follow {
+                        side,
+                        remaining_s: remaining_s - dt,
+                    };
+                    if ahead < p.stop_distance || front_wide < p.stop_distance * 0.8 {
+                        // A wall ahead: turn away from the followed one.
+                        return Ok((0.0, -side * p.turn_rate));
+                    }
+                    let wall = if side > 0.0 { wall_left } else { wall_right };
+                    if wall > 1.5 {
+                        // The wall ended (a corner or a door): bend round it.
+                        return Ok((0.25, side * 0.6));
+                    }
+                    let slow = ((ahead - p.stop_distance) / (p.slow_distance - p.stop_distance))
+                        .clamp(0.3, 1.0);
+                    let w = (side * 1.5 * (wall - p.follow_distance)).clamp(-0.6, 0.6);
+                    return Ok((p.cruise_speed * slow, w));
+                }
                 Mode::Cruise => {
                     if ahead < p.stop_distance || front_wide < p.stop_distance * 0.8 {
                         let bearing = self.open_bearing(ranges);
@@ -215,6 +274,18 @@ impl Wanderer {
                             continue;
                         }
                         return Ok((0.05, 0.0));
+                    }
+                    let near_wall = wall_left.min(wall_right) < 1.5;
+                    if near_wall
+                        && self
+                            .rng
+                            .random_bool((p.wall_follows_per_s * dt).clamp(0.0, 1.0))
+                    {
+                        self.mode = Mode::Follow {
+                            side: if wall_left <= wall_right { 1.0 } else { -1.0 },
+                            remaining_s: self.rng.random_range(30.0..90.0),
+                        };
+                        continue;
                     }
                     let turn_chance = p.random_turns_per_s * dt;
                     if self.rng.random_bool(turn_chance.clamp(0.0, 1.0)) {
