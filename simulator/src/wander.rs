@@ -51,6 +51,19 @@ impl Default for WanderParams {
     }
 }
 
+/// Speed while moving on to the middle of an opening, m/s.
+const OPENING_SPEED: f64 = 0.25;
+/// Time to move on from where the square sonar first sees through an
+/// opening to about the middle of a door (0.6 m on at 0.25 m/s, less what
+/// the sonar saw already).
+const OPENING_CREEP_S: f64 = 1.8;
+
+/// A reading this short from a front-diagonal sonar stops the robot. Such
+/// an echo lies at least 30° off the heading (the cone's inner edge), so
+/// anything farther passes beside the body; a larger margin here would
+/// make every door look shut.
+const NEAR_DIAGONAL_M: f64 = 0.25;
+
 /// What the wanderer is doing.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Mode {
@@ -66,6 +79,12 @@ enum Mode {
     },
     /// Following the wall on one side (+1 left, -1 right) for a while.
     Follow {
+        side: f64,
+        remaining_s: f64,
+    },
+    /// An opening beside a followed wall: on to its middle, then a quarter
+    /// turn into it; squarely, as a slanted approach would meet a jamb.
+    Opening {
         side: f64,
         remaining_s: f64,
     },
@@ -241,6 +260,23 @@ impl Wanderer {
                     };
                     return Ok((0.0, direction * p.turn_rate));
                 }
+                Mode::Opening { side, remaining_s } => {
+                    if remaining_s <= 0.0 {
+                        self.mode = Mode::Turn {
+                            remaining_rad: side * std::f64::consts::FRAC_PI_2,
+                        };
+                        continue;
+                    }
+                    if ahead < p.stop_distance {
+                        self.mode = Mode::Cruise;
+                        continue;
+                    }
+                    self.mode = Mode::Opening {
+                        side,
+                        remaining_s: remaining_s - dt,
+                    };
+                    return Ok((OPENING_SPEED, 0.0));
+                }
                 Mode::Follow { side, remaining_s } => {
                     if remaining_s <= 0.0 {
                         self.mode = Mode::Cruise;
@@ -250,14 +286,21 @@ impl Wanderer {
                         side,
                         remaining_s: remaining_s - dt,
                     };
-                    if ahead < p.stop_distance || front_wide < p.stop_distance * 0.8 {
+                    if ahead < p.stop_distance || front_wide < NEAR_DIAGONAL_M {
                         // A wall ahead: turn away from the followed one.
                         return Ok((0.0, -side * p.turn_rate));
                     }
                     let wall = if side > 0.0 { wall_left } else { wall_right };
-                    if wall > 1.5 {
-                        // The wall ended (a corner or a door): bend round it.
-                        return Ok((0.25, side * 0.6));
+                    // The sonar square to the wall looks through a door
+                    // that its neighbours, seeing the jambs, would hide.
+                    let abeam = self.abeam(ranges, side);
+                    if wall > 1.5 || abeam > 1.5 {
+                        // The wall ended (a corner or a door).
+                        self.mode = Mode::Opening {
+                            side,
+                            remaining_s: OPENING_CREEP_S,
+                        };
+                        continue;
                     }
                     let slow = ((ahead - p.stop_distance) / (p.slow_distance - p.stop_distance))
                         .clamp(0.3, 1.0);
@@ -265,7 +308,7 @@ impl Wanderer {
                     return Ok((p.cruise_speed * slow, w));
                 }
                 Mode::Cruise => {
-                    if ahead < p.stop_distance || front_wide < p.stop_distance * 0.8 {
+                    if ahead < p.stop_distance || front_wide < NEAR_DIAGONAL_M {
                         let bearing = self.open_bearing(ranges);
                         if bearing.abs() >= 0.05 {
                             self.mode = Mode::Turn {
@@ -311,6 +354,17 @@ impl Wanderer {
                 }
             }
         }
+    }
+
+    /// The reading of the sonar pointing most nearly square to `side` (+1
+    /// left, -1 right).
+    fn abeam(&self, ranges: &[f64], side: f64) -> f64 {
+        let target = side * std::f64::consts::FRAC_PI_2;
+        self.bearings
+            .iter()
+            .zip(ranges)
+            .min_by(|a, b| (a.0 - target).abs().total_cmp(&(b.0 - target).abs()))
+            .map_or(0.0, |(_, r)| *r)
     }
 
     /// The bearing (robot frame, radians) of an opening to turn toward:
