@@ -56,6 +56,9 @@ enum BenchTarget {
     /// against the thesis's mapper on the same store engine, and the
     /// server's memory while a map grows.
     MapServer(MapServerArgs),
+    /// Localization accuracy over seeded runs per world, in one process:
+    /// global convergence, error after convergence, kidnap recovery.
+    Localize(crate::bench_localize::LocalizeBenchArgs),
 }
 
 /// Options of `deog bench map-server`.
@@ -91,6 +94,7 @@ struct MapServerArgs {
 pub fn run(args: BenchArgs) -> Result<()> {
     match args.target {
         BenchTarget::MapServer(args) => map_server(args),
+        BenchTarget::Localize(args) => crate::bench_localize::run(args),
     }
 }
 

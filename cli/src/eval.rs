@@ -1,12 +1,19 @@
 //! `deog eval`: evaluation reports. `deog eval map` judges a map on the
 //! server against the ground truth of the world it was built in
-//! (definitions in `deog_mapping::quality`).
+//! (definitions in `deog_mapping::quality`); `deog eval localize` judges a
+//! localizer's pose estimates against the robot's true poses, with the
+//! thesis's error table, convergence and kidnap recovery, and plots the
+//! paths (definitions in `deog_localizer::evaluation`).
 
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
-use deog_grid::TileMap;
+use deog_grid::{Pose2, TileMap};
+use deog_localizer::evaluation::{
+    self, DEFAULT_CONVERGE_M, DEFAULT_CONVERGE_RAD, DEFAULT_KIDNAP_JUMP_M, EstimateSample,
+    EvalInput, EvalParams, LocalizationReport, PlotInput, RobotPath, TruthSample,
+};
 use deog_mapping::quality::DEFAULT_ROBOT_RADIUS_M;
 use deog_mapping::{QualityInput, map_quality};
 use deog_proto::v1 as pb;
@@ -30,6 +37,12 @@ pub enum EvalTarget {
     /// classified right, occupied precision and recall within one cell,
     /// coverage of the free space the robots could reach.
     Map(EvalMapArgs),
+    /// Judges a localizer's pose estimates against the robots' true poses:
+    /// the thesis's mean error and standard deviation of x, y and theta
+    /// after convergence, the time to converge, and recovery from kidnaps;
+    /// optionally plots the true path (red) against the estimated one
+    /// (green).
+    Localize(EvalLocalizeArgs),
 }
 
 /// Options of `deog eval map`.
@@ -53,10 +66,51 @@ pub struct EvalMapArgs {
     pub connection: ConnectionArgs,
 }
 
+/// Options of `deog eval localize`.
+#[derive(Debug, Args)]
+pub struct EvalLocalizeArgs {
+    /// The robot whose pose estimates to judge; repeat for several.
+    #[arg(long = "robot", required = true)]
+    pub robots: Vec<String>,
+    /// Only estimates made on this map count, and the plot is drawn over
+    /// it; without it, estimates on any map count.
+    #[arg(long, env = "DEOG_MAP")]
+    pub map: Option<String>,
+    /// First frame sequence to judge; default: the first stored.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub from: Option<u64>,
+    /// Last frame sequence to judge; default: the last stored.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub to: Option<u64>,
+    /// Also write the figures to this file as JSON: {"robots": [...]}.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Also draw the true and estimated paths to this PNG file, over the
+    /// map when --map is given.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Largest position error, metres, of an estimate that counts as
+    /// localized.
+    #[arg(long, default_value_t = DEFAULT_CONVERGE_M)]
+    pub converge_m: f64,
+    /// Largest heading error, radians, of an estimate that counts as
+    /// localized.
+    #[arg(long, default_value_t = DEFAULT_CONVERGE_RAD)]
+    pub converge_rad: f64,
+    /// A jump of the true pose between consecutive frames longer than
+    /// this, metres, beyond what driving explains, is a kidnap (as is a
+    /// turn of more than 45 degrees beyond what turning explains).
+    #[arg(long, default_value_t = DEFAULT_KIDNAP_JUMP_M)]
+    pub kidnap_jump_m: f64,
+    #[command(flatten)]
+    pub connection: ConnectionArgs,
+}
+
 /// Runs the evaluation asked for.
 pub fn run(args: EvalArgs) -> Result<()> {
     match args.target {
         EvalTarget::Map(args) => run_map(args),
+        EvalTarget::Localize(args) => run_localize(args),
     }
 }
 
@@ -128,4 +182,162 @@ async fn robot_starts(client: &MapClient) -> Result<Vec<Point2>> {
         }
     }
     Ok(seeds)
+}
+
+/// One robot's true poses and estimates, as the evaluation takes them.
+struct RobotSamples {
+    name: String,
+    truth: Vec<TruthSample>,
+    estimates: Vec<EstimateSample>,
+}
+
+/// Reads the robots' frames and estimates (and the map, to plot over),
+/// judges each robot, prints the tables and writes the JSON and the plot.
+fn run_localize(args: EvalLocalizeArgs) -> Result<()> {
+    let params = EvalParams {
+        converge_m: args.converge_m,
+        converge_rad: args.converge_rad,
+        kidnap_jump_m: args.kidnap_jump_m,
+        ..EvalParams::default()
+    };
+    // Bad options fail before any network call.
+    params.validate().context("checking the bounds")?;
+    if let (Some(from), Some(to)) = (args.from, args.to)
+        && from > to
+    {
+        anyhow::bail!("--from {from} is after --to {to}: no frame to judge");
+    }
+    let (from, to) = (args.from.unwrap_or(0), args.to.unwrap_or(0));
+    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    let (robots, map) = runtime.block_on(async {
+        let client = MapClient::connect(args.connection.client_config()?)
+            .await
+            .with_context(|| {
+                format!("connecting to the map server at {}", args.connection.server)
+            })?;
+        let mut robots = Vec::with_capacity(args.robots.len());
+        for name in &args.robots {
+            robots.push(read_robot(&client, name, args.map.as_deref(), from, to).await?);
+        }
+        let map = match (&args.plot, &args.map) {
+            (Some(_), Some(name)) => Some(fetch_map(&client, name).await?),
+            _ => None,
+        };
+        anyhow::Ok((robots, map))
+    })?;
+
+    let mut reports: Vec<LocalizationReport> = Vec::with_capacity(robots.len());
+    for (i, robot) in robots.iter().enumerate() {
+        let input = EvalInput {
+            robot: &robot.name,
+            map: args.map.as_deref(),
+            truth: &robot.truth,
+            estimates: &robot.estimates,
+            params,
+        };
+        let report = evaluation::evaluate(&input)
+            .with_context(|| format!("judging the pose estimates of robot {}", robot.name))?;
+        if i > 0 {
+            println!();
+        }
+        print!("{}", report.table());
+        reports.push(report);
+    }
+    if let Some(path) = &args.json {
+        std::fs::write(path, evaluation::reports_to_json(&reports))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if let Some(path) = &args.plot {
+        let paths: Vec<RobotPath<'_>> = robots
+            .iter()
+            .zip(&reports)
+            .map(|(robot, report)| RobotPath {
+                truth: &robot.truth,
+                estimates: &robot.estimates,
+                kidnaps: &report.kidnaps,
+            })
+            .collect();
+        let raster = evaluation::render_plot(&PlotInput {
+            map: map.as_ref(),
+            robots: &paths,
+        })
+        .context("drawing the plot")?;
+        let png = raster.to_png().context("drawing the plot")?;
+        std::fs::write(path, png).with_context(|| format!("writing {}", path.display()))?;
+        println!(
+            "\nplot: {} ({} x {} px, {:.1} px per metre)",
+            path.display(),
+            raster.width,
+            raster.height,
+            raster.px_per_m
+        );
+    }
+    Ok(())
+}
+
+/// A robot's frames with a true pose and its estimates (on `map`, when
+/// given) for frames `from..=to` (0 = open).
+async fn read_robot(
+    client: &MapClient,
+    name: &str,
+    map: Option<&str>,
+    from: u64,
+    to: u64,
+) -> Result<RobotSamples> {
+    let frames = client
+        .read_frames(name, from, to)
+        .await
+        .with_context(|| format!("reading the frames of robot {name}"))?;
+    let poses = client
+        .read_poses(name, from, to)
+        .await
+        .with_context(|| format!("reading the pose estimates of robot {name}"))?;
+    let pose = |p: pb::Pose2| Pose2::new(p.x, p.y, p.theta);
+    let truth: Vec<TruthSample> = frames
+        .iter()
+        .filter_map(|f| {
+            f.true_pose
+                .map(|p| TruthSample::new(f.sequence, f.time_s, pose(p)))
+        })
+        .collect();
+    if truth.len() < frames.len() {
+        tracing::info!(
+            robot = name,
+            skipped = frames.len() - truth.len(),
+            "frames without a true pose skipped"
+        );
+    }
+    let mut maps: Vec<&str> = Vec::new();
+    let mut estimates = Vec::with_capacity(poses.len());
+    for estimate in &poses {
+        if map.is_some_and(|m| m != estimate.map) {
+            continue;
+        }
+        if !maps.contains(&estimate.map.as_str()) {
+            maps.push(&estimate.map);
+        }
+        let p = estimate.pose.with_context(|| {
+            format!(
+                "the estimate of robot {name} for frame {} has no pose",
+                estimate.frame_sequence
+            )
+        })?;
+        estimates.push(EstimateSample {
+            sequence: estimate.frame_sequence,
+            pose: pose(p),
+            filter_converged: estimate.converged,
+        });
+    }
+    if maps.len() > 1 {
+        tracing::warn!(
+            robot = name,
+            maps = maps.join(", "),
+            "estimates on several maps are judged together; --map picks one"
+        );
+    }
+    Ok(RobotSamples {
+        name: name.to_string(),
+        truth,
+        estimates,
+    })
 }

@@ -1,6 +1,7 @@
 //! `deog`: every process of the system as a subcommand.
 
 mod bench;
+mod bench_localize;
 mod connection;
 mod demo;
 mod eval;

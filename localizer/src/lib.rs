@@ -1,6 +1,21 @@
-//! Monte Carlo Localization on a deog map.
+//! Monte Carlo Localization of a sonar robot on a deog map, and the
+//! measures that judge it.
+//!
+//! Everything here is pure and synchronous: the `deog localize` process
+//! fetches tiles and frames over the network and feeds them in.
 //!
 //! # Layout
-//! This crate will hold the particle filter (motion model, sonar beam model,
-//! resampling, KLD sampling, recovery). The expected range of a beam comes from
-//! [`deog_grid::cast_cone`]. It holds no code yet.
+//! - [`evaluation`]: localization accuracy from true poses and estimates
+//!   (the thesis's Tables 7.3 to 7.7, convergence, kidnap recovery) and the
+//!   path plot.
+
+pub mod evaluation;
+pub mod error;
+pub mod gaussian;
+pub mod motion;
+pub mod range_table;
+pub mod sampling;
+pub mod beam_model;
+pub mod local_map;
+pub mod cluster;
+pub mod filter;

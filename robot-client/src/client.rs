@@ -182,6 +182,27 @@ impl MapClient {
         Ok(())
     }
 
+    /// A robot's stored pose estimates for frames `from..=to` (0 = open),
+    /// in frame order, on whatever map each was made.
+    pub async fn read_poses(
+        &self,
+        robot: &str,
+        from: u64,
+        to: u64,
+    ) -> Result<Vec<pb::PoseEstimate>, ClientError> {
+        let request = pb::ReadPosesRequest {
+            robot: robot.to_string(),
+            from_sequence: from,
+            to_sequence: to,
+        };
+        let mut stream = self.raw.clone().read_poses(request).await?.into_inner();
+        let mut out = Vec::new();
+        while let Some(pose) = stream.next().await {
+            out.push(pose?);
+        }
+        Ok(out)
+    }
+
     /// Opens a batching, resending update stream for `client_id` on `map`,
     /// continuing after the last sequence the server applied for it.
     pub async fn updates(

@@ -309,7 +309,8 @@ impl Simulation {
         Ok(())
     }
 
-    fn random_free_pose(&self, rng: &mut ChaCha8Rng) -> Result<Pose2, SimError> {
+    /// A pose drawn at random where a robot fits with room to move, any heading.
+    pub fn random_free_pose(&self, rng: &mut ChaCha8Rng) -> Result<Pose2, SimError> {
         let (min, max) = self.world.bounds();
         for _ in 0..100_000 {
             let p = Point2::new(

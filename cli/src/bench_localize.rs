@@ -1,0 +1,306 @@
+//! `deog bench localize`: localization accuracy over many seeded runs, in
+//! one process with the same parts the separate processes use (simulator,
+//! wanderer, cartographer, filter), so that 20 runs per world take minutes.
+//!
+//! Per world: one robot wanders for `--map-minutes` while the cartographer
+//! builds the map from its true poses (as `deog map` does). Then, per run,
+//! a robot starts at a random pose, the filter starts with no idea where
+//! (uniform over the map's free cells), the wanderer drives, and half-way
+//! the robot is kidnapped to another random pose.
+
+use std::time::Instant;
+
+use anyhow::{Context, Result, ensure};
+use clap::Args;
+use deog_grid::{
+    ClampLimits, OccupancyThresholds, Resolution, SensorRing, SonarModelParams, TileMap, TileSize,
+    normalize_angle,
+};
+use deog_localizer::filter::{FilterSettings, Mcl};
+use deog_localizer::local_map::{LocalMap, MapSettings};
+use deog_localizer::range_table::ConeGeometry;
+use deog_mapping::{Cartographer, FrameInput, PoseChoice};
+use deog_simulator::simulation::{SimConfig, Simulation};
+use deog_simulator::{Specular, WanderParams, Wanderer};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::sim::load_world;
+
+/// Options of `deog bench localize`.
+#[derive(Debug, Args)]
+pub struct LocalizeBenchArgs {
+    /// Worlds to run in, comma-separated.
+    #[arg(long, default_value = "map1,map2", value_delimiter = ',')]
+    pub worlds: Vec<String>,
+    /// Seeded runs per world.
+    #[arg(long, default_value_t = 20)]
+    pub runs: u64,
+    /// First seed; runs use consecutive seeds.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Simulated seconds per run.
+    #[arg(long, default_value_t = 180.0)]
+    pub seconds: f64,
+    /// Simulated second of the kidnap (0: none).
+    #[arg(long, default_value_t = 90.0)]
+    pub kidnap_at: f64,
+    /// Simulated minutes of wandering that build each world's map.
+    #[arg(long, default_value_t = 10.0)]
+    pub map_minutes: f64,
+    /// Most particles.
+    #[arg(long, default_value_t = 20_000)]
+    pub max_particles: usize,
+    /// Turn specular reflection (lost echoes past 60° of incidence) and 2 %
+    /// dropouts on in the simulator.
+    #[arg(long)]
+    pub specular: bool,
+    /// The beam model's tempering τ (see deog_localizer::beam_model).
+    #[arg(long, default_value_t = deog_localizer::beam_model::BeamModelParams::default().tempering)]
+    pub tempering: f64,
+    /// The beam model's hit spread at zero range, metres.
+    #[arg(long, default_value_t = deog_localizer::beam_model::BeamModelParams::default().hit_sigma_m)]
+    pub hit_sigma: f64,
+    /// The beam model's hit spread growth per metre.
+    #[arg(long, default_value_t = deog_localizer::beam_model::BeamModelParams::default().hit_sigma_per_m)]
+    pub hit_sigma_per_m: f64,
+    /// Smoothing rate of the short-term likelihood average.
+    #[arg(long, default_value_t = FilterSettings::default().alpha_fast)]
+    pub alpha_fast: f64,
+    /// Print every run's figures.
+    #[arg(long)]
+    pub verbose: bool,
+}
+
+/// Position and heading error bounds of convergence.
+const CONVERGED_M: f64 = 0.25;
+const CONVERGED_RAD: f64 = 0.25;
+
+/// One run's figures.
+#[derive(Debug, Clone, Default)]
+struct RunFigures {
+    converge_s: Option<f64>,
+    recover_s: Option<f64>,
+    mean_position_m: f64,
+    mean_heading_deg: f64,
+    samples: usize,
+}
+
+/// Runs `deog bench localize`.
+pub fn run(args: LocalizeBenchArgs) -> Result<()> {
+    ensure!(args.runs > 0, "--runs must be at least 1");
+    ensure!(args.seconds > 0.0, "--seconds must be positive");
+    for world_name in &args.worlds {
+        let started = Instant::now();
+        let world = load_world(world_name)?;
+        let config = sim_config(args.specular);
+        let mut map = build_map(world.clone(), &config, args.map_minutes)?;
+        println!(
+            "{world_name}: map built in {:.1} s ({} tiles)",
+            started.elapsed().as_secs_f64(),
+            map.tile_count()
+        );
+        let mut all = Vec::new();
+        for seed in args.seed..args.seed + args.runs {
+            let t0 = Instant::now();
+            let figures = run_once(world.clone(), &config, &mut map, seed, &args)?;
+            if args.verbose {
+                println!(
+                    "  seed {seed}: converge {} s, recover {} s, mean error {:.3} m {:.2}°, {} samples, {:.1} s",
+                    fmt_opt(figures.converge_s),
+                    fmt_opt(figures.recover_s),
+                    figures.mean_position_m,
+                    figures.mean_heading_deg,
+                    figures.samples,
+                    t0.elapsed().as_secs_f64()
+                );
+            }
+            all.push(figures);
+        }
+        let n = all.len() as f64;
+        let converged = all
+            .iter()
+            .filter(|f| f.converge_s.is_some_and(|t| t <= 60.0))
+            .count();
+        let recovered = all
+            .iter()
+            .filter(|f| f.recover_s.is_some_and(|t| t <= 60.0))
+            .count();
+        let with = all.iter().filter(|f| f.samples > 0);
+        let (mut pos, mut head, mut k) = (0.0f64, 0.0f64, 0.0f64);
+        for f in with {
+            pos += f.mean_position_m;
+            head += f.mean_heading_deg;
+            k += 1.0;
+        }
+        println!(
+            "{world_name}: converged within 60 s {converged}/{} ({:.0} %), recovered within 60 s {recovered}/{} ({:.0} %), mean error after convergence {:.3} m, {:.2}°; {:.1} s",
+            all.len(),
+            100.0 * converged as f64 / n,
+            all.len(),
+            100.0 * recovered as f64 / n,
+            pos / k.max(1.0),
+            head / k.max(1.0),
+            started.elapsed().as_secs_f64()
+        );
+    }
+    Ok(())
+}
+
+fn fmt_opt(v: Option<f64>) -> String {
+    v.map_or("-".to_string(), |v| format!("{v:.1}"))
+}
+
+fn sim_config(specular: bool) -> SimConfig {
+    let mut config = SimConfig::default();
+    if specular {
+        config.sonar.specular = Specular::Lost {
+            max_incidence: 60f64.to_radians(),
+        };
+        config.sonar.dropout_probability = 0.02;
+    }
+    config
+}
+
+/// The map a wandering robot's frames give, as the cartographer builds it.
+fn build_map(world: deog_simulator::World, config: &SimConfig, minutes: f64) -> Result<LocalMap> {
+    let res = Resolution::DEFAULT;
+    let size = TileSize::new(64)?;
+    let mut sim = Simulation::new(world, config.clone(), 1000)?;
+    let mut state = sim.spawn("cartographer", None)?;
+    let mut wanderer = Wanderer::new(WanderParams::default(), &SensorRing::scout(), 1000)?;
+    let params = SonarModelParams {
+        max_occupied: 0.6,
+        ..SonarModelParams::default()
+    };
+    let mut cartographer = Cartographer::with_model(res, size, PoseChoice::True, params)?;
+    let mut tiles = TileMap::new(res, size, ClampLimits::default());
+    let mut deltas = Vec::new();
+    let mut fired = Vec::new();
+    let period = sim.config().sonar_period_s;
+    while sim.time_s() < minutes * 60.0 {
+        let (v, w) = wanderer.command(&state.ranges, state.bumper, period)?;
+        sim.drive("cartographer", v, w)?;
+        fired.clear();
+        while fired.is_empty() {
+            sim.advance(period, &mut fired)?;
+        }
+        state = fired.pop().context("a firing")?;
+        deltas.clear();
+        cartographer.integrate(
+            &FrameInput {
+                sequence: state.sequence,
+                true_pose: Some(state.true_pose),
+                odometry: state.odometry,
+                ranges: &state.ranges,
+            },
+            &mut deltas,
+        )?;
+        for d in &deltas {
+            tiles.apply(d)?;
+        }
+    }
+    let mut map = LocalMap::new(MapSettings {
+        resolution: res,
+        tile_size: size,
+        thresholds: OccupancyThresholds::default(),
+        geometry: ConeGeometry::default(),
+        budget_bytes: 512 << 20,
+    })?;
+    for (key, tile) in tiles.tiles() {
+        map.insert_tile(*key, 1, Some(tile))?;
+    }
+    Ok(map)
+}
+
+fn run_once(
+    world: deog_simulator::World,
+    config: &SimConfig,
+    map: &mut LocalMap,
+    seed: u64,
+    args: &LocalizeBenchArgs,
+) -> Result<RunFigures> {
+    let mut sim = Simulation::new(world, config.clone(), seed)?;
+    let mut state = sim.spawn("scout", None)?;
+    let mut wanderer = Wanderer::new(WanderParams::default(), &SensorRing::scout(), seed)?;
+    let mut settings = FilterSettings {
+        seed,
+        ..FilterSettings::default()
+    };
+    settings.kld.max_particles = args.max_particles;
+    settings.beam.tempering = args.tempering;
+    settings.beam.hit_sigma_m = args.hit_sigma;
+    settings.beam.hit_sigma_per_m = args.hit_sigma_per_m;
+    settings.alpha_fast = args.alpha_fast;
+    let mut mcl = Mcl::new(settings)?;
+    mcl.start_global(map)?;
+    let mut kidnap_rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6b69_646e_6170);
+    let mut kidnapped_at = None;
+    let mut fired = Vec::new();
+    let period = sim.config().sonar_period_s;
+    // (time, position error, heading error) per frame.
+    let mut errors: Vec<(f64, f64, f64)> = Vec::new();
+    while sim.time_s() < args.seconds {
+        if args.kidnap_at > 0.0 && kidnapped_at.is_none() && sim.time_s() >= args.kidnap_at {
+            let to = sim.random_free_pose(&mut kidnap_rng)?;
+            sim.teleport("scout", to)?;
+            kidnapped_at = Some(sim.time_s());
+        }
+        let (v, w) = wanderer.command(&state.ranges, state.bumper, period)?;
+        sim.drive("scout", v, w)?;
+        fired.clear();
+        while fired.is_empty() {
+            sim.advance(period, &mut fired)?;
+        }
+        state = fired.pop().context("a firing")?;
+        if mcl.predict(&state.odometry)? {
+            mcl.correct(map, &state.ranges)?;
+        }
+        if let Some(e) = mcl.estimate(&state.odometry) {
+            let t = state.true_pose;
+            errors.push((
+                state.time_s,
+                (e.pose.x - t.x).hypot(e.pose.y - t.y),
+                normalize_angle(e.pose.theta - t.theta).abs(),
+            ));
+        }
+    }
+    let end_first = kidnapped_at.unwrap_or(f64::INFINITY);
+    let settle = |from: f64, until: f64| -> Option<f64> {
+        // The first time from which every error until `until` is within bounds.
+        let mut candidate = None;
+        for &(t, p, h) in errors.iter().filter(|e| e.0 >= from && e.0 < until) {
+            if p <= CONVERGED_M && h <= CONVERGED_RAD {
+                candidate.get_or_insert(t);
+            } else {
+                candidate = None;
+            }
+        }
+        candidate.map(|t| t - from)
+    };
+    let converge_s = settle(0.0, end_first);
+    let recover_s = kidnapped_at.and_then(|k| settle(k, f64::INFINITY));
+    let mut figures = RunFigures {
+        converge_s,
+        recover_s,
+        ..RunFigures::default()
+    };
+    let after = |t: f64| {
+        converge_s.is_some_and(|c| t >= c && t < end_first)
+            || kidnapped_at.is_some_and(|k| recover_s.is_some_and(|r| t >= k + r))
+    };
+    let (mut p, mut h, mut n) = (0.0, 0.0, 0usize);
+    for &(t, pe, he) in &errors {
+        if after(t) {
+            p += pe;
+            h += he;
+            n += 1;
+        }
+    }
+    if n > 0 {
+        figures.mean_position_m = p / n as f64;
+        figures.mean_heading_deg = (h / n as f64).to_degrees();
+    }
+    figures.samples = n;
+    Ok(figures)
+}

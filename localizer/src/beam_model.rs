@@ -1,0 +1,272 @@
+//! The sonar beam model (Probabilistic Robotics, section 6.3): the
+//! likelihood of a measured range `z` given the range `z*` the map predicts
+//! for the beam's cone, as a mixture of four causes.
+//!
+//! - **hit**: the echo of the predicted obstacle, `N(z; z*, σ(z*)²)` with
+//!   `σ(z*) = σ₀ + σ₁·z*` (map blur plus the sonar's relative error);
+//! - **short**: an unmapped obstacle (another robot, a person) in front of
+//!   it, `λ·e^(−λz) / (1 − e^(−λz*))` for `z < z*`;
+//! - **max**: no echo (a specular reflection lost the sound), a point mass
+//!   at the maximum range;
+//! - **random**: anything else, uniform `1 / z_max`, which also covers the
+//!   long ranges of multiple reflections.
+//!
+//! When the cone holds no obstacle within range (`z*` = no echo), a
+//! no-echo reading is the expected one and gets the hit weight as well;
+//! when the sensor sits inside an obstacle (`z*` = 0), only the random and
+//! max causes remain. Masses (max) and densities (per metre) mix only
+//! across particles that share the same measurement, so comparing them is
+//! sound.
+//!
+//! **Combining beams.** A particle's log-likelihood is
+//! `τ · Σₖ ln p(zₖ | z*ₖ)`. The beams are not independent: the Scout's
+//! 30° cones overlap by 7.5° on each side, and errors of a sonar-built map
+//! repeat from beam to beam. Counting 16 beams as 16 independent
+//! observations makes the posterior far too sharp, and then a single
+//! unlucky frame wipes out the right particles. The tempering `τ` (default
+//! 1/4) counts the frame as `16 · τ` independent observations; it is the
+//! exponent of the product of beam likelihoods, applied once in log space.
+//!
+//! Per frame, each beam's likelihood is tabulated over `z*` in centimetres
+//! ([`BeamModel::tabulate`]), so that scoring a particle costs one table
+//! read per beam.
+
+use crate::error::{LocalizerError, within};
+
+/// Table slots per beam: predicted ranges 0 to `z_max` in whole centimetres,
+/// and one more for no echo.
+pub fn table_len(max_range: f64) -> usize {
+    (max_range * 100.0).ceil() as usize + 2
+}
+
+/// The mixture's parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BeamModelParams {
+    /// The sonar's maximum range, metres; readings at or past it are no echo.
+    pub max_range: f64,
+    /// σ₀: the hit spread at zero range, metres.
+    pub hit_sigma_m: f64,
+    /// σ₁: the hit spread's growth per metre of range.
+    pub hit_sigma_per_m: f64,
+    /// Weight of hits.
+    pub weight_hit: f64,
+    /// Weight of short readings.
+    pub weight_short: f64,
+    /// Weight of no echo.
+    pub weight_max: f64,
+    /// Weight of random readings.
+    pub weight_random: f64,
+    /// λ of short readings, per metre.
+    pub short_rate: f64,
+    /// τ: the exponent applied to the product of the beams' likelihoods.
+    pub tempering: f64,
+}
+
+impl Default for BeamModelParams {
+    fn default() -> Self {
+        Self {
+            max_range: 10.668,
+            hit_sigma_m: 0.05,
+            hit_sigma_per_m: 0.02,
+            weight_hit: 0.75,
+            weight_short: 0.05,
+            weight_max: 0.05,
+            weight_random: 0.15,
+            short_rate: 0.5,
+            tempering: 0.25,
+        }
+    }
+}
+
+impl BeamModelParams {
+    /// The parameters if each is in range and the weights are not all zero.
+    pub fn validate(self) -> Result<Self, LocalizerError> {
+        within("max_range", self.max_range, 0.1, 60.0)?;
+        within("hit_sigma_m", self.hit_sigma_m, 0.001, 5.0)?;
+        within("hit_sigma_per_m", self.hit_sigma_per_m, 0.0, 1.0)?;
+        within("weight_hit", self.weight_hit, 0.0, 1.0)?;
+        within("weight_short", self.weight_short, 0.0, 1.0)?;
+        within("weight_max", self.weight_max, 0.0, 1.0)?;
+        within("weight_random", self.weight_random, 1e-6, 1.0)?;
+        within("short_rate", self.short_rate, 1e-3, 100.0)?;
+        within("tempering", self.tempering, 1e-3, 1.0)?;
+        Ok(self)
+    }
+}
+
+/// The beam model with its constants worked out.
+#[derive(Debug, Clone)]
+pub struct BeamModel {
+    params: BeamModelParams,
+    no_echo_slot: usize,
+}
+
+impl BeamModel {
+    /// A model from validated parameters.
+    pub fn new(params: BeamModelParams) -> Result<Self, LocalizerError> {
+        let params = params.validate()?;
+        Ok(Self {
+            no_echo_slot: table_len(params.max_range) - 1,
+            params,
+        })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &BeamModelParams {
+        &self.params
+    }
+
+    /// The table slot of the no-echo prediction.
+    pub fn no_echo_slot(&self) -> usize {
+        self.no_echo_slot
+    }
+
+    /// `p(z | z*)`; `None` for either means no echo.
+    pub fn likelihood(&self, measured: Option<f64>, predicted: Option<f64>) -> f64 {
+        let p = &self.params;
+        let z_max = p.max_range;
+        let random = p.weight_random / z_max;
+        match (measured, predicted) {
+            (None, None) => p.weight_hit + p.weight_max,
+            (None, Some(expected)) => {
+                let sigma = p.hit_sigma_m + p.hit_sigma_per_m * expected;
+                p.weight_max + p.weight_hit * upper_tail((z_max - expected) / sigma)
+            }
+            (Some(z), predicted) => {
+                let expected = predicted.unwrap_or(z_max);
+                let sigma = p.hit_sigma_m + p.hit_sigma_per_m * expected;
+                let hit = p.weight_hit * gaussian_density(z - expected, sigma);
+                let short = if z < expected {
+                    let norm = 1.0 - (-p.short_rate * expected).exp();
+                    p.weight_short * p.short_rate * (-p.short_rate * z).exp() / norm.max(1e-12)
+                } else {
+                    0.0
+                };
+                hit + short + random
+            }
+        }
+    }
+
+    /// `τ · ln p(z | z*)` for every predicted range slot (centimetres, then
+    /// no echo), for one measured range, into `out`. A measured range at or
+    /// past the maximum is no echo; one below zero counts as zero.
+    pub fn tabulate(&self, measured: f64, out: &mut Vec<f32>) {
+        let measured = (measured < self.params.max_range).then(|| measured.max(0.0));
+        out.clear();
+        let tempering = self.params.tempering;
+        for slot in 0..self.no_echo_slot {
+            let predicted = slot as f64 / 100.0;
+            out.push((tempering * self.likelihood(measured, Some(predicted)).ln()) as f32);
+        }
+        out.push((tempering * self.likelihood(measured, None).ln()) as f32);
+    }
+}
+
+fn gaussian_density(x: f64, sigma: f64) -> f64 {
+    const INV_SQRT_TAU: f64 = 0.398_942_280_401_432_7;
+    INV_SQRT_TAU / sigma * (-0.5 * (x / sigma).powi(2)).exp()
+}
+
+/// P(N(0, 1) > x), from the complementary error function (Abramowitz and
+/// Stegun 7.1.26, absolute error below 1.5e-7).
+fn upper_tail(x: f64) -> f64 {
+    let t = x / std::f64::consts::SQRT_2;
+    let z = t.abs();
+    let k = 1.0 / (1.0 + 0.327_591_1 * z);
+    let poly = k
+        * (0.254_829_592
+            + k * (-0.284_496_736
+                + k * (1.421_413_741 + k * (-1.453_152_027 + k * 1.061_405_429))));
+    let erfc = poly * (-z * z).exp();
+    let erfc = if t >= 0.0 { erfc } else { 2.0 - erfc };
+    0.5 * erfc
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+
+    fn model() -> BeamModel {
+        BeamModel::new(BeamModelParams::default()).unwrap()
+    }
+
+    #[test]
+    fn a_matching_reading_beats_a_mismatch() {
+        let m = model();
+        let right = m.likelihood(Some(2.0), Some(2.0));
+        let near = m.likelihood(Some(2.0), Some(2.1));
+        let far = m.likelihood(Some(2.0), Some(4.0));
+        let beyond = m.likelihood(Some(4.0), Some(2.0));
+        assert!(
+            right > near && near > far && near > beyond,
+            "{right} {near} {far} {beyond}"
+        );
+        // A short reading (something in front) is likelier than one past the wall.
+        assert!(far > beyond);
+        // No echo is expected when nothing is in range.
+        assert!(m.likelihood(None, None) > m.likelihood(None, Some(2.0)));
+        // Inside a wall, a reading gets only the random share.
+        let inside = m.likelihood(Some(2.0), Some(0.0));
+        assert_abs_diff_eq!(inside, 0.15 / 10.668, epsilon = 1e-6);
+    }
+
+    #[test]
+    fn hit_term_is_the_gaussian() {
+        let params = BeamModelParams {
+            weight_hit: 1.0,
+            weight_short: 0.0,
+            weight_max: 0.0,
+            weight_random: 1e-6,
+            ..BeamModelParams::default()
+        };
+        let m = BeamModel::new(params).unwrap();
+        // σ(3 m) = 0.05 + 0.06 = 0.11 m; one σ off the density falls by e^(−1/2).
+        let at = m.likelihood(Some(3.0), Some(3.0));
+        let off = m.likelihood(Some(3.11), Some(3.0));
+        assert_abs_diff_eq!(off / at, (-0.5f64).exp(), epsilon = 1e-4);
+        assert_abs_diff_eq!(
+            at,
+            1.0 / (0.11 * std::f64::consts::TAU.sqrt()),
+            epsilon = 1e-3
+        );
+    }
+
+    #[test]
+    fn tail_function_matches_known_values() {
+        assert_abs_diff_eq!(upper_tail(0.0), 0.5, epsilon = 1e-7);
+        assert_abs_diff_eq!(upper_tail(1.0), 0.158_655_25, epsilon = 1e-6);
+        assert_abs_diff_eq!(upper_tail(-1.96), 0.975_002_1, epsilon = 1e-6);
+    }
+
+    #[test]
+    fn table_holds_tempered_logs() {
+        let m = model();
+        let mut table = Vec::new();
+        m.tabulate(2.0, &mut table);
+        assert_eq!(table.len(), table_len(10.668));
+        assert_eq!(table.len() - 1, m.no_echo_slot());
+        let expected = 0.25 * m.likelihood(Some(2.0), Some(2.0)).ln();
+        assert_abs_diff_eq!(f64::from(table[200]), expected, epsilon = 1e-5);
+        let best = (0..table.len())
+            .max_by(|&a, &b| table[a].total_cmp(&table[b]))
+            .unwrap();
+        assert_eq!(best, 200);
+        m.tabulate(20.0, &mut table);
+        let best = (0..table.len())
+            .max_by(|&a, &b| table[a].total_cmp(&table[b]))
+            .unwrap();
+        assert_eq!(best, m.no_echo_slot());
+        assert!(table.iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn bad_parameters_are_named() {
+        let err = BeamModel::new(BeamModelParams {
+            tempering: 0.0,
+            ..BeamModelParams::default()
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("tempering"), "{err}");
+    }
+}

@@ -1,0 +1,510 @@
+//! The particle filter: augmented MCL (Probabilistic Robotics, table 8.3)
+//! with KLD-sampling (table 8.4) and selective, low-variance resampling.
+//!
+//! Each frame: [`Mcl::predict`] moves the particles by the odometry since
+//! the last correction once the robot has moved far enough to be worth a
+//! sensor update (turning or driving a little between frames would
+//! otherwise count the same scene many times over). Then the caller makes
+//! sure the map holds the tiles [`Mcl::tiles_needed`] names, and
+//! [`Mcl::correct`] weighs every particle by its sonar frame:
+//! - weights multiply by the tempered beam likelihood (see
+//!   [`crate::beam_model`]);
+//! - the mean per-beam likelihood feeds a slow and a fast average; when the
+//!   fast falls below the slow (the scene no longer fits the map where the
+//!   particles are: kidnapping, or a wrong early convergence), a share
+//!   `max(0, 1 − w_fast / w_slow)` of the particles drawn at the next
+//!   resampling come from the known-free cells of the map instead;
+//! - resampling happens only when the effective sample size `1 / Σ w²`
+//!   falls below a fraction of the particle count, or when particles are
+//!   to be injected; the new count comes from the KLD bound on the number
+//!   of bins the drawn particles occupy.
+//!
+//! Deterministic for a given seed: one ChaCha stream drives every draw.
+
+use std::collections::HashSet;
+
+use deog_grid::{CellIndex, Pose2, SensorRing, TileKey, normalize_angle};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::beam_model::{BeamModel, BeamModelParams};
+use crate::cluster::{BinSize, ClusterEstimate, heaviest_cluster};
+use crate::error::{LocalizerError, within};
+use crate::local_map::LocalMap;
+use crate::motion::{MotionNoise, OdometryMove};
+use crate::sampling::{KldSettings, systematic_resample};
+
+/// Every setting of the filter.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FilterSettings {
+    /// The odometry motion model's noise.
+    pub motion: MotionNoise,
+    /// The sonar beam model.
+    pub beam: BeamModelParams,
+    /// KLD-sampling bounds and limits.
+    pub kld: KldSettings,
+    /// Histogram bins for KLD-sampling and clustering.
+    pub bins: BinSize,
+    /// The sonars' mounts on the robot.
+    pub ring: SensorRing,
+    /// Metres driven before the next sensor update.
+    pub update_min_distance: f64,
+    /// Radians turned before the next sensor update.
+    pub update_min_rotation: f64,
+    /// Resample when the effective sample size falls below this share of
+    /// the particles.
+    pub resample_below: f64,
+    /// Smoothing rate of the long-term likelihood average.
+    pub alpha_slow: f64,
+    /// Smoothing rate of the short-term likelihood average.
+    pub alpha_fast: f64,
+    /// The heaviest cluster must hold this share of the weight to count as
+    /// converged…
+    pub converged_weight: f64,
+    /// … with a position spread (√(σx² + σy²)) at most this, metres …
+    pub converged_spread_m: f64,
+    /// … and a heading spread at most this, radians.
+    pub converged_spread_rad: f64,
+    /// Seed of every random draw.
+    pub seed: u64,
+}
+
+impl Default for FilterSettings {
+    fn default() -> Self {
+        Self {
+            motion: MotionNoise::default(),
+            beam: BeamModelParams::default(),
+            kld: KldSettings::default(),
+            bins: BinSize::default(),
+            ring: SensorRing::scout(),
+            update_min_distance: 0.05,
+            update_min_rotation: 0.05,
+            resample_below: 0.5,
+            alpha_slow: 0.001,
+            alpha_fast: 0.1,
+            converged_weight: 0.6,
+            converged_spread_m: 0.2,
+            converged_spread_rad: 0.2,
+            seed: 1,
+        }
+    }
+}
+
+impl FilterSettings {
+    /// The settings if every figure is in range.
+    pub fn validate(self) -> Result<Self, LocalizerError> {
+        self.motion.validate()?;
+        self.beam.validate()?;
+        self.kld.validate()?;
+        within("bin_xy", self.bins.xy, 0.01, 10.0)?;
+        within("bin_theta", self.bins.theta, 0.01, std::f64::consts::PI)?;
+        within("update_min_distance", self.update_min_distance, 0.0, 10.0)?;
+        within("update_min_rotation", self.update_min_rotation, 0.0, 7.0)?;
+        within("resample_below", self.resample_below, 0.0, 1.0)?;
+        within("alpha_slow", self.alpha_slow, 0.0, 1.0)?;
+        within("alpha_fast", self.alpha_fast, 0.0, 1.0)?;
+        if self.alpha_fast < self.alpha_slow {
+            return Err(LocalizerError::Invalid(format!(
+                "alpha_fast ({}) must be at least alpha_slow ({})",
+                self.alpha_fast, self.alpha_slow
+            )));
+        }
+        within("converged_weight", self.converged_weight, 0.0, 1.0)?;
+        within("converged_spread_m", self.converged_spread_m, 0.0, 100.0)?;
+        within("converged_spread_rad", self.converged_spread_rad, 0.0, 7.0)?;
+        if self.ring.is_empty() {
+            return Err(LocalizerError::Invalid(
+                "the sensor ring has no sonar".into(),
+            ));
+        }
+        Ok(self)
+    }
+}
+
+/// What the filter believes after a frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimate {
+    /// Mean of the heaviest cluster, moved by the odometry since the last
+    /// correction.
+    pub pose: Pose2,
+    /// Covariance of (x, y, θ), row-major.
+    pub covariance: [f64; 9],
+    /// Particles in the filter.
+    pub particle_count: usize,
+    /// The heaviest cluster's share of the weight.
+    pub cluster_weight: f64,
+    /// Whether the filter has settled on one pose.
+    pub converged: bool,
+    /// 0 when frames fit the map as well as they have lately, towards 1
+    /// when they fit far worse (`1 − w_fast / w_slow`).
+    pub lost_score: f64,
+}
+
+/// What one correction did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CorrectionReport {
+    /// Effective sample size after weighting.
+    pub effective_sample_size: f64,
+    /// Whether the particles were resampled.
+    pub resampled: bool,
+    /// Particles drawn from free space instead of the old set.
+    pub injected: usize,
+    /// Range tables built for this correction.
+    pub tables_built: usize,
+}
+
+/// Monte Carlo Localization of one robot.
+#[derive(Debug)]
+pub struct Mcl {
+    settings: FilterSettings,
+    model: BeamModel,
+    rng: ChaCha8Rng,
+    particles: Vec<Pose2>,
+    weights: Vec<f64>,
+    /// The odometry pose the particles were last moved to.
+    odometry: Option<Pose2>,
+    w_slow: f64,
+    w_fast: f64,
+    cluster: Option<ClusterEstimate>,
+    /// Per-beam likelihood tables of the current frame.
+    beam_tables: Vec<Vec<f32>>,
+    scratch_log: Vec<f64>,
+    scratch_indices: Vec<usize>,
+}
+
+impl Mcl {
+    /// A filter with no particles yet: start it with [`Self::start_global`]
+    /// or [`Self::start_at`].
+    pub fn new(settings: FilterSettings) -> Result<Self, LocalizerError> {
+        let settings = settings.validate()?;
+        Ok(Self {
+            model: BeamModel::new(settings.beam)?,
+            rng: ChaCha8Rng::seed_from_u64(settings.seed),
+            beam_tables: vec![Vec::new(); settings.ring.len()],
+            settings,
+            particles: Vec::new(),
+            weights: Vec::new(),
+            odometry: None,
+            w_slow: 0.0,
+            w_fast: 0.0,
+            cluster: None,
+            scratch_log: Vec::new(),
+            scratch_indices: Vec::new(),
+        })
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &FilterSettings {
+        &self.settings
+    }
+
+    /// The particles.
+    pub fn particles(&self) -> &[Pose2] {
+        &self.particles
+    }
+
+    /// The particles' normalised weights.
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// Global localization: the most particles the settings allow, spread
+    /// uniformly over the known-free cells the map holds, all headings.
+    pub fn start_global(&mut self, map: &LocalMap) -> Result<(), LocalizerError> {
+        let free = map.free_cells();
+        if free.is_empty() {
+            return Err(LocalizerError::NoFreeSpace);
+        }
+        let n = self.settings.kld.max_particles;
+        let res = map.settings().resolution;
+        self.particles.clear();
+        for _ in 0..n {
+            let cell = free[self.rng.random_range(0..free.len())];
+            self.particles
+                .push(random_pose_in(cell, res, &mut self.rng));
+        }
+        self.reset_weights();
+        Ok(())
+    }
+
+    /// Tracking: particles drawn around `pose` with standard deviations
+    /// `std_xy` (metres) and `std_theta` (radians).
+    pub fn start_at(
+        &mut self,
+        pose: Pose2,
+        std_xy: f64,
+        std_theta: f64,
+    ) -> Result<(), LocalizerError> {
+        let pose = pose.validate("initial pose")?;
+        within("initial std_xy", std_xy, 0.0, 1000.0)?;
+        within("initial std_theta", std_theta, 0.0, 10.0)?;
+        let n = self
+            .settings
+            .kld
+            .min_particles
+            .max(self.settings.kld.max_particles / 4);
+        self.particles.clear();
+        for _ in 0..n {
+            let p = Pose2::new(
+                pose.x + crate::gaussian::normal(&mut self.rng, std_xy),
+                pose.y + crate::gaussian::normal(&mut self.rng, std_xy),
+                normalize_angle(pose.theta + crate::gaussian::normal(&mut self.rng, std_theta)),
+            );
+            self.particles.push(p);
+        }
+        self.reset_weights();
+        Ok(())
+    }
+
+    fn reset_weights(&mut self) {
+        let n = self.particles.len();
+        self.weights = vec![1.0 / n as f64; n];
+        self.odometry = None;
+        self.w_slow = 0.0;
+        self.w_fast = 0.0;
+        self.cluster = heaviest_cluster(&self.particles, &self.weights, self.settings.bins);
+    }
+
+    /// Takes the frame's odometry pose. Returns true when a sensor update
+    /// is due: on the first frame, and once the robot has moved far enough
+    /// since the last one (the particles are then moved by that motion).
+    pub fn predict(&mut self, odometry: &Pose2) -> Result<bool, LocalizerError> {
+        let odometry = odometry.validate("odometry")?;
+        let Some(last) = self.odometry else {
+            self.odometry = Some(odometry);
+            return Ok(true);
+        };
+        let step = OdometryMove::between(&last, &odometry);
+        if step.translation() < self.settings.update_min_distance
+            && step.rotation() < self.settings.update_min_rotation
+        {
+            return Ok(false);
+        }
+        for p in &mut self.particles {
+            *p = step.sample(p, &self.settings.motion, &mut self.rng);
+        }
+        self.odometry = Some(odometry);
+        Ok(true)
+    }
+
+    /// The tiles whose range tables the next correction reads: those under
+    /// every particle's sonars.
+    pub fn tiles_needed(&self, map: &LocalMap) -> Vec<TileKey> {
+        let reach = self
+            .settings
+            .ring
+            .mounts()
+            .iter()
+            .map(|m| m.x.hypot(m.y))
+            .fold(0.0, f64::max);
+        let res = map.settings().resolution;
+        let mut keys = HashSet::new();
+        let mut last = None;
+        for p in &self.particles {
+            for (dx, dy) in [
+                (-reach, -reach),
+                (reach, reach),
+                (-reach, reach),
+                (reach, -reach),
+            ] {
+                if let Ok(cell) = res.cell_of(p.x + dx, p.y + dy) {
+                    let key = map.tile_of(cell);
+                    if last != Some(key) {
+                        keys.insert(key);
+                        last = Some(key);
+                    }
+                }
+            }
+        }
+        let mut keys: Vec<TileKey> = keys.into_iter().collect();
+        keys.sort();
+        keys
+    }
+
+    /// Weighs the particles by one sonar frame (`ranges` in the ring's
+    /// order, metres; at or past the maximum means no echo), updates the
+    /// likelihood averages and resamples if due. Builds the range tables
+    /// it lacks from the tiles `map` holds.
+    pub fn correct(
+        &mut self,
+        map: &mut LocalMap,
+        ranges: &[f64],
+    ) -> Result<CorrectionReport, LocalizerError> {
+        if ranges.len() != self.settings.ring.len() {
+            return Err(LocalizerError::Invalid(format!(
+                "the frame has {} ranges, the sensor ring {} sonars",
+                ranges.len(),
+                self.settings.ring.len()
+            )));
+        }
+        if let Some(i) = ranges.iter().position(|r| r.is_nan() || *r < 0.0) {
+            return Err(LocalizerError::Invalid(format!(
+                "ranges[{i}] is {}, not a range",
+                ranges[i]
+            )));
+        }
+        if self.particles.is_empty() {
+            return Err(LocalizerError::Invalid(
+                "the filter has no particles: start it first".into(),
+            ));
+        }
+        for (table, &z) in self.beam_tables.iter_mut().zip(ranges) {
+            self.model.tabulate(z, table);
+        }
+        let keys = self.tiles_needed(map);
+        let tables_built = map.ensure_tables(keys.iter().copied())?;
+        let window = map.window(&keys);
+        let no_echo = self.model.no_echo_slot();
+        let mounts = self.settings.ring.mounts();
+        self.scratch_log.clear();
+        for p in &self.particles {
+            let (sin, cos) = p.theta.sin_cos();
+            let mut log_likelihood = 0.0f32;
+            for (mount, table) in mounts.iter().zip(&self.beam_tables) {
+                let sx = p.x + cos * mount.x - sin * mount.y;
+                let sy = p.y + sin * mount.x + cos * mount.y;
+                let (ms, mc) = mount.theta.sin_cos();
+                let beam_cos = cos * mc - sin * ms;
+                let beam_sin = sin * mc + cos * ms;
+                let slot = window.expected_slot(
+                    sx,
+                    sy,
+                    p.theta + mount.theta,
+                    (beam_cos, beam_sin),
+                    no_echo,
+                );
+                log_likelihood += table[slot];
+            }
+            self.scratch_log.push(f64::from(log_likelihood));
+        }
+        drop(window);
+        // New weights ∝ old · likelihood, in log space.
+        let mut best = f64::NEG_INFINITY;
+        for (l, w) in self.scratch_log.iter_mut().zip(&self.weights) {
+            *l += w.ln();
+            best = best.max(*l);
+        }
+        let mut total = 0.0;
+        for (w, l) in self.weights.iter_mut().zip(&self.scratch_log) {
+            *w = (l - best).exp();
+            total += *w;
+        }
+        for w in &mut self.weights {
+            *w /= total;
+        }
+        // Σ old·likelihood = e^best · total: the average likelihood, taken
+        // per beam (the τ-th root undone, then the geometric mean over beams)
+        // so that its scale does not depend on the ring.
+        let beams = self.settings.ring.len() as f64 * self.settings.beam.tempering;
+        let average = ((best + total.ln()) / beams).exp();
+        if self.w_slow == 0.0 {
+            self.w_slow = average;
+            self.w_fast = average;
+        } else {
+            self.w_slow += self.settings.alpha_slow * (average - self.w_slow);
+            self.w_fast += self.settings.alpha_fast * (average - self.w_fast);
+        }
+        let ess = 1.0 / self.weights.iter().map(|w| w * w).sum::<f64>();
+        let inject = self.injection_share();
+        let mut report = CorrectionReport {
+            effective_sample_size: ess,
+            tables_built,
+            ..CorrectionReport::default()
+        };
+        if ess < self.settings.resample_below * self.particles.len() as f64 || inject > 0.0 {
+            report.injected = self.resample(map, inject)?;
+            report.resampled = true;
+        }
+        self.cluster = heaviest_cluster(&self.particles, &self.weights, self.settings.bins);
+        Ok(report)
+    }
+
+    /// The share of particles the next resampling draws from free space.
+    pub fn injection_share(&self) -> f64 {
+        if self.w_slow > 0.0 {
+            (1.0 - self.w_fast / self.w_slow).clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    }
+
+    fn resample(&mut self, map: &LocalMap, inject: f64) -> Result<usize, LocalizerError> {
+        // Draw as many as now, count the bins they fill, then draw the
+        // number KLD-sampling asks for.
+        let n_now = self.particles.len();
+        systematic_resample(
+            &self.weights,
+            n_now,
+            &mut self.rng,
+            &mut self.scratch_indices,
+        )?;
+        let bins = self
+            .settings
+            .bins
+            .occupied_bins(self.scratch_indices.iter().map(|&i| &self.particles[i]));
+        let n = self.settings.kld.particles_for(bins);
+        if n != n_now {
+            systematic_resample(&self.weights, n, &mut self.rng, &mut self.scratch_indices)?;
+        }
+        let free = if inject > 0.0 {
+            map.free_cells()
+        } else {
+            Vec::new()
+        };
+        let res = map.settings().resolution;
+        let mut next = Vec::with_capacity(n);
+        let mut injected = 0;
+        for &i in &self.scratch_indices {
+            if !free.is_empty() && self.rng.random_bool(inject) {
+                let cell = free[self.rng.random_range(0..free.len())];
+                next.push(random_pose_in(cell, res, &mut self.rng));
+                injected += 1;
+            } else {
+                next.push(self.particles[i]);
+            }
+        }
+        // Systematic draws come out in index order; shuffling is not needed
+        // since nothing downstream depends on order.
+        self.particles = next;
+        self.weights = vec![1.0 / n as f64; n];
+        if injected > 0 {
+            // The injected particles answer the drop; start the averages anew
+            // so that one bad stretch does not keep injecting.
+            self.w_fast = self.w_slow;
+        }
+        Ok(injected)
+    }
+
+    /// The estimate for a frame with odometry pose `odometry`: the heaviest
+    /// cluster's mean moved by the odometry since the last correction.
+    pub fn estimate(&self, odometry: &Pose2) -> Option<Estimate> {
+        let cluster = self.cluster?;
+        let pose = match self.odometry {
+            Some(last) => OdometryMove::between(&last, odometry).apply(&cluster.pose),
+            None => cluster.pose,
+        };
+        let c = cluster.covariance;
+        let converged = cluster.weight >= self.settings.converged_weight
+            && (c[0] + c[4]).sqrt() <= self.settings.converged_spread_m
+            && c[8].sqrt() <= self.settings.converged_spread_rad;
+        Some(Estimate {
+            pose,
+            covariance: c,
+            particle_count: self.particles.len(),
+            cluster_weight: cluster.weight,
+            converged,
+            lost_score: self.injection_share(),
+        })
+    }
+}
+
+/// A pose uniformly inside `cell`, any heading.
+fn random_pose_in(cell: CellIndex, res: deog_grid::Resolution, rng: &mut impl Rng) -> Pose2 {
+    let (x0, y0) = res.cell_corner(cell);
+    let m = res.metres();
+    Pose2::new(
+        x0 + rng.random_range(0.0..m),
+        y0 + rng.random_range(0.0..m),
+        rng.random_range(-std::f64::consts::PI..std::f64::consts::PI),
+    )
+}

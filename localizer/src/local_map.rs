@@ -1,0 +1,573 @@
+//! The localizer's piece of the map: occupancy tiles fetched from the map
+//! server as the particles need them, and each tile's expected-range table
+//! built lazily from them, all within a memory budget.
+//!
+//! The map server owns the map; this is a cache of it. Tiles come in
+//! through [`LocalMap::insert_tile`] (the network edge fetches them) and go
+//! stale through [`LocalMap::tile_changed`] (the watch stream). A tile's
+//! range table reads every tile within the sonar's range of it, so a change
+//! to one tile drops the tables of its neighbours too; they are rebuilt
+//! when a particle next needs them. When the cache holds more than its
+//! budget, [`LocalMap::evict_to_budget`] drops the least recently used
+//! tables and tiles outside the working set.
+
+use std::collections::{HashMap, HashSet};
+
+use deog_grid::{
+    CellBox, CellIndex, LogOdds, Occupancy, OccupancyThresholds, OccupancyView, Resolution, Tile,
+    TileKey, TileSize,
+};
+use rand::Rng;
+
+use crate::error::LocalizerError;
+use crate::range_table::{ConeGeometry, NO_ECHO, OccupancyRaster, build_table};
+
+const UNKNOWN: u8 = 0;
+const FREE: u8 = 1;
+const OCCUPIED: u8 = 2;
+
+/// Largest raster built in one go, cells; bigger batches are split.
+const MAX_RASTER_CELLS: u64 = 4_000_000;
+
+/// How the map is cut and judged, and how much memory the cache may use.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapSettings {
+    /// Cell size.
+    pub resolution: Resolution,
+    /// Cells per tile side.
+    pub tile_size: TileSize,
+    /// Occupied and free thresholds.
+    pub thresholds: OccupancyThresholds,
+    /// The sonar cone the range tables are for.
+    pub geometry: ConeGeometry,
+    /// Bytes of tiles and tables the cache may hold after eviction.
+    pub budget_bytes: usize,
+}
+
+/// One tile as the localizer holds it.
+#[derive(Debug)]
+struct MapTile {
+    version: u64,
+    /// Per cell: unknown, free or occupied. `None` until fetched.
+    cells: Option<Box<[u8]>>,
+    free_cells: u32,
+    ranges: Option<Box<[u16]>>,
+    last_used: u64,
+}
+
+/// Counts of what the cache did, for logs and tests.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CacheStats {
+    /// Range tables built.
+    pub tables_built: u64,
+    /// Range tables dropped, by eviction or because their neighbourhood changed.
+    pub tables_dropped: u64,
+    /// Occupancy tiles dropped by eviction.
+    pub tiles_evicted: u64,
+}
+
+/// The cached part of one map.
+#[derive(Debug)]
+pub struct LocalMap {
+    settings: MapSettings,
+    tiles: HashMap<TileKey, MapTile>,
+    bytes: usize,
+    clock: u64,
+    margin_tiles: i32,
+    stats: CacheStats,
+}
+
+impl LocalMap {
+    /// An empty cache.
+    pub fn new(settings: MapSettings) -> Result<Self, LocalizerError> {
+        let geometry = settings.geometry.validate()?;
+        let margin_cells = geometry.margin_cells(settings.resolution);
+        let side = settings.tile_size.cells() as i32;
+        Ok(Self {
+            settings: MapSettings {
+                geometry,
+                ..settings
+            },
+            tiles: HashMap::new(),
+            bytes: 0,
+            clock: 0,
+            margin_tiles: (margin_cells + side - 1) / side,
+            stats: CacheStats::default(),
+        })
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &MapSettings {
+        &self.settings
+    }
+
+    /// Bytes held now.
+    pub fn bytes(&self) -> usize {
+        self.bytes
+    }
+
+    /// What the cache has done so far.
+    pub fn stats(&self) -> CacheStats {
+        self.stats
+    }
+
+    /// Tiles held (fetched or known absent).
+    pub fn tile_count(&self) -> usize {
+        self.tiles.values().filter(|t| t.cells.is_some()).count()
+    }
+
+    /// The tile holding `cell`.
+    pub fn tile_of(&self, cell: CellIndex) -> TileKey {
+        self.settings.tile_size.split(cell).0
+    }
+
+    /// The tile under a point, metres.
+    pub fn tile_at(&self, x: f64, y: f64) -> Result<TileKey, LocalizerError> {
+        Ok(self.tile_of(self.settings.resolution.cell_of(x, y)?))
+    }
+
+    /// Stores the server's tile `key` at `version`; `None` means the server
+    /// has no such tile (every cell unknown). Tables that read it are
+    /// dropped if its occupancy changed.
+    pub fn insert_tile(
+        &mut self,
+        key: TileKey,
+        version: u64,
+        tile: Option<&Tile>,
+    ) -> Result<(), LocalizerError> {
+        let area = self.settings.tile_size.area();
+        let cells: Box<[u8]> = match tile {
+            Some(t) => {
+                if t.size() != self.settings.tile_size {
+                    return Err(LocalizerError::Invalid(format!(
+                        "tile ({}, {}) has {} cells a side, the map {}",
+                        key.x,
+                        key.y,
+                        t.size().cells(),
+                        self.settings.tile_size.cells()
+                    )));
+                }
+                t.raw_cells()
+                    .iter()
+                    .map(
+                        |&raw| match self.settings.thresholds.classify(LogOdds::from_raw(raw)) {
+                            Occupancy::Unknown => UNKNOWN,
+                            Occupancy::Free => FREE,
+                            Occupancy::Occupied => OCCUPIED,
+                        },
+                    )
+                    .collect()
+            }
+            None => vec![UNKNOWN; area].into_boxed_slice(),
+        };
+        let free_cells = cells.iter().filter(|&&c| c == FREE).count() as u32;
+        let now = self.tick();
+        let changed = match self.tiles.get_mut(&key) {
+            Some(existing) => {
+                let changed = existing.cells.as_deref() != Some(&cells[..]);
+                if existing.cells.is_none() {
+                    self.bytes += area;
+                }
+                existing.cells = Some(cells);
+                existing.version = version;
+                existing.free_cells = free_cells;
+                existing.last_used = now;
+                changed
+            }
+            None => {
+                self.tiles.insert(
+                    key,
+                    MapTile {
+                        version,
+                        cells: Some(cells),
+                        free_cells,
+                        ranges: None,
+                        last_used: now,
+                    },
+                );
+                self.bytes += area;
+                true
+            }
+        };
+        if changed {
+            self.drop_tables_near(key);
+        }
+        Ok(())
+    }
+
+    /// The server says tile `key` changed: its cells are fetched again when
+    /// needed, and the tables that read it are dropped.
+    pub fn tile_changed(&mut self, key: TileKey) {
+        let area = self.settings.tile_size.area();
+        if let Some(tile) = self.tiles.get_mut(&key)
+            && tile.cells.take().is_some()
+        {
+            self.bytes -= area;
+        }
+        self.drop_tables_near(key);
+    }
+
+    /// Every held tile becomes stale (after the watch stream lost events).
+    pub fn all_changed(&mut self) {
+        let keys: Vec<TileKey> = self.tiles.keys().copied().collect();
+        for key in keys {
+            self.tile_changed(key);
+        }
+    }
+
+    /// The version of a held tile.
+    pub fn version(&self, key: TileKey) -> Option<u64> {
+        self.tiles
+            .get(&key)
+            .filter(|t| t.cells.is_some())
+            .map(|t| t.version)
+    }
+
+    /// Tiles whose cells are needed, and not held, to build the tables of
+    /// `keys` (each key and every tile within sonar range of it), sorted.
+    pub fn missing_tiles(&self, keys: impl IntoIterator<Item = TileKey>) -> Vec<TileKey> {
+        let mut missing = HashSet::new();
+        for key in keys {
+            if self.tiles.get(&key).is_some_and(|t| t.ranges.is_some()) {
+                continue;
+            }
+            for near in self.neighbourhood(key) {
+                if self.tiles.get(&near).is_none_or(|t| t.cells.is_none()) {
+                    missing.insert(near);
+                }
+            }
+        }
+        let mut missing: Vec<TileKey> = missing.into_iter().collect();
+        missing.sort();
+        missing
+    }
+
+    /// Builds the range tables `keys` lack, from the tiles held (tiles not
+    /// held count as unknown). Returns how many were built.
+    pub fn ensure_tables(
+        &mut self,
+        keys: impl IntoIterator<Item = TileKey>,
+    ) -> Result<usize, LocalizerError> {
+        let mut todo: Vec<TileKey> = keys
+            .into_iter()
+            .filter(|k| self.tiles.get(k).is_none_or(|t| t.ranges.is_none()))
+            .collect::<HashSet<_>>()
+            .into_iter()
+            .collect();
+        todo.sort();
+        let count = todo.len();
+        let size = self.settings.tile_size;
+        let margin = self
+            .settings
+            .geometry
+            .margin_cells(self.settings.resolution);
+        // Batches of nearby tiles share one raster.
+        let mut remaining = todo.as_slice();
+        while let Some(first) = remaining.first() {
+            let mut bounds = widen(size.cell_box(*first)?, margin);
+            let mut taken = 1;
+            for key in &remaining[1..] {
+                let candidate = bounds.union(&widen(size.cell_box(*key)?, margin));
+                if candidate.width() * candidate.height() > MAX_RASTER_CELLS {
+                    break;
+                }
+                bounds = candidate;
+                taken += 1;
+            }
+            let raster = OccupancyRaster::new(bounds, |cell| self.cell_state(cell) == OCCUPIED);
+            for key in &remaining[..taken] {
+                let table = build_table(
+                    &raster,
+                    size.cell_box(*key)?,
+                    self.settings.resolution,
+                    &self.settings.geometry,
+                );
+                let now = self.tick();
+                let bytes = table.len() * std::mem::size_of::<u16>();
+                let tile = self.tiles.entry(*key).or_insert(MapTile {
+                    version: 0,
+                    cells: None,
+                    free_cells: 0,
+                    ranges: None,
+                    last_used: now,
+                });
+                tile.ranges = Some(table);
+                tile.last_used = now;
+                self.bytes += bytes;
+                self.stats.tables_built += 1;
+            }
+            remaining = &remaining[taken..];
+        }
+        Ok(count)
+    }
+
+    /// A fast read-only view of the tables of the tiles in `keys`' bounding
+    /// box, for scoring particles; tiles without a table read as inside an
+    /// obstacle. Marks those tiles used.
+    pub fn window(&mut self, keys: &[TileKey]) -> RangeWindow<'_> {
+        let now = self.tick();
+        let (mut min, mut max) = match keys.first() {
+            Some(k) => (*k, *k),
+            None => (TileKey::new(0, 0), TileKey::new(0, 0)),
+        };
+        for k in keys {
+            min = TileKey::new(min.x.min(k.x), min.y.min(k.y));
+            max = TileKey::new(max.x.max(k.x), max.y.max(k.y));
+        }
+        for k in keys {
+            if let Some(t) = self.tiles.get_mut(k) {
+                t.last_used = now;
+            }
+        }
+        let width = (i64::from(max.x) - i64::from(min.x) + 1) as usize;
+        let height = (i64::from(max.y) - i64::from(min.y) + 1) as usize;
+        let mut tables = vec![None; width * height];
+        for y in 0..height {
+            for x in 0..width {
+                let key = TileKey::new(min.x + x as i32, min.y + y as i32);
+                tables[y * width + x] = self.tiles.get(&key).and_then(|t| t.ranges.as_deref());
+            }
+        }
+        let side = self.settings.tile_size.cells();
+        RangeWindow {
+            min,
+            width,
+            height,
+            tables,
+            shift: side.trailing_zeros(),
+            mask: side as i64 - 1,
+            headings: self.settings.geometry.headings,
+            inv_res: 1.0 / self.settings.resolution.metres(),
+            res: self.settings.resolution.metres(),
+        }
+    }
+
+    /// Drops least recently used tables, then tiles, outside `keep` until
+    /// the cache fits its budget (or nothing else can go).
+    pub fn evict_to_budget(&mut self, keep: &HashSet<TileKey>) {
+        if self.bytes <= self.settings.budget_bytes {
+            return;
+        }
+        let mut candidates: Vec<(u64, TileKey)> = self
+            .tiles
+            .iter()
+            .filter(|(k, _)| !keep.contains(k))
+            .map(|(k, t)| (t.last_used, *k))
+            .collect();
+        candidates.sort();
+        let area = self.settings.tile_size.area();
+        // Tables are large and rebuilt from tiles; tiles are small and cost
+        // a fetch. Tables go first.
+        for (_, key) in &candidates {
+            if self.bytes <= self.settings.budget_bytes {
+                return;
+            }
+            if let Some(t) = self.tiles.get_mut(key)
+                && let Some(table) = t.ranges.take()
+            {
+                self.bytes -= table.len() * std::mem::size_of::<u16>();
+                self.stats.tables_dropped += 1;
+            }
+        }
+        for (_, key) in &candidates {
+            if self.bytes <= self.settings.budget_bytes {
+                return;
+            }
+            if let Some(t) = self.tiles.remove(key) {
+                if t.cells.is_some() {
+                    self.bytes -= area;
+                    self.stats.tiles_evicted += 1;
+                }
+                if let Some(table) = t.ranges {
+                    self.bytes -= table.len() * std::mem::size_of::<u16>();
+                }
+            }
+        }
+    }
+
+    /// Known-free cells among the held tiles.
+    pub fn free_cell_count(&self) -> u64 {
+        self.tiles.values().map(|t| u64::from(t.free_cells)).sum()
+    }
+
+    /// A known-free cell drawn uniformly from the held tiles.
+    pub fn sample_free_cell(&self, rng: &mut impl Rng) -> Result<CellIndex, LocalizerError> {
+        let total = self.free_cell_count();
+        if total == 0 {
+            return Err(LocalizerError::NoFreeSpace);
+        }
+        let mut pick = rng.random_range(0..total);
+        // Sorted keys make the draw independent of hash order.
+        let mut keys: Vec<&TileKey> = self.tiles.keys().collect();
+        keys.sort();
+        for key in keys {
+            let tile = &self.tiles[key];
+            if pick >= u64::from(tile.free_cells) {
+                pick -= u64::from(tile.free_cells);
+                continue;
+            }
+            let cells = tile.cells.as_deref().ok_or(LocalizerError::NoFreeSpace)?;
+            let index = cells
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| **c == FREE)
+                .nth(pick as usize)
+                .map(|(i, _)| i)
+                .ok_or(LocalizerError::NoFreeSpace)?;
+            let offset = deog_grid::CellOffset::from_index(index, self.settings.tile_size);
+            return Ok(self.settings.tile_size.join(*key, offset)?);
+        }
+        Err(LocalizerError::NoFreeSpace)
+    }
+
+    /// Every held free cell, for the uniform prior (in tile order).
+    pub fn free_cells(&self) -> Vec<CellIndex> {
+        let mut keys: Vec<&TileKey> = self.tiles.keys().collect();
+        keys.sort();
+        let mut out = Vec::new();
+        for key in keys {
+            if let Some(cells) = self.tiles[key].cells.as_deref() {
+                for (i, c) in cells.iter().enumerate() {
+                    if *c == FREE
+                        && let Ok(cell) = self.settings.tile_size.join(
+                            *key,
+                            deog_grid::CellOffset::from_index(i, self.settings.tile_size),
+                        )
+                    {
+                        out.push(cell);
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    fn cell_state(&self, cell: CellIndex) -> u8 {
+        let (key, offset) = self.settings.tile_size.split(cell);
+        self.tiles
+            .get(&key)
+            .and_then(|t| t.cells.as_deref())
+            .map_or(UNKNOWN, |cells| {
+                cells[offset.index(self.settings.tile_size)]
+            })
+    }
+
+    fn neighbourhood(&self, key: TileKey) -> impl Iterator<Item = TileKey> + use<> {
+        let m = self.margin_tiles;
+        (-m..=m).flat_map(move |dy| {
+            (-m..=m).filter_map(move |dx| {
+                Some(TileKey::new(key.x.checked_add(dx)?, key.y.checked_add(dy)?))
+            })
+        })
+    }
+
+    fn drop_tables_near(&mut self, key: TileKey) {
+        let near: Vec<TileKey> = self.neighbourhood(key).collect();
+        for k in near {
+            if let Some(t) = self.tiles.get_mut(&k)
+                && let Some(table) = t.ranges.take()
+            {
+                self.bytes -= table.len() * std::mem::size_of::<u16>();
+                self.stats.tables_dropped += 1;
+            }
+        }
+    }
+
+    fn tick(&mut self) -> u64 {
+        self.clock += 1;
+        self.clock
+    }
+}
+
+impl OccupancyView for LocalMap {
+    fn occupancy(&self, cell: CellIndex) -> Occupancy {
+        match self.cell_state(cell) {
+            FREE => Occupancy::Free,
+            OCCUPIED => Occupancy::Occupied,
+            _ => Occupancy::Unknown,
+        }
+    }
+}
+
+fn widen(b: CellBox, by: i32) -> CellBox {
+    let grow = |v: i32, d: i32| v.saturating_add(d);
+    CellBox {
+        min: CellIndex::new(grow(b.min.x, -by), grow(b.min.y, -by)),
+        max: CellIndex::new(grow(b.max.x, by), grow(b.max.y, by)),
+    }
+}
+
+/// Range tables of a block of tiles, laid out for fast lookups.
+#[derive(Debug)]
+pub struct RangeWindow<'a> {
+    min: TileKey,
+    width: usize,
+    height: usize,
+    tables: Vec<Option<&'a [u16]>>,
+    shift: u32,
+    mask: i64,
+    headings: usize,
+    inv_res: f64,
+    res: f64,
+}
+
+impl RangeWindow<'_> {
+    /// The expected range in whole centimetres, clamped below
+    /// `no_echo_slot`, or `no_echo_slot` itself for no echo, of a sonar at
+    /// `(x, y)` pointing along `heading` (radians): the table of its cell,
+    /// interpolated between the two nearest stored headings and corrected
+    /// for where in the cell the sensor sits. `cos` and `sin` are those of
+    /// `heading` (the caller has them cheaper). Outside the tables: 0, as
+    /// inside an obstacle.
+    #[inline]
+    pub fn expected_slot(
+        &self,
+        x: f64,
+        y: f64,
+        heading: f64,
+        (cos, sin): (f64, f64),
+        no_echo_slot: usize,
+    ) -> usize {
+        let fx = (x * self.inv_res).floor();
+        let fy = (y * self.inv_res).floor();
+        let (cx, cy) = (fx as i64, fy as i64);
+        let tx = (cx >> self.shift) - i64::from(self.min.x);
+        let ty = (cy >> self.shift) - i64::from(self.min.y);
+        if tx < 0 || ty < 0 || tx as usize >= self.width || ty as usize >= self.height {
+            return 0;
+        }
+        let Some(table) = self.tables[ty as usize * self.width + tx as usize] else {
+            return 0;
+        };
+        let index = (((cy & self.mask) << self.shift) + (cx & self.mask)) as usize;
+        let base = index * self.headings;
+        let h = self.headings as f64;
+        let mut position = heading * (h / std::f64::consts::TAU);
+        position -= (position / h).floor() * h;
+        let lower = (position as usize).min(self.headings - 1);
+        let frac = position - lower as f64;
+        let upper = if lower + 1 == self.headings {
+            0
+        } else {
+            lower + 1
+        };
+        let (a, b) = (table[base + lower], table[base + upper]);
+        let millimetres = match (a, b) {
+            (NO_ECHO, NO_ECHO) => return no_echo_slot,
+            (0, _) | (_, 0) => return 0,
+            (NO_ECHO, v) | (v, NO_ECHO) => {
+                let nearer = if frac < 0.5 { a } else { b };
+                if nearer == NO_ECHO {
+                    return no_echo_slot;
+                }
+                f64::from(v)
+            }
+            (a, b) => f64::from(a) + (f64::from(b) - f64::from(a)) * frac,
+        };
+        // The table is for the cell's centre; move to the sensor.
+        let off_x = x - (fx + 0.5) * self.res;
+        let off_y = y - (fy + 0.5) * self.res;
+        let centimetres = millimetres * 0.1 - (off_x * cos + off_y * sin) * 100.0;
+        (centimetres.round().max(0.0) as usize).min(no_echo_slot - 1)
+    }
+}

@@ -1,0 +1,469 @@
+//! Precomputed expected sonar ranges: for every cell of a tile and every
+//! one of [`ConeGeometry::headings`] headings, the range a sonar centred on
+//! that cell would read, as the nearest echo inside its cone.
+//!
+//! A table is built from an [`OccupancyRaster`] that covers the tile and
+//! everything within the sonar's range of it. For each cell,
+//! [`ConeGeometry::rays`] rays leave its centre at equal angles; each
+//! marches over the raster, skipping ahead by the Euclidean distance field
+//! where the nearest wall is far (sphere tracing) and cell by cell where it
+//! is near, to the first occupied cell. A ray's range is the distance from
+//! the centre to the nearest point of that cell, as [`deog_grid::cast_cone`]
+//! measures it. A heading's expected range is the least range of the rays
+//! within the cone's half-angle of it: the nearest echo in the cone.
+//!
+//! Ranges are stored as whole millimetres in a `u16`: [`NO_ECHO`] when no
+//! occupied cell lies within the maximum range, 0 for a cell that is itself
+//! occupied (a sensor inside a wall). One tile of 64 × 64 cells and 120
+//! headings takes 960 KiB.
+//!
+//! [`expected_range_by_marching`] is the plain reference: one cone, each
+//! ray walked cell by cell, nothing precomputed.
+
+use deog_grid::{CellBox, CellIndex, Occupancy, OccupancyView, Resolution};
+
+use crate::error::{LocalizerError, within};
+
+/// Stored range meaning no echo within the maximum range.
+pub const NO_ECHO: u16 = u16::MAX;
+
+/// The sonar cone and the angular resolution of the tables.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ConeGeometry {
+    /// Half the cone's opening angle, radians.
+    pub half_angle: f64,
+    /// The largest range the sonar reports, metres.
+    pub max_range: f64,
+    /// Headings per full turn stored for each cell.
+    pub headings: usize,
+    /// Rays cast per heading step (the rays are `headings · rays_per_heading`
+    /// per full turn).
+    pub rays_per_heading: usize,
+}
+
+impl Default for ConeGeometry {
+    /// The Scout's sonar (15° half-angle, 10.668 m), headings every 3°,
+    /// rays every 1°.
+    fn default() -> Self {
+        Self {
+            half_angle: 15f64.to_radians(),
+            max_range: 10.668,
+            headings: 120,
+            rays_per_heading: 3,
+        }
+    }
+}
+
+impl ConeGeometry {
+    /// The geometry if every figure is in range.
+    pub fn validate(self) -> Result<Self, LocalizerError> {
+        within("half_angle", self.half_angle, 1e-3, 1.4)?;
+        within("max_range", self.max_range, 0.1, 60.0)?;
+        if !(4..=1024).contains(&self.headings) || !(1..=16).contains(&self.rays_per_heading) {
+            return Err(LocalizerError::Invalid(format!(
+                "headings must be in [4, 1024] and rays_per_heading in [1, 16], got {} and {}",
+                self.headings, self.rays_per_heading
+            )));
+        }
+        Ok(self)
+    }
+
+    /// Rays per full turn.
+    pub fn rays(&self) -> usize {
+        self.headings * self.rays_per_heading
+    }
+
+    /// Cells a table reaches beyond its tile on every side.
+    pub fn margin_cells(&self, res: Resolution) -> i32 {
+        (self.max_range / res.metres()).ceil() as i32 + 2
+    }
+
+    /// Bytes of one tile's table.
+    pub fn table_bytes(&self, tile_area: usize) -> usize {
+        tile_area * self.headings * std::mem::size_of::<u16>()
+    }
+}
+
+/// Occupied cells of a rectangle of the map, with a distance field.
+#[derive(Debug, Clone)]
+pub struct OccupancyRaster {
+    bounds: CellBox,
+    width: usize,
+    height: usize,
+    occupied: Vec<bool>,
+    /// Distance from each cell's centre to the nearest occupied cell's
+    /// centre, in cells.
+    distance: Vec<f32>,
+}
+
+impl OccupancyRaster {
+    /// A raster of `bounds` with each cell's occupancy from `occupied`.
+    pub fn new(bounds: CellBox, mut occupied: impl FnMut(CellIndex) -> bool) -> Self {
+        let width = bounds.width() as usize;
+        let height = bounds.height() as usize;
+        let mut cells = Vec::with_capacity(width * height);
+        for y in 0..height {
+            for x in 0..width {
+                cells.push(occupied(CellIndex::new(
+                    bounds.min.x + x as i32,
+                    bounds.min.y + y as i32,
+                )));
+            }
+        }
+        let distance = distance_field(&cells, width, height);
+        Self {
+            bounds,
+            width,
+            height,
+            occupied: cells,
+            distance,
+        }
+    }
+
+    /// The cells the raster covers.
+    pub fn bounds(&self) -> CellBox {
+        self.bounds
+    }
+
+    #[inline]
+    fn slot(&self, x: i64, y: i64) -> Option<usize> {
+        (x >= 0 && y >= 0 && (x as usize) < self.width && (y as usize) < self.height)
+            .then(|| y as usize * self.width + x as usize)
+    }
+}
+
+/// The expected ranges of every cell of `tile` (row-major, each cell's
+/// headings together), from `raster`, which must cover `tile` widened by
+/// [`ConeGeometry::margin_cells`]; cells of the margin it lacks count as free.
+pub fn build_table(
+    raster: &OccupancyRaster,
+    tile: CellBox,
+    res: Resolution,
+    geometry: &ConeGeometry,
+) -> Box<[u16]> {
+    let rays = geometry.rays();
+    let directions: Vec<(f64, f64)> = (0..rays)
+        .map(|j| {
+            let a = j as f64 * std::f64::consts::TAU / rays as f64;
+            (a.cos(), a.sin())
+        })
+        .collect();
+    let cell_m = res.metres();
+    let max_cells = geometry.max_range / cell_m;
+    // Rays on each side of a heading that lie inside the cone.
+    let step = std::f64::consts::TAU / rays as f64;
+    let reach = (geometry.half_angle / step + 1e-9).floor() as i64;
+    let mut ray_ranges = vec![f32::INFINITY; rays];
+    let mut table =
+        Vec::with_capacity(tile.width() as usize * tile.height() as usize * geometry.headings);
+    for cy in tile.min.y..=tile.max.y {
+        for cx in tile.min.x..=tile.max.x {
+            let rx = i64::from(cx) - i64::from(raster.bounds.min.x);
+            let ry = i64::from(cy) - i64::from(raster.bounds.min.y);
+            if raster.slot(rx, ry).is_some_and(|s| raster.occupied[s]) {
+                table.extend(std::iter::repeat_n(0u16, geometry.headings));
+                continue;
+            }
+            let origin = (rx as f64 + 0.5, ry as f64 + 0.5);
+            for (range, dir) in ray_ranges.iter_mut().zip(&directions) {
+                *range = march(raster, origin, *dir, max_cells);
+            }
+            for h in 0..geometry.headings {
+                let centre = (h * geometry.rays_per_heading) as i64;
+                let mut nearest = f32::INFINITY;
+                for j in centre - reach..=centre + reach {
+                    nearest = nearest.min(ray_ranges[j.rem_euclid(rays as i64) as usize]);
+                }
+                table.push(to_millimetres(
+                    f64::from(nearest) * cell_m,
+                    geometry.max_range,
+                ));
+            }
+        }
+    }
+    table.into_boxed_slice()
+}
+
+/// A range in metres as stored: whole millimetres, [`NO_ECHO`] past `max_range`.
+fn to_millimetres(range: f64, max_range: f64) -> u16 {
+    if range.is_finite() && range <= max_range {
+        (range * 1000.0).round().min(f64::from(NO_ECHO - 1)) as u16
+    } else {
+        NO_ECHO
+    }
+}
+
+/// The distance in cells from `origin` (raster coordinates, cells) along
+/// `dir` to the nearest point of the first occupied cell, or infinity if
+/// none lies within `max_cells`.
+fn march(raster: &OccupancyRaster, origin: (f64, f64), dir: (f64, f64), max_cells: f64) -> f32 {
+    let mut t = 0.0f64;
+    loop {
+        let (px, py) = (origin.0 + t * dir.0, origin.1 + t * dir.1);
+        let (cx, cy) = (px.floor(), py.floor());
+        let Some(slot) = raster.slot(cx as i64, cy as i64) else {
+            return f32::INFINITY;
+        };
+        if raster.occupied[slot] {
+            let gap_x = ((cx + 0.5 - origin.0).abs() - 0.5).max(0.0);
+            let gap_y = ((cy + 0.5 - origin.1).abs() - 0.5).max(0.0);
+            return gap_x.hypot(gap_y) as f32;
+        }
+        // No occupied square comes closer than the distance between centres
+        // less a cell's diagonal (half from each square).
+        let clear = f64::from(raster.distance[slot]) - std::f64::consts::SQRT_2;
+        if clear > 1.0 {
+            t += clear;
+        } else {
+            // Step to the next cell boundary the ray crosses.
+            let to_x = boundary(px, cx, dir.0);
+            let to_y = boundary(py, cy, dir.1);
+            t += to_x.min(to_y) + 1e-6;
+        }
+        if t > max_cells {
+            return f32::INFINITY;
+        }
+    }
+}
+
+#[inline]
+fn boundary(pos: f64, cell: f64, dir: f64) -> f64 {
+    if dir > 1e-12 {
+        (cell + 1.0 - pos) / dir
+    } else if dir < -1e-12 {
+        (cell - pos) / dir
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// Exact Euclidean distance from every cell to the nearest occupied cell,
+/// in cells (Felzenszwalb and Huttenlocher's two-pass transform); a large
+/// value where nothing is occupied.
+fn distance_field(occupied: &[bool], width: usize, height: usize) -> Vec<f32> {
+    const FAR: f64 = 1e12;
+    let mut squared: Vec<f64> = occupied
+        .iter()
+        .map(|&o| if o { 0.0 } else { FAR })
+        .collect();
+    let longest = width.max(height);
+    let mut line = vec![0.0; longest];
+    let mut out = vec![0.0; longest];
+    let mut hull = vec![0usize; longest];
+    let mut bounds = vec![0.0; longest + 1];
+    for x in 0..width {
+        for y in 0..height {
+            line[y] = squared[y * width + x];
+        }
+        transform_line(&line[..height], &mut out[..height], &mut hull, &mut bounds);
+        for y in 0..height {
+            squared[y * width + x] = out[y];
+        }
+    }
+    for y in 0..height {
+        let row = &mut squared[y * width..(y + 1) * width];
+        line[..width].copy_from_slice(row);
+        transform_line(&line[..width], &mut out[..width], &mut hull, &mut bounds);
+        row.copy_from_slice(&out[..width]);
+    }
+    squared.iter().map(|d| d.sqrt() as f32).collect()
+}
+
+/// One dimension of the squared distance transform: `out[q] = min_p (q − p)² + f[p]`.
+fn transform_line(f: &[f64], out: &mut [f64], hull: &mut [usize], bounds: &mut [f64]) {
+    let n = f.len();
+    if n == 0 {
+        return;
+    }
+    let mut k = 0usize;
+    hull[0] = 0;
+    bounds[0] = f64::NEG_INFINITY;
+    bounds[1] = f64::INFINITY;
+    let intersect = |q: usize, p: usize| -> f64 {
+        let (qf, pf) = (q as f64, p as f64);
+        ((f[q] + qf * qf) - (f[p] + pf * pf)) / (2.0 * qf - 2.0 * pf)
+    };
+    for q in 1..n {
+        let mut s = intersect(q, hull[k]);
+        while s <= bounds[k] {
+            if k == 0 {
+                break;
+            }
+            k -= 1;
+            s = intersect(q, hull[k]);
+        }
+        if s <= bounds[k] {
+            // Only reachable with k == 0: q replaces the first parabola.
+            hull[0] = q;
+            bounds[0] = f64::NEG_INFINITY;
+            bounds[1] = f64::INFINITY;
+            continue;
+        }
+        k += 1;
+        hull[k] = q;
+        bounds[k] = s;
+        bounds[k + 1] = f64::INFINITY;
+    }
+    k = 0;
+    for (q, slot) in out.iter_mut().enumerate() {
+        while bounds[k + 1] < q as f64 {
+            k += 1;
+        }
+        let d = q as f64 - hull[k] as f64;
+        *slot = d * d + f[hull[k]];
+    }
+}
+
+/// The plain reference: the range a sonar at `(x, y)` heading `heading`
+/// would read, by walking each of the cone's rays (as many as the table
+/// uses) cell by cell from the sensor, with nothing precomputed. `None` for
+/// no echo.
+pub fn expected_range_by_marching(
+    view: &impl OccupancyView,
+    res: Resolution,
+    geometry: &ConeGeometry,
+    x: f64,
+    y: f64,
+    heading: f64,
+) -> Option<f64> {
+    let cell_m = res.metres();
+    let (ox, oy) = (x / cell_m, y / cell_m);
+    if view.occupancy(CellIndex::new(ox.floor() as i32, oy.floor() as i32)) == Occupancy::Occupied {
+        return Some(0.0);
+    }
+    let step = std::f64::consts::TAU / geometry.rays() as f64;
+    let reach = (geometry.half_angle / step + 1e-9).floor() as i64;
+    let max_cells = geometry.max_range / cell_m;
+    let mut nearest = f64::INFINITY;
+    for j in -reach..=reach {
+        let a = heading + j as f64 * step;
+        let dir = (a.cos(), a.sin());
+        let mut t = 0.0f64;
+        while t <= max_cells.min(nearest) {
+            let (px, py) = (ox + t * dir.0, oy + t * dir.1);
+            let (cx, cy) = (px.floor(), py.floor());
+            if view.occupancy(CellIndex::new(cx as i32, cy as i32)) == Occupancy::Occupied {
+                let gap_x = ((cx + 0.5 - ox).abs() - 0.5).max(0.0);
+                let gap_y = ((cy + 0.5 - oy).abs() - 0.5).max(0.0);
+                nearest = nearest.min(gap_x.hypot(gap_y));
+                break;
+            }
+            t += boundary(px, cx, dir.0).min(boundary(py, cy, dir.1)) + 1e-6;
+        }
+    }
+    let range = nearest * cell_m;
+    (range <= geometry.max_range).then_some(range)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_abs_diff_eq;
+    use proptest::prelude::*;
+    use std::collections::HashSet;
+
+    struct Cells(HashSet<CellIndex>);
+
+    impl OccupancyView for Cells {
+        fn occupancy(&self, cell: CellIndex) -> Occupancy {
+            if self.0.contains(&cell) {
+                Occupancy::Occupied
+            } else {
+                Occupancy::Free
+            }
+        }
+    }
+
+    fn raster_of(cells: &Cells, bounds: CellBox) -> OccupancyRaster {
+        OccupancyRaster::new(bounds, |c| cells.0.contains(&c))
+    }
+
+    fn cell_box(x0: i32, y0: i32, x1: i32, y1: i32) -> CellBox {
+        CellBox::new(CellIndex::new(x0, y0), CellIndex::new(x1, y1)).unwrap()
+    }
+
+    #[test]
+    fn distance_field_is_euclidean() {
+        let (w, h) = (9, 7);
+        let mut occ = vec![false; w * h];
+        occ[3 * w + 4] = true;
+        occ[0] = true;
+        let d = distance_field(&occ, w, h);
+        for y in 0..h {
+            for x in 0..w {
+                let to_a = ((x as f64 - 4.0).powi(2) + (y as f64 - 3.0).powi(2)).sqrt();
+                let to_b = ((x as f64).powi(2) + (y as f64).powi(2)).sqrt();
+                assert_abs_diff_eq!(f64::from(d[y * w + x]), to_a.min(to_b), epsilon = 1e-5);
+            }
+        }
+    }
+
+    #[test]
+    fn wall_ahead_reads_its_distance() {
+        // A wall of cells at x = 40 (2.00 m to 2.05 m); a sensor in cell 0
+        // (centre 0.025 m) facing +x reads 2.0 - 0.025 = 1.975 m.
+        let res = Resolution::DEFAULT;
+        let wall = Cells((-200..=200).map(|y| CellIndex::new(40, y)).collect());
+        let geometry = ConeGeometry::default();
+        let margin = geometry.margin_cells(res);
+        let tile = cell_box(0, 0, 3, 3);
+        let raster = raster_of(&wall, cell_box(-margin, -margin, 3 + margin, 3 + margin));
+        let table = build_table(&raster, tile, res, &geometry);
+        assert_eq!(table.len(), 16 * geometry.headings);
+        // Cell (0, 0), heading 0: the nearest point of the wall straight ahead.
+        assert_eq!(table[0], 1975);
+        // Heading 180°: nothing within 10.668 m.
+        assert_eq!(table[geometry.headings / 2], NO_ECHO);
+        // Heading 30°: the cone (15° to 45°) meets the wall first at 15°:
+        // 1.975 / cos 15° = 2.045 m, within a ray's spacing.
+        let h30 = geometry.headings / 12;
+        let expected = 1.975 / 15f64.to_radians().cos();
+        assert_abs_diff_eq!(f64::from(table[h30]) / 1000.0, expected, epsilon = 0.01);
+    }
+
+    #[test]
+    fn occupied_cells_read_zero() {
+        let res = Resolution::DEFAULT;
+        let cells = Cells([CellIndex::new(1, 1)].into_iter().collect());
+        let geometry = ConeGeometry::default();
+        let m = geometry.margin_cells(res);
+        let raster = raster_of(&cells, cell_box(-m, -m, 3 + m, 3 + m));
+        let table = build_table(&raster, cell_box(0, 0, 3, 3), res, &geometry);
+        let at = |x: usize, y: usize, h: usize| table[(y * 4 + x) * geometry.headings + h];
+        assert_eq!(at(1, 1, 0), 0);
+        // Its neighbour to the left sees it at 0 m (touching squares).
+        assert_eq!(at(0, 1, 0), 25);
+        assert!(at(3, 3, 0) != 0);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(24))]
+        /// The table, built with distance-field skipping, agrees with the
+        /// plain cell-by-cell reference for random clutter.
+        #[test]
+        fn table_matches_the_reference(
+            blocks in prop::collection::vec((-60i32..60, -60i32..60, 1i32..6, 1i32..6), 1..25),
+            cell_x in 0i32..8, cell_y in 0i32..8, heading in 0usize..120,
+        ) {
+            let res = Resolution::DEFAULT;
+            let mut set = HashSet::new();
+            for (x, y, w, h) in blocks {
+                for dx in 0..w { for dy in 0..h { set.insert(CellIndex::new(x + dx, y + dy)); } }
+            }
+            let cells = Cells(set);
+            let geometry = ConeGeometry { max_range: 3.0, ..ConeGeometry::default() };
+            let m = geometry.margin_cells(res);
+            let raster = raster_of(&cells, cell_box(-m, -m, 7 + m, 7 + m));
+            let table = build_table(&raster, cell_box(0, 0, 7, 7), res, &geometry);
+            let got = table[(cell_y as usize * 8 + cell_x as usize) * geometry.headings + heading];
+            let (cx, cy) = res.cell_center(CellIndex::new(cell_x, cell_y));
+            let angle = heading as f64 * std::f64::consts::TAU / geometry.headings as f64;
+            let reference = expected_range_by_marching(&cells, res, &geometry, cx, cy, angle);
+            match reference {
+                None => prop_assert_eq!(got, NO_ECHO),
+                Some(r) => prop_assert!((f64::from(got) / 1000.0 - r).abs() <= 0.0011,
+                    "table {} mm, reference {} m", got, r),
+            }
+        }
+    }
+}
