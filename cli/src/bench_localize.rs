@@ -13,7 +13,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, ensure};
 use clap::Args;
 use deog_grid::{
-    ClampLimits, OccupancyThresholds, Resolution, SensorRing, SonarModelParams, TileMap, TileSize,
+    ClampLimits, OccupancyThresholds, Pose2, Resolution, SensorRing, SonarModelParams, TileMap, TileSize,
     normalize_angle,
 };
 use deog_localizer::filter::{FilterSettings, Mcl};
@@ -64,12 +64,24 @@ pub struct LocalizeBenchArgs {
     /// The beam model's hit spread growth per metre.
     #[arg(long, default_value_t = deog_localizer::beam_model::BeamModelParams::default().hit_sigma_per_m)]
     pub hit_sigma_per_m: f64,
+    /// Smoothing rate of the long-term likelihood average.
+    #[arg(long, default_value_t = FilterSettings::default().alpha_slow)]
+    pub alpha_slow: f64,
     /// Smoothing rate of the short-term likelihood average.
     #[arg(long, default_value_t = FilterSettings::default().alpha_fast)]
     pub alpha_fast: f64,
     /// Print every run's figures.
     #[arg(long)]
     pub verbose: bool,
+    /// Also score each frame at the true pose and at its image turned 180°
+    /// about this point ("x,y"), and print the sums: how much the map tells
+    /// a symmetric world's two halves apart.
+    #[arg(long, value_delimiter = ',')]
+    pub mirror_about: Option<Vec<f64>>,
+    /// Print each run's true and estimated pose every this many simulated
+    /// seconds (0: never).
+    #[arg(long, default_value_t = 0.0)]
+    pub trace_every: f64,
 }
 
 /// Position and heading error bounds of convergence.
@@ -232,6 +244,7 @@ fn run_once(
     settings.beam.hit_sigma_m = args.hit_sigma;
     settings.beam.hit_sigma_per_m = args.hit_sigma_per_m;
     settings.alpha_fast = args.alpha_fast;
+    settings.alpha_slow = args.alpha_slow;
     let mut mcl = Mcl::new(settings)?;
     mcl.start_global(map)?;
     let mut kidnap_rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6b69_646e_6170);
@@ -240,6 +253,7 @@ fn run_once(
     let period = sim.config().sonar_period_s;
     // (time, position error, heading error) per frame.
     let mut errors: Vec<(f64, f64, f64)> = Vec::new();
+    let mut mirror_sums = (0.0, 0.0, 0u64, 0u64);
     while sim.time_s() < args.seconds {
         if args.kidnap_at > 0.0 && kidnapped_at.is_none() && sim.time_s() >= args.kidnap_at {
             let to = sim.random_free_pose(&mut kidnap_rng)?;
@@ -253,11 +267,53 @@ fn run_once(
             sim.advance(period, &mut fired)?;
         }
         state = fired.pop().context("a firing")?;
+        if let Some(centre) = &args.mirror_about
+            && centre.len() == 2
+        {
+            let t = state.true_pose;
+            let image = Pose2::new(
+                2.0 * centre[0] - t.x,
+                2.0 * centre[1] - t.y,
+                t.theta + std::f64::consts::PI,
+            );
+            let here = mcl.score_pose(map, &t, &state.ranges)?;
+            let there = mcl.score_pose(map, &image, &state.ranges)?;
+            mirror_sums.0 += here;
+            mirror_sums.1 += there;
+            if here > there {
+                mirror_sums.2 += 1;
+            }
+            mirror_sums.3 += 1;
+            if sim.time_s() + period >= args.seconds || state.sequence % 100 == 0 {
+                println!(
+                    "    t {:6.1}  Σ log-likelihood true {:9.1}  image {:9.1}  frames favouring the truth {}/{}",
+                    state.time_s, mirror_sums.0, mirror_sums.1, mirror_sums.2, mirror_sums.3
+                );
+            }
+        }
         if mcl.predict(&state.odometry)? {
             mcl.correct(map, &state.ranges)?;
         }
         if let Some(e) = mcl.estimate(&state.odometry) {
             let t = state.true_pose;
+            if args.trace_every > 0.0
+                && (state.time_s / args.trace_every).fract() < period / args.trace_every * 0.999
+            {
+                println!(
+                    "    t {:6.1}  true ({:5.2}, {:5.2}, {:6.1}°)  estimate ({:5.2}, {:5.2}, {:6.1}°)  particles {:5}  weight {:.2}  converged {}  lost {:.2}",
+                    state.time_s,
+                    t.x,
+                    t.y,
+                    t.theta.to_degrees(),
+                    e.pose.x,
+                    e.pose.y,
+                    e.pose.theta.to_degrees(),
+                    e.particle_count,
+                    e.cluster_weight,
+                    e.converged,
+                    e.lost_score
+                );
+            }
             errors.push((
                 state.time_s,
                 (e.pose.x - t.x).hypot(e.pose.y - t.y),

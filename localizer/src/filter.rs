@@ -419,6 +419,46 @@ impl Mcl {
         Ok(report)
     }
 
+    /// The tempered log-likelihood `τ · Σ ln p(zₖ | z*ₖ)` of one frame at
+    /// `pose`, as a particle there would get it: for diagnostics and tests.
+    pub fn score_pose(
+        &mut self,
+        map: &mut LocalMap,
+        pose: &Pose2,
+        ranges: &[f64],
+    ) -> Result<f64, LocalizerError> {
+        if ranges.len() != self.settings.ring.len() {
+            return Err(LocalizerError::Invalid(format!(
+                "the frame has {} ranges, the sensor ring {} sonars",
+                ranges.len(),
+                self.settings.ring.len()
+            )));
+        }
+        for (table, &z) in self.beam_tables.iter_mut().zip(ranges) {
+            self.model.tabulate(z, table);
+        }
+        let res = map.settings().resolution;
+        let mut keys: Vec<TileKey> = self
+            .settings
+            .ring
+            .sensor_poses(pose)
+            .filter_map(|s| res.cell_of(s.x, s.y).ok())
+            .map(|c| map.tile_of(c))
+            .collect();
+        keys.sort();
+        keys.dedup();
+        map.ensure_tables(keys.iter().copied())?;
+        let window = map.window(&keys);
+        let no_echo = self.model.no_echo_slot();
+        let mut total = 0.0f64;
+        for (sensor, table) in self.settings.ring.sensor_poses(pose).zip(&self.beam_tables) {
+            let (sin, cos) = sensor.theta.sin_cos();
+            let slot = window.expected_slot(sensor.x, sensor.y, sensor.theta, (cos, sin), no_echo);
+            total += f64::from(table[slot]);
+        }
+        Ok(total)
+    }
+
     /// The share of particles the next resampling draws from free space.
     pub fn injection_share(&self) -> f64 {
         if self.w_slow > 0.0 {

@@ -126,7 +126,10 @@ async fn eval_localize_reports_the_known_errors_and_plots_the_paths() {
         table.contains("converged after 0.500 s and 0.500 m driven (frame 6)"),
         "{table}"
     );
-    assert!(table.contains("kidnapped once, recovered, in 0.700 s"), "{table}");
+    assert!(
+        table.contains("kidnapped once, recovered, in 0.700 s"),
+        "{table}"
+    );
 
     let json = read_json(&json_file);
     let robots = json.get("robots").array();
@@ -158,7 +161,8 @@ async fn eval_localize_reports_the_known_errors_and_plots_the_paths() {
     );
     // Signed x errors: 24 of +0.10 and 23 of -0.04.
     let bias_x = (24.0 * 0.10 - 23.0 * 0.04) / used;
-    let spread_x = ((24.0 * (0.10 - bias_x).powi(2) + 23.0 * (-0.04 - bias_x).powi(2)) / used).sqrt();
+    let spread_x =
+        ((24.0 * (0.10 - bias_x).powi(2) + 23.0 * (-0.04 - bias_x).powi(2)) / used).sqrt();
     close(r.get("std_error_m").get("x").number(), spread_x);
     close(r.get("mean_error_m").get("x").number(), bias_x);
     let rms = ((24.0 * (0.01 + 0.0025) + 23.0 * (0.0016 + 0.0064)) / used).sqrt();
@@ -224,14 +228,17 @@ async fn eval_localize_reports_the_known_errors_and_plots_the_paths() {
     close(h, 2.63);
     let (width, height, rgb) = read_png(&png_file);
     assert_eq!((width, height), (1000, (1000.0 * h / w).round() as u32));
-    assert!(rgb.chunks(3).all(|p| p != [0, 0, 0]), "no map was asked for");
+    assert!(
+        rgb.chunks(3).all(|p| p != [0, 0, 0]),
+        "no map was asked for"
+    );
 
     // A window of frames after the kidnap: no kidnap left in it, and the
     // estimate settles at frame 38.
     let json_file = path("window.json");
     let args = [
-        "eval", "localize", "--robot", ROBOT, "--map", "m", "--from", "31", "--to", "60",
-        "--json", &json_file,
+        "eval", "localize", "--robot", ROBOT, "--map", "m", "--from", "31", "--to", "60", "--json",
+        &json_file,
     ];
     succeeded(&deog(&args, &server));
     let json = read_json(&json_file);
@@ -429,7 +436,10 @@ impl Parser<'_> {
             _ => {
                 let start = self.at;
                 while self.at < self.text.len()
-                    && matches!(self.text[self.at], b'-' | b'+' | b'.' | b'e' | b'E' | b'0'..=b'9')
+                    && matches!(
+                        self.text[self.at],
+                        b'-' | b'+' | b'.' | b'e' | b'E' | b'0'..=b'9'
+                    )
                 {
                     self.at += 1;
                 }

@@ -38,7 +38,7 @@ pub const OCCUPIED_RGB: [u8; 3] = [0, 0, 0];
 pub const UNKNOWN_RGB: [u8; 3] = [205, 205, 205];
 
 /// Half the length of a kidnap cross's arm, pixels.
-const CROSS_HALF_PX: i64 = 7;
+const CROSS_HALF_PX: i64 = 9;
 
 /// One robot's paths.
 #[derive(Debug, Clone, Copy)]
@@ -93,7 +93,7 @@ impl Raster {
     pub fn pixel_of(&self, x: f64, y: f64) -> Option<(u32, u32)> {
         let (col, row) = self.position(x, y);
         let inside = |v: f64, size: u32| v >= 0.0 && v < f64::from(size);
-        (inside(col, self.width) && inside(row, self.height)).then(|| (col as u32, row as u32))
+        (inside(col, self.width) && inside(row, self.height)).then_some((col as u32, row as u32))
     }
 
     /// The image as an 8-bit RGB PNG.
@@ -233,7 +233,11 @@ pub fn render_plot(input: &PlotInput<'_>) -> Result<Raster, EvaluationError> {
         b.max_y - b.min_y + 2.0 * margin,
     );
     let px_per_m = f64::from(MAX_SIDE_PX) / width_m.max(height_m);
-    let side = |metres: f64| (metres * px_per_m).round().clamp(1.0, f64::from(MAX_SIDE_PX)) as u32;
+    let side = |metres: f64| {
+        (metres * px_per_m)
+            .round()
+            .clamp(1.0, f64::from(MAX_SIDE_PX)) as u32
+    };
     let (width, height) = (side(width_m), side(height_m));
     let mut raster = Raster {
         width,

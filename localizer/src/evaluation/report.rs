@@ -34,11 +34,7 @@ impl LocalizationReport {
     fn json_object(&self, indent: &str) -> String {
         let stats = self.stats.as_ref();
         let axis = |pick: fn(&super::ErrorStats) -> AxisStats| stats.map(pick);
-        let (x, y, theta) = (
-            axis(|s| s.x_m),
-            axis(|s| s.y_m),
-            axis(|s| s.theta_rad),
-        );
+        let (x, y, theta) = (axis(|s| s.x_m), axis(|s| s.y_m), axis(|s| s.theta_rad));
         let xy = |factor: f64, field: fn(&AxisStats) -> f64| {
             format!(
                 "{{\"x\": {}, \"y\": {}}}",
@@ -46,7 +42,8 @@ impl LocalizationReport {
                 number(y.map(|a| field(&a) * factor))
             )
         };
-        let angle = |factor: f64, field: fn(&AxisStats) -> f64| number(theta.map(|a| field(&a) * factor));
+        let angle =
+            |factor: f64, field: fn(&AxisStats) -> f64| number(theta.map(|a| field(&a) * factor));
         let degrees = 180.0 / std::f64::consts::PI;
         let p = &self.params;
         let fields: Vec<(&str, String)> = vec![
@@ -54,8 +51,14 @@ impl LocalizationReport {
             ("map", self.map.as_deref().map_or("null".into(), string)),
             ("converged", self.converged().to_string()),
             ("converge_s", number(self.converge_s())),
-            ("converge_sequence", integer(self.convergence.map(|c| c.sequence))),
-            ("converge_distance_m", number(self.convergence.map(|c| c.distance_m))),
+            (
+                "converge_sequence",
+                integer(self.convergence.map(|c| c.sequence)),
+            ),
+            (
+                "converge_distance_m",
+                number(self.convergence.map(|c| c.distance_m)),
+            ),
             ("mean_abs_error_m", xy(1.0, |a| a.mean_abs)),
             ("mean_abs_error_in", xy(INCHES_PER_METRE, |a| a.mean_abs)),
             ("std_error_m", xy(1.0, |a| a.std_dev)),
@@ -71,7 +74,10 @@ impl LocalizationReport {
             ("max_position_m", number(stats.map(|s| s.max_position_m))),
             ("estimates_used", stats.map_or(0, |s| s.count).to_string()),
             ("kidnapped", self.kidnapped().to_string()),
-            ("recovered", self.recovered().map_or("null".into(), |r| r.to_string())),
+            (
+                "recovered",
+                self.recovered().map_or("null".into(), |r| r.to_string()),
+            ),
             ("recover_s", number(self.recover_s())),
             ("kidnap_count", self.kidnaps.len().to_string()),
             ("kidnaps", self.kidnaps_json(indent)),
@@ -202,7 +208,12 @@ impl LocalizationReport {
                 );
                 let _ = writeln!(
                     out,
-                    "\nrms position error {:.4} m ({:.4} in), largest {:.4} m",
+                    "\n(mean error: of |estimate - truth|; standard deviation and bias: of the \
+                     signed error)"
+                );
+                let _ = writeln!(
+                    out,
+                    "rms position error {:.4} m ({:.4} in), largest {:.4} m",
                     s.rms_position_m,
                     s.rms_position_m * INCHES_PER_METRE,
                     s.max_position_m

@@ -200,7 +200,13 @@ fn a_kidnap_never_recovered_from() {
 #[test]
 fn converging_only_after_a_kidnap() {
     let truth = kidnapped_run();
-    let estimates = offset(&truth, |s| if s < 15 { (2.0, 0.0, 0.0) } else { (0.0, 0.0, 0.0) });
+    let estimates = offset(&truth, |s| {
+        if s < 15 {
+            (2.0, 0.0, 0.0)
+        } else {
+            (0.0, 0.0, 0.0)
+        }
+    });
     let r = run(&truth, &estimates);
     let c = r.convergence.expect("converged");
     assert_eq!(c.sequence, 15);
@@ -230,7 +236,10 @@ fn never_converging_gives_no_figures_and_nulls() {
     ] {
         assert!(json.contains(&format!("\"{key}\": null")), "{key}: {json}");
     }
-    assert!(json.contains("\"mean_abs_error_m\": {\"x\": null, \"y\": null}"), "{json}");
+    assert!(
+        json.contains("\"mean_abs_error_m\": {\"x\": null, \"y\": null}"),
+        "{json}"
+    );
     assert!(json.contains("\"converged\": false"), "{json}");
     assert!(!json.contains("NaN") && !json.contains("inf"), "{json}");
     assert!(r.table().contains("never converged"), "{}", r.table());
@@ -247,7 +256,9 @@ fn heading_errors_wrap_around_pi() {
             TruthSample::new(s, 0.1 * s as f64, Pose2::new(0.0, 0.0, sign * theta))
         })
         .collect();
-    let estimates = offset(&truth, |s| (0.0, 0.0, if s % 2 == 0 { -0.02 } else { 0.02 }));
+    let estimates = offset(&truth, |s| {
+        (0.0, 0.0, if s % 2 == 0 { -0.02 } else { 0.02 })
+    });
     let r = run(&truth, &estimates);
     assert!(!r.kidnapped());
     let s = r.stats.expect("figures");
@@ -297,7 +308,10 @@ fn unpaired_estimates_and_frames_after_the_last_estimate_are_left_out() {
     assert_eq!((r.frames, r.frames_after_last_estimate), (6, 4));
     assert_relative_eq!(r.end_time_s, 0.6, epsilon = 1e-12);
     // The unpaired one does not count among the filter's claims.
-    assert_eq!((r.filter_converged, r.filter_converged_within_bounds), (1, 1));
+    assert_eq!(
+        (r.filter_converged, r.filter_converged_within_bounds),
+        (1, 1)
+    );
     assert_eq!(r.stats.expect("figures").count, 6);
 }
 
@@ -389,7 +403,13 @@ fn bad_input_names_the_field() {
 #[test]
 fn json_has_the_interface_keys_and_escapes_names() {
     let truth = kidnapped_run();
-    let estimates = offset(&truth, |s| if (11..14).contains(&s) { (3.0, 0.0, 0.0) } else { (0.1, 0.0, 0.0) });
+    let estimates = offset(&truth, |s| {
+        if (11..14).contains(&s) {
+            (3.0, 0.0, 0.0)
+        } else {
+            (0.1, 0.0, 0.0)
+        }
+    });
     let mut input = EvalInput::new("r\"1", &truth, &estimates);
     input.map = Some("m");
     let r = evaluate(&input).expect("evaluates");
@@ -416,7 +436,10 @@ fn json_has_the_interface_keys_and_escapes_names() {
         json.contains("\"mean_abs_error_m\": {\"x\": 0.0999") && json.contains(", \"y\": 0}"),
         "{json}"
     );
-    assert!(json.contains("\"sequence_before\": 10, \"sequence\": 11"), "{json}");
+    assert!(
+        json.contains("\"sequence_before\": 10, \"sequence\": 11"),
+        "{json}"
+    );
     let all = reports_to_json(&[r.clone(), r]);
     assert!(all.starts_with("{\n  \"robots\": [\n    {\n"), "{all}");
     assert_eq!(all.matches("\"name\": ").count(), 2);
@@ -430,11 +453,23 @@ fn json_has_the_interface_keys_and_escapes_names() {
 #[test]
 fn table_reads_like_the_thesis() {
     let truth = kidnapped_run();
-    let estimates = offset(&truth, |s| if (11..14).contains(&s) { (3.0, 0.0, 0.0) } else { (0.0254, 0.0, 0.0) });
+    let estimates = offset(&truth, |s| {
+        if (11..14).contains(&s) {
+            (3.0, 0.0, 0.0)
+        } else {
+            (0.0254, 0.0, 0.0)
+        }
+    });
     let table = run(&truth, &estimates).table();
     assert!(table.contains("converged after 0.000 s"), "{table}");
-    assert!(table.contains("| x | 0.0254 m | 0.0000 m | 1.0000 in | 0.0000 in |"), "{table}");
-    assert!(table.contains("kidnapped once, recovered, in 0.300 s"), "{table}");
+    assert!(
+        table.contains("| x | 0.0254 m | 0.0000 m | 1.0000 in | 0.0000 in |"),
+        "{table}"
+    );
+    assert!(
+        table.contains("kidnapped once, recovered, in 0.300 s"),
+        "{table}"
+    );
     assert!(table.contains("| 1 | 10 to 11 | 1.100 |"), "{table}");
 }
 
@@ -463,7 +498,10 @@ fn plot_frames_the_paths_and_colours_them() {
     let raster = plot_of(&truth, &estimates, None);
     assert_eq!(raster.width, MAX_SIDE_PX);
     assert_eq!(raster.height, (1000.0f64 * 1.3 / 2.9).round() as u32);
-    assert_eq!(raster.rgb.len(), 3 * (raster.width * raster.height) as usize);
+    assert_eq!(
+        raster.rgb.len(),
+        3 * (raster.width * raster.height) as usize
+    );
     let at = |x: f64, y: f64| {
         let (col, row) = raster.pixel_of(x, y).expect("inside");
         raster.pixel(col, row).expect("pixel")
