@@ -13,8 +13,8 @@ use std::time::Instant;
 use anyhow::{Context, Result, ensure};
 use clap::Args;
 use deog_grid::{
-    ClampLimits, OccupancyThresholds, Pose2, Resolution, SensorRing, SonarModelParams, TileMap, TileSize,
-    normalize_angle,
+    ClampLimits, OccupancyThresholds, Pose2, Resolution, SensorRing, SonarModelParams, TileMap,
+    TileSize, normalize_angle,
 };
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};

@@ -8,6 +8,7 @@ mod eval;
 mod export;
 mod frames;
 mod import;
+mod localize;
 mod map;
 mod server;
 mod signal;
@@ -45,6 +46,10 @@ enum Command {
     /// The cartographer: follows a robot's frames and builds a map on the
     /// server from them.
     Map(map::MapArgs),
+    /// The localizer: follows a robot's frames and estimates its pose on a
+    /// map held by the server (Monte Carlo Localization), publishing each
+    /// estimate.
+    Localize(localize::LocalizeArgs),
     /// Imports recorded data into the map server: a wanderer data file as
     /// a robot's frames (--robot), or a map_server map as a map (--map).
     Import(import::ImportArgs),
@@ -85,6 +90,7 @@ fn run(command: Command) -> Result<()> {
         Command::Import(args) => import::run(args),
         Command::Export(args) => export::run(args),
         Command::Map(args) => map::run(args),
+        Command::Localize(args) => localize::run(args),
         Command::Frames(args) => frames::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Bench(args) => bench::run(args),

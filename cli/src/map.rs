@@ -296,14 +296,14 @@ async fn send(
     Ok(())
 }
 
-type FrameReader = (
+pub(crate) type FrameReader = (
     tokio::sync::mpsc::Receiver<pb::SonarFrame>,
     tokio::task::JoinHandle<Result<()>>,
 );
 
 /// Reads the frame stream into a queue as fast as it comes, so the main
 /// loop can take whatever has arrived as one batch.
-fn spawn_frame_reader(mut stream: tonic::Streaming<pb::SonarFrame>) -> FrameReader {
+pub(crate) fn spawn_frame_reader(mut stream: tonic::Streaming<pb::SonarFrame>) -> FrameReader {
     let (tx, rx) = tokio::sync::mpsc::channel(1024);
     let task = tokio::spawn(async move {
         while let Some(frame) = stream.message().await.context("the frame stream failed")? {

@@ -32,7 +32,8 @@ impl BinSize {
         ((std::f64::consts::TAU / self.theta).round() as i64).max(1)
     }
 
-    fn bin(&self, p: &Pose2) -> Bin {
+    /// The bin holding pose `p`.
+    pub fn bin_of(&self, p: &Pose2) -> (i64, i64, i64) {
         let h = self.headings();
         let t = (normalize_angle(p.theta) + std::f64::consts::PI) / std::f64::consts::TAU;
         (
@@ -46,7 +47,7 @@ impl BinSize {
     pub fn occupied_bins<'a>(&self, particles: impl IntoIterator<Item = &'a Pose2>) -> usize {
         let mut bins = std::collections::HashSet::new();
         for p in particles {
-            bins.insert(self.bin(p));
+            bins.insert(self.bin_of(p));
         }
         bins.len()
     }
@@ -82,7 +83,7 @@ pub fn heaviest_cluster(
     let mut particle_bin = Vec::with_capacity(particles.len());
     let mut bin_list: Vec<Bin> = Vec::new();
     for p in particles {
-        let b = bins.bin(p);
+        let b = bins.bin_of(p);
         let id = *bin_ids.entry(b).or_insert_with(|| {
             bin_list.push(b);
             bin_list.len() - 1

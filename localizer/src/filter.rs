@@ -468,43 +468,49 @@ impl Mcl {
         }
     }
 
+    /// KLD-sampling as Fox describes it: particles are drawn one at a time
+    /// (from the old set, or from free space with probability `inject`)
+    /// until their number reaches the bound for the bins they fill. Draws
+    /// from the old set take a random order through a low-variance
+    /// (systematic) sample of the most particles allowed. Injected particles
+    /// open new bins, so a lost filter grows back towards the maximum.
     fn resample(&mut self, map: &LocalMap, inject: f64) -> Result<usize, LocalizerError> {
-        // Draw as many as now, count the bins they fill, then draw the
-        // number KLD-sampling asks for.
-        let n_now = self.particles.len();
+        let kld = self.settings.kld;
+        let pool = kld.max_particles;
         systematic_resample(
             &self.weights,
-            n_now,
+            pool,
             &mut self.rng,
             &mut self.scratch_indices,
         )?;
-        let bins = self
-            .settings
-            .bins
-            .occupied_bins(self.scratch_indices.iter().map(|&i| &self.particles[i]));
-        let n = self.settings.kld.particles_for(bins);
-        if n != n_now {
-            systematic_resample(&self.weights, n, &mut self.rng, &mut self.scratch_indices)?;
-        }
         let free = if inject > 0.0 {
             map.free_cells()
         } else {
             Vec::new()
         };
         let res = map.settings().resolution;
-        let mut next = Vec::with_capacity(n);
+        let mut bins = HashSet::new();
+        let mut next = Vec::with_capacity(self.particles.len());
+        let mut bound = kld.particles_for(0);
         let mut injected = 0;
-        for &i in &self.scratch_indices {
-            if !free.is_empty() && self.rng.random_bool(inject) {
-                let cell = free[self.rng.random_range(0..free.len())];
-                next.push(random_pose_in(cell, res, &mut self.rng));
+        let mut taken = 0;
+        while next.len() < bound && taken < pool {
+            let pose = if !free.is_empty() && self.rng.random_bool(inject) {
                 injected += 1;
+                let cell = free[self.rng.random_range(0..free.len())];
+                random_pose_in(cell, res, &mut self.rng)
             } else {
-                next.push(self.particles[i]);
+                let j = self.rng.random_range(taken..pool);
+                self.scratch_indices.swap(taken, j);
+                taken += 1;
+                self.particles[self.scratch_indices[taken - 1]]
+            };
+            if bins.insert(self.settings.bins.bin_of(&pose)) {
+                bound = kld.particles_for(bins.len());
             }
+            next.push(pose);
         }
-        // Systematic draws come out in index order; shuffling is not needed
-        // since nothing downstream depends on order.
+        let n = next.len();
         self.particles = next;
         self.weights = vec![1.0 / n as f64; n];
         if injected > 0 {

@@ -9,13 +9,13 @@
 //!   (the thesis's Tables 7.3 to 7.7, convergence, kidnap recovery) and the
 //!   path plot.
 
-pub mod evaluation;
+pub mod beam_model;
+pub mod cluster;
 pub mod error;
+pub mod evaluation;
+pub mod filter;
 pub mod gaussian;
+pub mod local_map;
 pub mod motion;
 pub mod range_table;
 pub mod sampling;
-pub mod beam_model;
-pub mod local_map;
-pub mod cluster;
-pub mod filter;

@@ -1,0 +1,389 @@
+//! `deog localize`: Monte Carlo Localization of one robot on a map held by
+//! the map server. Follows the robot's frames, fetches the tiles its
+//! particles need (keeping them current through the watch stream, within a
+//! memory budget), and publishes an estimate per frame.
+
+use std::collections::HashSet;
+use std::time::Duration;
+
+use anyhow::{Context, Result, bail, ensure};
+use clap::Args;
+use deog_grid::{OccupancyThresholds, Pose2, Resolution, Tile, TileKey, TileSize};
+use deog_localizer::filter::{FilterSettings, Mcl};
+use deog_localizer::local_map::{LocalMap, MapSettings};
+use deog_localizer::range_table::ConeGeometry;
+use deog_proto::v1 as pb;
+use deog_robot_client::MapClient;
+
+use crate::connection::ConnectionArgs;
+use crate::map::spawn_frame_reader;
+
+/// Options of `deog localize`.
+#[derive(Debug, Args)]
+pub struct LocalizeArgs {
+    /// The robot whose frames to follow.
+    #[arg(long, env = "DEOG_ROBOT")]
+    pub robot: String,
+    /// The map to localize on.
+    #[arg(long, env = "DEOG_MAP")]
+    pub map: String,
+    /// Start from this frame (0: the next frame to arrive).
+    #[arg(long, default_value_t = 0)]
+    pub from: u64,
+    /// Stop after this frame (0: no end).
+    #[arg(long, default_value_t = 0)]
+    pub to: u64,
+    /// Stop once no frame has arrived for this many seconds (0: follow until ctrl-c).
+    #[arg(long, default_value_t = 0.0)]
+    pub idle_exit: f64,
+    /// Track from a known pose "x,y,theta" (metres, radians) instead of
+    /// localizing globally.
+    #[arg(long, value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
+    pub initial_pose: Option<Vec<f64>>,
+    /// Standard deviation of the initial position, metres (with --initial-pose).
+    #[arg(long, default_value_t = 0.25)]
+    pub initial_std_xy: f64,
+    /// Standard deviation of the initial heading, radians (with --initial-pose).
+    #[arg(long, default_value_t = 0.2)]
+    pub initial_std_theta: f64,
+    /// Most particles (global localization starts with this many).
+    #[arg(long, default_value_t = FilterSettings::default().kld.max_particles)]
+    pub max_particles: usize,
+    /// Fewest particles.
+    #[arg(long, default_value_t = FilterSettings::default().kld.min_particles)]
+    pub min_particles: usize,
+    /// The beam model's tempering τ: the frame counts as 16·τ independent
+    /// beams.
+    #[arg(long, default_value_t = FilterSettings::default().beam.tempering)]
+    pub tempering: f64,
+    /// Seed of the filter's random draws.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Memory the map cache (tiles and range tables) may hold, MiB.
+    #[arg(long, default_value_t = 256)]
+    pub cache_mb: usize,
+    /// Least time between two refreshes of tiles the map server reports
+    /// changed, seconds: a map still being built changes all the time.
+    #[arg(long, default_value_t = 5.0)]
+    pub refresh_s: f64,
+    #[command(flatten)]
+    pub connection: ConnectionArgs,
+}
+
+/// Runs `deog localize`.
+pub fn run(args: LocalizeArgs) -> Result<()> {
+    ensure!(
+        args.idle_exit.is_finite() && args.idle_exit >= 0.0,
+        "--idle-exit must be zero or positive, got {}",
+        args.idle_exit
+    );
+    ensure!(
+        args.refresh_s.is_finite() && args.refresh_s >= 0.0,
+        "--refresh-s must be zero or positive, got {}",
+        args.refresh_s
+    );
+    ensure!(
+        args.cache_mb >= 16,
+        "--cache-mb must be at least 16, got {}",
+        args.cache_mb
+    );
+    let mut settings = FilterSettings {
+        seed: args.seed,
+        ..FilterSettings::default()
+    };
+    settings.kld.max_particles = args.max_particles;
+    settings.kld.min_particles = args.min_particles;
+    settings.beam.tempering = args.tempering;
+    let mut mcl = Mcl::new(settings).context("the filter's settings")?;
+    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    runtime.block_on(async move {
+        let client = MapClient::connect(args.connection.client_config()?)
+            .await
+            .with_context(|| format!("connecting to the map server at {}", args.connection.server))?;
+        let info = client
+            .map_info(&args.map)
+            .await
+            .with_context(|| format!("opening map {}", args.map))?;
+        let resolution = Resolution::new(info.resolution_m)?;
+        let tile_size = TileSize::new(info.tile_size)?;
+        let mut map = LocalMap::new(MapSettings {
+            resolution,
+            tile_size,
+            thresholds: OccupancyThresholds::default(),
+            geometry: ConeGeometry::default(),
+            budget_bytes: args.cache_mb << 20,
+        })?;
+        // Watch first, so no change between the first read and the stream is missed.
+        let watch = client
+            .raw()
+            .watch_tiles(pb::WatchTilesRequest {
+                map: args.map.clone(),
+                // The whole plane: the map may grow anywhere.
+                region: Some(pb::CellBox {
+                    min_x: i32::MIN,
+                    min_y: i32::MIN,
+                    max_x: i32::MAX,
+                    max_y: i32::MAX,
+                }),
+                include_cells: false,
+            })
+            .await
+            .context("watching the map's tiles")?
+            .into_inner();
+        let (mut changes, watcher) = spawn_watcher(watch);
+        match &args.initial_pose {
+            Some(p) => {
+                mcl.start_at(Pose2::new(p[0], p[1], p[2]), args.initial_std_xy, args.initial_std_theta)
+                    .context("--initial-pose")?;
+                tracing::info!(x = p[0], y = p[1], theta = p[2], "tracking from the given pose");
+            }
+            None => {
+                let Some(region) = info.bounds_cells else {
+                    bail!("map {} has no observed cell yet: nothing to localize on", args.map);
+                };
+                let tiles = client
+                    .tiles(pb::TileQuery {
+                        map: args.map.clone(),
+                        selection: Some(pb::tile_query::Selection::Region(region)),
+                        newer_than_version: 0,
+                    })
+                    .await
+                    .context("reading the map")?;
+                for tile in tiles {
+                    let (key, version, cells) = decode_tile(&tile, tile_size)?;
+                    map.insert_tile(key, version, Some(&cells))?;
+                }
+                mcl.start_global(&map).context("spreading particles over the map")?;
+                tracing::info!(
+                    tiles = map.tile_count(),
+                    free_cells = map.free_cell_count(),
+                    particles = mcl.particles().len(),
+                    "global localization: particles spread over every known-free cell"
+                );
+            }
+        }
+        let frames = client
+            .raw()
+            .subscribe_frames(pb::SubscribeFramesRequest {
+                robot: args.robot.clone(),
+                from_sequence: args.from,
+            })
+            .await
+            .context("following the robot's frames")?
+            .into_inner();
+        let (mut queue, reader) = spawn_frame_reader(frames);
+        let shutdown = crate::signal::shutdown();
+        tokio::pin!(shutdown);
+        let idle = (args.idle_exit > 0.0).then(|| Duration::from_secs_f64(args.idle_exit));
+        let refresh = Duration::from_secs_f64(args.refresh_s);
+        let mut stale: HashSet<TileKey> = HashSet::new();
+        let mut resync = false;
+        let mut last_refresh = tokio::time::Instant::now();
+        let (mut processed, mut corrections, mut last_sequence) = (0u64, 0u64, 0u64);
+        loop {
+            let next = async {
+                match idle {
+                    Some(idle) => tokio::time::timeout(idle, queue.recv()).await.ok(),
+                    None => Some(queue.recv().await),
+                }
+            };
+            let frame = tokio::select! {
+                () = &mut shutdown => break,
+                frame = next => match frame {
+                    None => {
+                        tracing::info!("no frame for {:.1} s; stopping", args.idle_exit);
+                        break;
+                    }
+                    Some(Some(frame)) => frame,
+                    Some(None) => {
+                        reader.await.context("the frame reader panicked")??;
+                        break;
+                    }
+                },
+            };
+            if frame.sequence <= last_sequence {
+                continue;
+            }
+            if args.to > 0 && frame.sequence > args.to {
+                break;
+            }
+            last_sequence = frame.sequence;
+            // Changes the server reported, applied at most every --refresh-s.
+            while let Ok(change) = changes.try_recv() {
+                match change {
+                    Change::Tile(key) => {
+                        stale.insert(key);
+                    }
+                    Change::All => resync = true,
+                }
+            }
+            if (resync || !stale.is_empty()) && last_refresh.elapsed() >= refresh {
+                if resync {
+                    map.all_changed();
+                } else {
+                    for key in stale.drain() {
+                        map.tile_changed(key);
+                    }
+                }
+                stale.clear();
+                resync = false;
+                last_refresh = tokio::time::Instant::now();
+            }
+            let odometry = frame
+                .odometry
+                .map(|p| Pose2::new(p.x, p.y, p.theta))
+                .with_context(|| format!("frame {} has no odometry pose", frame.sequence))?;
+            if mcl.predict(&odometry)? {
+                let needed = mcl.tiles_needed(&map);
+                let missing = map.missing_tiles(needed.iter().copied());
+                if !missing.is_empty() {
+                    fetch_tiles(&client, &args.map, tile_size, &missing, &mut map).await?;
+                }
+                tokio::task::block_in_place(|| mcl.correct(&mut map, &frame.ranges))
+                    .with_context(|| format!("frame {}", frame.sequence))?;
+                map.evict_to_budget(&needed.into_iter().collect());
+                corrections += 1;
+            }
+            processed += 1;
+            if let Some(estimate) = mcl.estimate(&odometry) {
+                client
+                    .publish_pose(pb::PoseEstimate {
+                        robot: args.robot.clone(),
+                        map: args.map.clone(),
+                        frame_sequence: frame.sequence,
+                        time_s: frame.time_s,
+                        pose: Some(pb::Pose2 {
+                            x: estimate.pose.x,
+                            y: estimate.pose.y,
+                            theta: estimate.pose.theta,
+                        }),
+                        covariance: estimate.covariance.to_vec(),
+                        particle_count: estimate.particle_count as u32,
+                        converged: estimate.converged,
+                        lost_score: estimate.lost_score,
+                    })
+                    .await
+                    .with_context(|| format!("publishing the estimate of frame {}", frame.sequence))?;
+                if processed % 100 == 0 {
+                    tracing::info!(
+                        frame = frame.sequence,
+                        x = format!("{:.3}", estimate.pose.x),
+                        y = format!("{:.3}", estimate.pose.y),
+                        theta = format!("{:.3}", estimate.pose.theta),
+                        particles = estimate.particle_count,
+                        converged = estimate.converged,
+                        lost = format!("{:.2}", estimate.lost_score),
+                        cache_mb = format!("{:.1}", map.bytes() as f64 / f64::from(1 << 20)),
+                        "estimate"
+                    );
+                }
+            }
+            if args.to > 0 && frame.sequence >= args.to {
+                break;
+            }
+        }
+        watcher.abort();
+        let stats = map.stats();
+        println!(
+            "{} on {}: {processed} frames, {corrections} sensor updates, {} range tables built, cache {:.1} MiB",
+            args.robot,
+            args.map,
+            stats.tables_built,
+            map.bytes() as f64 / f64::from(1 << 20)
+        );
+        Ok(())
+    })
+}
+
+/// A tile as the server sent it, decoded.
+fn decode_tile(tile: &pb::Tile, size: TileSize) -> Result<(TileKey, u64, Tile)> {
+    let key = tile
+        .key
+        .map(|k| TileKey::new(k.x, k.y))
+        .context("the server sent a tile without a key")?;
+    ensure!(
+        tile.encoding == pb::CellEncoding::DenseI16Le as i32,
+        "the server sent tile ({}, {}) in encoding {}, expected dense",
+        key.x,
+        key.y,
+        tile.encoding
+    );
+    let cells = Tile::from_dense_bytes(size, &tile.cells)
+        .with_context(|| format!("tile ({}, {})", key.x, key.y))?;
+    Ok((key, tile.version, cells))
+}
+
+/// Fetches `keys` into the cache; keys the server has no tile for are
+/// stored as all unknown.
+async fn fetch_tiles(
+    client: &MapClient,
+    map_name: &str,
+    size: TileSize,
+    keys: &[TileKey],
+    map: &mut LocalMap,
+) -> Result<()> {
+    let tiles = client
+        .tiles(pb::TileQuery {
+            map: map_name.to_string(),
+            selection: Some(pb::tile_query::Selection::Keys(pb::TileKeys {
+                keys: keys
+                    .iter()
+                    .map(|k| pb::TileKey { x: k.x, y: k.y })
+                    .collect(),
+            })),
+            newer_than_version: 0,
+        })
+        .await
+        .context("fetching tiles")?;
+    let mut found = HashSet::new();
+    for tile in &tiles {
+        let (key, version, cells) = decode_tile(tile, size)?;
+        map.insert_tile(key, version, Some(&cells))?;
+        found.insert(key);
+    }
+    for key in keys {
+        if !found.contains(key) {
+            map.insert_tile(*key, 0, None)?;
+        }
+    }
+    Ok(())
+}
+
+/// What the watch stream reports.
+enum Change {
+    Tile(TileKey),
+    /// Events were lost or the map was cleared: everything held is stale.
+    All,
+}
+
+fn spawn_watcher(
+    mut stream: tonic::Streaming<pb::TileEvent>,
+) -> (
+    tokio::sync::mpsc::UnboundedReceiver<Change>,
+    tokio::task::JoinHandle<()>,
+) {
+    let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+    let task = tokio::spawn(async move {
+        loop {
+            let change = match stream.message().await {
+                Ok(Some(event)) => match event.event {
+                    Some(pb::tile_event::Event::Changed(tile)) => match tile.key {
+                        Some(k) => Change::Tile(TileKey::new(k.x, k.y)),
+                        None => continue,
+                    },
+                    Some(_) => Change::All,
+                    None => continue,
+                },
+                Ok(None) => break,
+                Err(status) => {
+                    tracing::warn!(%status, "the tile watch stream ended; the map is no longer kept current");
+                    break;
+                }
+            };
+            if tx.send(change).is_err() {
+                break;
+            }
+        }
+    });
+    (rx, task)
+}
