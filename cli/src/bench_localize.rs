@@ -49,7 +49,7 @@ pub struct LocalizeBenchArgs {
     #[arg(long, default_value_t = 10.0)]
     pub map_minutes: f64,
     /// Most particles.
-    #[arg(long, default_value_t = 20_000)]
+    #[arg(long, default_value_t = FilterSettings::default().kld.max_particles)]
     pub max_particles: usize,
     /// Turn specular reflection (lost echoes past 60° of incidence) and 2 %
     /// dropouts on in the simulator.

@@ -22,16 +22,23 @@
 //! `τ · Σₖ ln p(zₖ | z*ₖ)`. The beams are not independent: the Scout's
 //! 30° cones overlap by 7.5° on each side, and errors of a sonar-built map
 //! repeat from beam to beam. Counting 16 beams as 16 independent
-//! observations makes the posterior far too sharp, and then a single
-//! unlucky frame wipes out the right particles. The tempering `τ` (default
-//! 1/4) counts the frame as `16 · τ` independent observations; it is the
-//! exponent of the product of beam likelihoods, applied once in log space.
+//! observations makes the posterior far too sharp, and then a few unlucky
+//! frames wipe out the right particles before the evidence that tells two
+//! look-alike places apart arrives. The tempering `τ` counts the frame as
+//! `16 · τ` independent observations; it is the exponent of the product of
+//! beam likelihoods, applied once in log space. The default, 1/20 (a frame
+//! weighs as much as one independent beam), was measured best for global
+//! localization in the nearly symmetric `map1` and costs nothing in
+//! tracking accuracy (BENCHMARKS.md, localization).
 //!
-//! Per frame, each beam's likelihood is tabulated over `z*` in centimetres
-//! ([`BeamModel::tabulate`]), so that scoring a particle costs one table
-//! read per beam.
+//! Per frame, each beam's log-likelihood is tabulated over `z*` in
+//! centimetres ([`BeamModel::tabulate`]), so that scoring a particle costs
+//! one table read per beam and an integer sum.
 
 use crate::error::{LocalizerError, within};
+
+/// Units of a tabulated log-likelihood per nat.
+pub const TABLE_SCALE: f64 = 1000.0;
 
 /// Table slots per beam: predicted ranges 0 to `z_max` in whole centimetres,
 /// and one more for no echo.
@@ -73,7 +80,7 @@ impl Default for BeamModelParams {
             weight_max: 0.05,
             weight_random: 0.15,
             short_rate: 0.5,
-            tempering: 0.25,
+            tempering: 0.05,
         }
     }
 }
@@ -147,18 +154,24 @@ impl BeamModel {
         }
     }
 
-    /// `τ · ln p(z | z*)` for every predicted range slot (centimetres, then
-    /// no echo), for one measured range, into `out`. A measured range at or
-    /// past the maximum is no echo; one below zero counts as zero.
-    pub fn tabulate(&self, measured: f64, out: &mut Vec<f32>) {
+    /// `ln p(z | z*)` for every predicted range slot (centimetres, then no
+    /// echo), for one measured range, into `out`, in thousandths of a nat
+    /// ([`TABLE_SCALE`]; the tempering is applied to the sum): 16 beams'
+    /// tables then fit the first-level cache. A measured range at or past
+    /// the maximum is no echo; one below zero counts as zero.
+    pub fn tabulate(&self, measured: f64, out: &mut Vec<i16>) {
         let measured = (measured < self.params.max_range).then(|| measured.max(0.0));
         out.clear();
-        let tempering = self.params.tempering;
+        let fixed = |likelihood: f64| {
+            (likelihood.ln() * TABLE_SCALE)
+                .round()
+                .clamp(-f64::from(i16::MAX), f64::from(i16::MAX)) as i16
+        };
         for slot in 0..self.no_echo_slot {
             let predicted = slot as f64 / 100.0;
-            out.push((tempering * self.likelihood(measured, Some(predicted)).ln()) as f32);
+            out.push(fixed(self.likelihood(measured, Some(predicted))));
         }
-        out.push((tempering * self.likelihood(measured, None).ln()) as f32);
+        out.push(fixed(self.likelihood(measured, None)));
     }
 }
 
@@ -246,18 +259,19 @@ mod tests {
         m.tabulate(2.0, &mut table);
         assert_eq!(table.len(), table_len(10.668));
         assert_eq!(table.len() - 1, m.no_echo_slot());
-        let expected = 0.25 * m.likelihood(Some(2.0), Some(2.0)).ln();
-        assert_abs_diff_eq!(f64::from(table[200]), expected, epsilon = 1e-5);
+        let expected = m.likelihood(Some(2.0), Some(2.0)).ln();
+        assert_abs_diff_eq!(
+            f64::from(table[200]) / TABLE_SCALE,
+            expected,
+            epsilon = 1e-3
+        );
         let best = (0..table.len())
-            .max_by(|&a, &b| table[a].total_cmp(&table[b]))
+            .max_by_key(|&a| (table[a], std::cmp::Reverse(a.abs_diff(200))))
             .unwrap();
         assert_eq!(best, 200);
         m.tabulate(20.0, &mut table);
-        let best = (0..table.len())
-            .max_by(|&a, &b| table[a].total_cmp(&table[b]))
-            .unwrap();
+        let best = (0..table.len()).max_by_key(|&a| table[a]).unwrap();
         assert_eq!(best, m.no_echo_slot());
-        assert!(table.iter().all(|v| v.is_finite()));
     }
 
     #[test]

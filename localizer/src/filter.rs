@@ -27,12 +27,16 @@ use deog_grid::{CellIndex, Pose2, SensorRing, TileKey, normalize_angle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::beam_model::{BeamModel, BeamModelParams};
+use crate::beam_model::{BeamModel, BeamModelParams, TABLE_SCALE};
 use crate::cluster::{BinSize, ClusterEstimate, heaviest_cluster};
 use crate::error::{LocalizerError, within};
 use crate::local_map::LocalMap;
 use crate::motion::{MotionNoise, OdometryMove};
 use crate::sampling::{KldSettings, systematic_resample};
+
+/// Up to this many tiles, a correction reads every tile of the particles'
+/// bounding box rather than finding the tiles under each particle.
+const BOUNDING_BOX_TILES: i64 = 64;
 
 /// Every setting of the filter.
 #[derive(Debug, Clone, PartialEq)]
@@ -80,7 +84,7 @@ impl Default for FilterSettings {
             update_min_distance: 0.05,
             update_min_rotation: 0.05,
             resample_below: 0.5,
-            alpha_slow: 0.001,
+            alpha_slow: 0.01,
             alpha_fast: 0.1,
             converged_weight: 0.6,
             converged_spread_m: 0.2,
@@ -167,7 +171,7 @@ pub struct Mcl {
     w_fast: f64,
     cluster: Option<ClusterEstimate>,
     /// Per-beam likelihood tables of the current frame.
-    beam_tables: Vec<Vec<f32>>,
+    beam_tables: Vec<Vec<i16>>,
     scratch_log: Vec<f64>,
     scratch_indices: Vec<usize>,
 }
@@ -223,12 +227,15 @@ impl Mcl {
             self.particles
                 .push(random_pose_in(cell, res, &mut self.rng));
         }
+        self.sort_particles(res);
         self.reset_weights();
         Ok(())
     }
 
-    /// Tracking: particles drawn around `pose` with standard deviations
-    /// `std_xy` (metres) and `std_theta` (radians).
+    /// Tracking: the most particles the settings allow, drawn around `pose`
+    /// with standard deviations `std_xy` (metres) and `std_theta` (radians);
+    /// KLD-sampling cuts their number at the first resampling if the pose
+    /// is as certain as that.
     pub fn start_at(
         &mut self,
         pose: Pose2,
@@ -238,11 +245,7 @@ impl Mcl {
         let pose = pose.validate("initial pose")?;
         within("initial std_xy", std_xy, 0.0, 1000.0)?;
         within("initial std_theta", std_theta, 0.0, 10.0)?;
-        let n = self
-            .settings
-            .kld
-            .min_particles
-            .max(self.settings.kld.max_particles / 4);
+        let n = self.settings.kld.max_particles;
         self.particles.clear();
         for _ in 0..n {
             let p = Pose2::new(
@@ -252,8 +255,19 @@ impl Mcl {
             );
             self.particles.push(p);
         }
+        // Any grid gives the order its locality; the map's is not at hand.
+        self.sort_particles(deog_grid::Resolution::DEFAULT);
         self.reset_weights();
         Ok(())
+    }
+
+    /// Puts the particles in row-major order of their cells, so that
+    /// scoring walks the range tables in memory order rather than jumping
+    /// about (the weights must be uniform: they are not permuted).
+    fn sort_particles(&mut self, res: deog_grid::Resolution) {
+        let inv = 1.0 / res.metres();
+        self.particles
+            .sort_unstable_by_key(|p| ((p.y * inv).floor() as i64, (p.x * inv).floor() as i64));
     }
 
     fn reset_weights(&mut self) {
@@ -298,6 +312,28 @@ impl Mcl {
             .map(|m| m.x.hypot(m.y))
             .fold(0.0, f64::max);
         let res = map.settings().resolution;
+        // Usually the particles' bounding box is small: take its tiles.
+        let (mut lo_x, mut lo_y, mut hi_x, mut hi_y) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+        for p in &self.particles {
+            lo_x = lo_x.min(p.x);
+            lo_y = lo_y.min(p.y);
+            hi_x = hi_x.max(p.x);
+            hi_y = hi_y.max(p.y);
+        }
+        if let (Ok(lo), Ok(hi)) = (
+            res.cell_of(lo_x - reach, lo_y - reach),
+            res.cell_of(hi_x + reach, hi_y + reach),
+        ) {
+            let (a, b) = (map.tile_of(lo), map.tile_of(hi));
+            let count =
+                (i64::from(b.x) - i64::from(a.x) + 1) * (i64::from(b.y) - i64::from(a.y) + 1);
+            if count <= BOUNDING_BOX_TILES {
+                return (a.y..=b.y)
+                    .flat_map(|y| (a.x..=b.x).map(move |x| TileKey::new(x, y)))
+                    .collect();
+            }
+        }
+        // Far-apart clusters: only the tiles under particles.
         let mut keys = HashSet::new();
         let mut last = None;
         for p in &self.particles {
@@ -321,15 +357,11 @@ impl Mcl {
         keys
     }
 
-    /// Weighs the particles by one sonar frame (`ranges` in the ring's
-    /// order, metres; at or past the maximum means no echo), updates the
-    /// likelihood averages and resamples if due. Builds the range tables
-    /// it lacks from the tiles `map` holds.
-    pub fn correct(
-        &mut self,
-        map: &mut LocalMap,
-        ranges: &[f64],
-    ) -> Result<CorrectionReport, LocalizerError> {
+    /// The sensor model's half of [`Self::correct`]: every particle's
+    /// tempered log-likelihood of `ranges`, kept for the weighting (and
+    /// returned by [`Self::scores`]). Returns how many range tables it
+    /// built. Public so that benchmarks can time it alone.
+    pub fn score(&mut self, map: &mut LocalMap, ranges: &[f64]) -> Result<usize, LocalizerError> {
         if ranges.len() != self.settings.ring.len() {
             return Err(LocalizerError::Invalid(format!(
                 "the frame has {} ranges, the sensor ring {} sonars",
@@ -355,29 +387,57 @@ impl Mcl {
         let tables_built = map.ensure_tables(keys.iter().copied())?;
         let window = map.window(&keys);
         let no_echo = self.model.no_echo_slot();
-        let mounts = self.settings.ring.mounts();
+        // Each mount's offset, the sine and cosine of its heading, and its
+        // heading as a position among the table's stored headings.
+        let headings = window.headings() as f64;
+        let mounts: Vec<(f64, f64, f64, f64, f64)> = self
+            .settings
+            .ring
+            .mounts()
+            .iter()
+            .map(|m| {
+                let (s, c) = m.theta.sin_cos();
+                (m.x, m.y, c, s, window.heading_position(m.theta))
+            })
+            .collect();
+        let to_nats = self.settings.beam.tempering / TABLE_SCALE;
         self.scratch_log.clear();
         for p in &self.particles {
             let (sin, cos) = p.theta.sin_cos();
-            let mut log_likelihood = 0.0f32;
-            for (mount, table) in mounts.iter().zip(&self.beam_tables) {
-                let sx = p.x + cos * mount.x - sin * mount.y;
-                let sy = p.y + sin * mount.x + cos * mount.y;
-                let (ms, mc) = mount.theta.sin_cos();
+            let base = window.heading_position(p.theta);
+            let mut log_likelihood = 0i32;
+            for (&(mx, my, mc, ms, mp), table) in mounts.iter().zip(&self.beam_tables) {
+                let sx = p.x + cos * mx - sin * my;
+                let sy = p.y + sin * mx + cos * my;
                 let beam_cos = cos * mc - sin * ms;
                 let beam_sin = sin * mc + cos * ms;
-                let slot = window.expected_slot(
-                    sx,
-                    sy,
-                    p.theta + mount.theta,
-                    (beam_cos, beam_sin),
-                    no_echo,
-                );
-                log_likelihood += table[slot];
+                let mut position = base + mp;
+                if position >= headings {
+                    position -= headings;
+                }
+                let slot = window.expected_slot_at(sx, sy, position, (beam_cos, beam_sin), no_echo);
+                log_likelihood += i32::from(table[slot]);
             }
-            self.scratch_log.push(f64::from(log_likelihood));
+            self.scratch_log.push(f64::from(log_likelihood) * to_nats);
         }
-        drop(window);
+        Ok(tables_built)
+    }
+
+    /// The log-likelihoods [`Self::score`] last computed, one per particle.
+    pub fn scores(&self) -> &[f64] {
+        &self.scratch_log
+    }
+
+    /// Weighs the particles by one sonar frame (`ranges` in the ring's
+    /// order, metres; at or past the maximum means no echo), updates the
+    /// likelihood averages and resamples if due. Builds the range tables
+    /// it lacks from the tiles `map` holds.
+    pub fn correct(
+        &mut self,
+        map: &mut LocalMap,
+        ranges: &[f64],
+    ) -> Result<CorrectionReport, LocalizerError> {
+        let tables_built = self.score(map, ranges)?;
         // New weights ∝ old · likelihood, in log space.
         let mut best = f64::NEG_INFINITY;
         for (l, w) in self.scratch_log.iter_mut().zip(&self.weights) {
@@ -450,13 +510,13 @@ impl Mcl {
         map.ensure_tables(keys.iter().copied())?;
         let window = map.window(&keys);
         let no_echo = self.model.no_echo_slot();
-        let mut total = 0.0f64;
+        let mut total = 0i32;
         for (sensor, table) in self.settings.ring.sensor_poses(pose).zip(&self.beam_tables) {
             let (sin, cos) = sensor.theta.sin_cos();
             let slot = window.expected_slot(sensor.x, sensor.y, sensor.theta, (cos, sin), no_echo);
-            total += f64::from(table[slot]);
+            total += i32::from(table[slot]);
         }
-        Ok(total)
+        Ok(f64::from(total) * self.settings.beam.tempering / TABLE_SCALE)
     }
 
     /// The share of particles the next resampling draws from free space.
@@ -512,6 +572,7 @@ impl Mcl {
         }
         let n = next.len();
         self.particles = next;
+        self.sort_particles(res);
         self.weights = vec![1.0 / n as f64; n];
         if injected > 0 {
             // The injected particles answer the drop; start the averages anew

@@ -512,13 +512,32 @@ pub struct RangeWindow<'a> {
 }
 
 impl RangeWindow<'_> {
+    /// Stored headings per full turn.
+    pub fn headings(&self) -> usize {
+        self.headings
+    }
+
+    /// A heading as a position among the stored headings, in `[0, headings)`.
+    #[inline]
+    pub fn heading_position(&self, heading: f64) -> f64 {
+        let h = self.headings as f64;
+        let mut position = heading * (h / std::f64::consts::TAU);
+        // Headings arrive within a few turns of zero: no division needed.
+        while position < 0.0 {
+            position += h;
+        }
+        while position >= h {
+            position -= h;
+        }
+        position
+    }
+
     /// The expected range in whole centimetres, clamped below
     /// `no_echo_slot`, or `no_echo_slot` itself for no echo, of a sonar at
     /// `(x, y)` pointing along `heading` (radians): the table of its cell,
     /// interpolated between the two nearest stored headings and corrected
     /// for where in the cell the sensor sits. `cos` and `sin` are those of
-    /// `heading` (the caller has them cheaper). Outside the tables: 0, as
-    /// inside an obstacle.
+    /// `heading`. Outside the tables: 0, as inside an obstacle.
     #[inline]
     pub fn expected_slot(
         &self,
@@ -528,9 +547,22 @@ impl RangeWindow<'_> {
         (cos, sin): (f64, f64),
         no_echo_slot: usize,
     ) -> usize {
-        let fx = (x * self.inv_res).floor();
-        let fy = (y * self.inv_res).floor();
-        let (cx, cy) = (fx as i64, fy as i64);
+        let position = self.heading_position(heading);
+        self.expected_slot_at(x, y, position, (cos, sin), no_echo_slot)
+    }
+
+    /// [`Self::expected_slot`] with the heading given as its position among
+    /// the stored headings ([`Self::heading_position`]), in `[0, headings)`.
+    #[inline(always)]
+    pub fn expected_slot_at(
+        &self,
+        x: f64,
+        y: f64,
+        position: f64,
+        (cos, sin): (f64, f64),
+        no_echo_slot: usize,
+    ) -> usize {
+        let (cx, cy) = (floor_i64(x * self.inv_res), floor_i64(y * self.inv_res));
         let tx = (cx >> self.shift) - i64::from(self.min.x);
         let ty = (cy >> self.shift) - i64::from(self.min.y);
         if tx < 0 || ty < 0 || tx as usize >= self.width || ty as usize >= self.height {
@@ -540,10 +572,7 @@ impl RangeWindow<'_> {
             return 0;
         };
         let index = (((cy & self.mask) << self.shift) + (cx & self.mask)) as usize;
-        let base = index * self.headings;
-        let h = self.headings as f64;
-        let mut position = heading * (h / std::f64::consts::TAU);
-        position -= (position / h).floor() * h;
+        let cell = &table[index * self.headings..(index + 1) * self.headings];
         let lower = (position as usize).min(self.headings - 1);
         let frac = position - lower as f64;
         let upper = if lower + 1 == self.headings {
@@ -551,23 +580,32 @@ impl RangeWindow<'_> {
         } else {
             lower + 1
         };
-        let (a, b) = (table[base + lower], table[base + upper]);
-        let millimetres = match (a, b) {
-            (NO_ECHO, NO_ECHO) => return no_echo_slot,
-            (0, _) | (_, 0) => return 0,
-            (NO_ECHO, v) | (v, NO_ECHO) => {
-                let nearer = if frac < 0.5 { a } else { b };
-                if nearer == NO_ECHO {
-                    return no_echo_slot;
-                }
-                f64::from(v)
+        let (a, b) = (cell[lower], cell[upper]);
+        let millimetres = if a.min(b) == 0 {
+            return 0;
+        } else if a.max(b) == NO_ECHO {
+            // Between an echo and none: take the nearer heading's.
+            let nearer = if frac < 0.5 { a } else { b };
+            if nearer == NO_ECHO {
+                return no_echo_slot;
             }
-            (a, b) => f64::from(a) + (f64::from(b) - f64::from(a)) * frac,
+            f64::from(nearer)
+        } else {
+            f64::from(a) + (f64::from(b) - f64::from(a)) * frac
         };
         // The table is for the cell's centre; move to the sensor.
-        let off_x = x - (fx + 0.5) * self.res;
-        let off_y = y - (fy + 0.5) * self.res;
+        let off_x = x - (cx as f64 + 0.5) * self.res;
+        let off_y = y - (cy as f64 + 0.5) * self.res;
         let centimetres = millimetres * 0.1 - (off_x * cos + off_y * sin) * 100.0;
-        (centimetres.round().max(0.0) as usize).min(no_echo_slot - 1)
+        // Rounded by truncating after adding a half: non-negative here.
+        ((centimetres.max(0.0) + 0.5) as usize).min(no_echo_slot - 1)
     }
+}
+
+/// `v.floor()` as an integer, without the library call `floor` compiles to
+/// on baseline x86-64 (no SSE4.1); saturates far outside the i64 range.
+#[inline]
+fn floor_i64(v: f64) -> i64 {
+    let t = v as i64;
+    t - i64::from((t as f64) > v)
 }

@@ -66,13 +66,18 @@ pub struct KldSettings {
 }
 
 impl Default for KldSettings {
-    /// ROS amcl's defaults for ε and δ (0.01, 0.01); 500 to 20,000 particles.
+    /// ROS amcl's defaults for ε and δ (0.01, 0.01); 500 to 100,000
+    /// particles. Global localization in a nearly symmetric room needs the
+    /// 100,000: with fewer, each half of the room holds only a handful of
+    /// particles near the right pose, and whichever half happens to hold
+    /// the better-placed one wins before the sonars can tell them apart
+    /// (BENCHMARKS.md, localization).
     fn default() -> Self {
         Self {
             epsilon: 0.01,
             delta: 0.01,
             min_particles: 500,
-            max_particles: 20_000,
+            max_particles: 100_000,
         }
     }
 }
@@ -141,7 +146,7 @@ mod tests {
         assert!(kld_sample_count(100, 0.01, 0.01) > kld_sample_count(100, 0.05, 0.01));
         let s = KldSettings::default();
         assert_eq!(s.particles_for(1), 500);
-        assert_eq!(s.particles_for(1_000_000), 20_000);
+        assert_eq!(s.particles_for(1_000_000), 100_000);
     }
 
     #[test]

@@ -1,0 +1,290 @@
+//! The particle filter on a synthetic room, with sonar frames cast from the
+//! same map by the plain reference (so the map is exact and any error is the
+//! filter's): tracking, global localization, kidnapping, determinism, bad
+//! input; and the cache staying within its budget on a map far larger.
+
+use std::collections::HashSet;
+
+use deog_grid::{
+    CellIndex, OccupancyThresholds, Pose2, Resolution, SensorRing, Tile, TileKey, TileSize,
+    normalize_angle,
+};
+use deog_localizer::filter::{FilterSettings, Mcl};
+use deog_localizer::local_map::{LocalMap, MapSettings};
+use deog_localizer::range_table::{ConeGeometry, expected_range_by_marching};
+
+const OCCUPIED: i16 = 3000;
+const FREE: i16 = -3000;
+
+/// An asymmetric 8 × 6 m room: walls, an L-shaped block and a box.
+fn solid(x: f64, y: f64) -> bool {
+    let wall = x < 0.1 || x > 7.9 || y < 0.1 || y > 5.9;
+    let blocks = [
+        (1.5, 1.0, 2.5, 1.6),
+        (5.0, 3.0, 5.5, 5.0),
+        (5.5, 3.0, 6.8, 3.5),
+    ];
+    wall || blocks
+        .iter()
+        .any(|&(x0, y0, x1, y1)| (x0..x1).contains(&x) && (y0..y1).contains(&y))
+}
+
+fn settings(budget_bytes: usize) -> MapSettings {
+    MapSettings {
+        resolution: Resolution::DEFAULT,
+        tile_size: TileSize::new(64).unwrap(),
+        thresholds: OccupancyThresholds::default(),
+        geometry: ConeGeometry::default(),
+        budget_bytes,
+    }
+}
+
+/// The room's tile `key`: cells inside 0..8 × 0..6 m known, the rest unknown.
+fn room_tile(key: TileKey) -> Tile {
+    let s = settings(0);
+    let origin = s.tile_size.origin(key).unwrap();
+    let side = s.tile_size.cells() as i32;
+    let mut bytes = Vec::new();
+    for cy in 0..side {
+        for cx in 0..side {
+            let (x, y) = s
+                .resolution
+                .cell_center(CellIndex::new(origin.x + cx, origin.y + cy));
+            let value = if !(0.0..8.0).contains(&x) || !(0.0..6.0).contains(&y) {
+                i16::MIN
+            } else if solid(x, y) {
+                OCCUPIED
+            } else {
+                FREE
+            };
+            bytes.extend_from_slice(&value.to_le_bytes());
+        }
+    }
+    Tile::from_dense_bytes(s.tile_size, &bytes).unwrap()
+}
+
+fn room() -> LocalMap {
+    let mut map = LocalMap::new(settings(1 << 30)).unwrap();
+    for ty in -1..=2 {
+        for tx in -1..=3 {
+            let key = TileKey::new(tx, ty);
+            map.insert_tile(key, 1, Some(&room_tile(key))).unwrap();
+        }
+    }
+    map
+}
+
+/// The ranges the Scout's sonars read at `pose` in the room (no echo as 11 m).
+fn frame(map: &LocalMap, pose: &Pose2) -> Vec<f64> {
+    let geometry = ConeGeometry::default();
+    SensorRing::scout()
+        .sensor_poses(pose)
+        .map(|s| {
+            expected_range_by_marching(map, Resolution::DEFAULT, &geometry, s.x, s.y, s.theta)
+                .unwrap_or(11.0)
+        })
+        .collect()
+}
+
+/// A robot driving round a circle of radius `r` about `centre`, 5 cm a
+/// frame: (true pose, odometry) per frame, the odometry reading 2 % long.
+fn circle(centre: (f64, f64), r: f64, frames: usize) -> Vec<(Pose2, Pose2)> {
+    let turn = 0.05 / r;
+    let mut out = Vec::new();
+    let mut odometry = Pose2::new(0.0, 0.0, 0.0);
+    for i in 0..frames {
+        let a = i as f64 * turn;
+        let truth = Pose2::new(
+            centre.0 + r * a.cos(),
+            centre.1 + r * a.sin(),
+            normalize_angle(a + std::f64::consts::FRAC_PI_2),
+        );
+        assert!(
+            !solid(truth.x, truth.y),
+            "the test path runs into a wall at frame {i}"
+        );
+        out.push((truth, odometry));
+        odometry = Pose2::new(
+            odometry.x + 0.051 * odometry.theta.cos(),
+            odometry.y + 0.051 * odometry.theta.sin(),
+            normalize_angle(odometry.theta + turn),
+        );
+    }
+    out
+}
+
+fn path(frames: usize) -> Vec<(Pose2, Pose2)> {
+    circle((3.5, 3.2), 1.2, frames)
+}
+
+fn error(estimate: &Pose2, truth: &Pose2) -> (f64, f64) {
+    (
+        (estimate.x - truth.x).hypot(estimate.y - truth.y),
+        normalize_angle(estimate.theta - truth.theta).abs(),
+    )
+}
+
+fn run(mcl: &mut Mcl, map: &mut LocalMap, steps: &[(Pose2, Pose2)]) -> Vec<(f64, f64)> {
+    let mut errors = Vec::new();
+    for (truth, odometry) in steps {
+        if mcl.predict(odometry).unwrap() {
+            let ranges = frame(map, truth);
+            mcl.correct(map, &ranges).unwrap();
+        }
+        let estimate = mcl.estimate(odometry).unwrap();
+        errors.push(error(&estimate.pose, truth));
+    }
+    errors
+}
+
+fn filter(max_particles: usize, seed: u64) -> Mcl {
+    let mut settings = FilterSettings {
+        seed,
+        ..FilterSettings::default()
+    };
+    settings.kld.max_particles = max_particles;
+    Mcl::new(settings).unwrap()
+}
+
+#[test]
+fn tracking_stays_within_centimetres() {
+    let mut map = room();
+    let steps = path(240);
+    let mut mcl = filter(5_000, 3);
+    let start = steps[0].0;
+    mcl.start_at(
+        Pose2::new(start.x + 0.1, start.y - 0.1, start.theta + 0.05),
+        0.2,
+        0.1,
+    )
+    .unwrap();
+    let errors = run(&mut mcl, &mut map, &steps);
+    let tail = &errors[40..];
+    let mean_position = tail.iter().map(|e| e.0).sum::<f64>() / tail.len() as f64;
+    let mean_heading = tail.iter().map(|e| e.1).sum::<f64>() / tail.len() as f64;
+    assert!(
+        mean_position < 0.05,
+        "mean position error {mean_position:.3} m"
+    );
+    assert!(
+        mean_heading < 2f64.to_radians(),
+        "mean heading error {:.2}°",
+        mean_heading.to_degrees()
+    );
+    // KLD-sampling shrank the set once the pose was certain.
+    assert!(
+        mcl.particles().len() < 5_000,
+        "{} particles",
+        mcl.particles().len()
+    );
+}
+
+#[test]
+fn global_localization_converges_and_is_deterministic() {
+    let mut map = room();
+    let steps = path(200);
+    let mut first = filter(30_000, 11);
+    first.start_global(&map).unwrap();
+    let errors = run(&mut first, &mut map, &steps);
+    let (position, heading) = errors[errors.len() - 1];
+    assert!(
+        position < 0.15 && heading < 0.15,
+        "final error {position:.3} m, {heading:.3} rad"
+    );
+    let estimate = first.estimate(&steps[steps.len() - 1].1).unwrap();
+    assert!(estimate.converged, "{estimate:?}");
+    // The same seed, the same particles.
+    let mut second = filter(30_000, 11);
+    second.start_global(&map).unwrap();
+    run(&mut second, &mut map, &steps);
+    assert_eq!(first.particles(), second.particles());
+}
+
+#[test]
+fn a_kidnapped_robot_is_found_again() {
+    let mut map = room();
+    let steps = path(300);
+    let mut mcl = filter(20_000, 5);
+    let start = steps[0].0;
+    mcl.start_at(start, 0.05, 0.05).unwrap();
+    run(&mut mcl, &mut map, &steps[..60]);
+    // Carried off: the truth jumps to another circle, the odometry goes on
+    // as if nothing happened.
+    let last_odometry = steps[59].1;
+    let kidnapped: Vec<(Pose2, Pose2)> = circle((6.0, 1.6), 1.0, 240)
+        .into_iter()
+        .map(|(t, o)| (t, last_odometry.compose(&o)))
+        .collect();
+    let errors = run(&mut mcl, &mut map, &kidnapped);
+    let (position, heading) = errors[errors.len() - 1];
+    assert!(
+        position < 0.25 && heading < 0.25,
+        "after the kidnap: {position:.3} m, {heading:.3} rad"
+    );
+}
+
+#[test]
+fn bad_frames_are_errors_not_panics() {
+    let mut map = room();
+    let mut mcl = filter(1_000, 1);
+    // Not started.
+    assert!(mcl.correct(&mut map, &[1.0; 16]).is_err());
+    mcl.start_at(Pose2::new(2.0, 2.0, 0.0), 0.1, 0.1).unwrap();
+    let err = mcl.correct(&mut map, &[1.0; 15]).unwrap_err().to_string();
+    assert!(err.contains("15 ranges"), "{err}");
+    let mut ranges = vec![1.0; 16];
+    ranges[3] = f64::NAN;
+    let err = mcl.correct(&mut map, &ranges).unwrap_err().to_string();
+    assert!(err.contains("ranges[3]"), "{err}");
+    assert!(mcl.predict(&Pose2::new(f64::INFINITY, 0.0, 0.0)).is_err());
+    assert!(
+        mcl.start_at(Pose2::new(f64::NAN, 0.0, 0.0), 0.1, 0.1)
+            .is_err()
+    );
+    // An empty map has nowhere to put particles.
+    let empty = LocalMap::new(settings(1 << 20)).unwrap();
+    assert!(filter(1_000, 1).start_global(&empty).is_err());
+}
+
+#[test]
+fn cache_stays_within_budget_on_a_map_a_hundred_times_larger() {
+    // A 40 × 40 tile map (128 × 128 m) whose range tables alone would take
+    // about 1.5 GiB, behind a 12 MiB budget, with a robot's particles driven
+    // from one corner to the other.
+    let budget = 12 << 20;
+    let mut map = LocalMap::new(settings(budget)).unwrap();
+    let tile_table_bytes = ConeGeometry::default().table_bytes(64 * 64);
+    assert!(1600 * tile_table_bytes > 100 * budget);
+    let size = map.settings().tile_size;
+    let mut mcl = filter(2_000, 2);
+    let mut peak = 0;
+    for step in 0..40 {
+        let p = Pose2::new(
+            1.6 + 3.2 * f64::from(step),
+            1.6 + 3.2 * f64::from(step),
+            0.7,
+        );
+        mcl.start_at(p, 0.3, 0.3).unwrap();
+        let needed = mcl.tiles_needed(&map);
+        for key in map.missing_tiles(needed.iter().copied()) {
+            // The same room pattern repeated everywhere; far tiles read as unknown.
+            let local = TileKey::new(key.x.rem_euclid(3), key.y.rem_euclid(2));
+            let tile = room_tile(local);
+            assert_eq!(tile.size(), size);
+            map.insert_tile(key, 1, Some(&tile)).unwrap();
+        }
+        let ranges = vec![2.0; 16];
+        mcl.correct(&mut map, &ranges).unwrap();
+        map.evict_to_budget(&needed.iter().copied().collect::<HashSet<_>>());
+        peak = peak.max(map.bytes());
+    }
+    assert!(
+        peak <= budget,
+        "the cache held {peak} bytes, budget {budget}"
+    );
+    assert!(
+        map.stats().tables_dropped > 0,
+        "nothing was evicted: {:?}",
+        map.stats()
+    );
+}
