@@ -29,7 +29,7 @@ const FREE: i16 = -3000;
 /// Whether a point of the room is solid.
 fn solid(x: f64, y: f64) -> bool {
     let outside = !(0.0..10.0).contains(&x) || !(0.0..8.0).contains(&y);
-    let wall = x < 0.1 || x > 9.9 || y < 0.1 || y > 7.9;
+    let wall = !(0.1..=9.9).contains(&x) || !(0.1..=7.9).contains(&y);
     let boxes = [
         (2.0, 1.5, 3.2, 2.3),
         (6.0, 4.0, 6.5, 6.5),

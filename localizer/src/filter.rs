@@ -471,11 +471,14 @@ impl Mcl {
             tables_built,
             ..CorrectionReport::default()
         };
+        // The estimate comes from the weighted set, before resampling: after
+        // it the weights are equal, and a crowd of freshly injected
+        // particles would form one large cluster that outweighs the right one.
+        self.cluster = heaviest_cluster(&self.particles, &self.weights, self.settings.bins);
         if ess < self.settings.resample_below * self.particles.len() as f64 || inject > 0.0 {
             report.injected = self.resample(map, inject)?;
             report.resampled = true;
         }
-        self.cluster = heaviest_cluster(&self.particles, &self.weights, self.settings.bins);
         Ok(report)
     }
 

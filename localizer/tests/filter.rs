@@ -18,7 +18,7 @@ const FREE: i16 = -3000;
 
 /// An asymmetric 8 × 6 m room: walls, an L-shaped block and a box.
 fn solid(x: f64, y: f64) -> bool {
-    let wall = x < 0.1 || x > 7.9 || y < 0.1 || y > 5.9;
+    let wall = !(0.1..=7.9).contains(&x) || !(0.1..=5.9).contains(&y);
     let blocks = [
         (1.5, 1.0, 2.5, 1.6),
         (5.0, 3.0, 5.5, 5.0),
