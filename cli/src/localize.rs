@@ -16,7 +16,7 @@ use deog_proto::v1 as pb;
 use deog_robot_client::MapClient;
 
 use crate::connection::ConnectionArgs;
-use crate::map::spawn_frame_reader;
+use crate::frame_queue::FrameQueue;
 
 /// Options of `deog localize`.
 #[derive(Debug, Args)]
@@ -171,34 +171,20 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             .await
             .context("following the robot's frames")?
             .into_inner();
-        let (mut queue, reader) = spawn_frame_reader(frames);
+        let mut queue = FrameQueue::spawn(frames, args.idle_exit);
         let shutdown = crate::signal::shutdown();
         tokio::pin!(shutdown);
-        let idle = (args.idle_exit > 0.0).then(|| Duration::from_secs_f64(args.idle_exit));
         let refresh = Duration::from_secs_f64(args.refresh_s);
         let mut stale: HashSet<TileKey> = HashSet::new();
         let mut resync = false;
         let mut last_refresh = tokio::time::Instant::now();
         let (mut processed, mut corrections, mut last_sequence) = (0u64, 0u64, 0u64);
         loop {
-            let next = async {
-                match idle {
-                    Some(idle) => tokio::time::timeout(idle, queue.recv()).await.ok(),
-                    None => Some(queue.recv().await),
-                }
-            };
             let frame = tokio::select! {
                 () = &mut shutdown => break,
-                frame = next => match frame {
-                    None => {
-                        tracing::info!("no frame for {:.1} s; stopping", args.idle_exit);
-                        break;
-                    }
-                    Some(Some(frame)) => frame,
-                    Some(None) => {
-                        reader.await.context("the frame reader panicked")??;
-                        break;
-                    }
+                frame = queue.next() => match frame? {
+                    Some(frame) => frame,
+                    None => break,
                 },
             };
             if frame.sequence <= last_sequence {

@@ -6,6 +6,7 @@ mod connection;
 mod demo;
 mod eval;
 mod export;
+mod frame_queue;
 mod frames;
 mod import;
 mod localize;

@@ -3,7 +3,7 @@
 //! batches, each numbered by the last frame it holds, so that a restart
 //! resumes after the last frame the server applied and none is applied twice.
 
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
@@ -13,6 +13,7 @@ use deog_proto::v1 as pb;
 use deog_robot_client::{MapClient, UpdateSenderConfig};
 
 use crate::connection::ConnectionArgs;
+use crate::frame_queue::FrameQueue;
 
 /// Which pose to map from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -167,11 +168,10 @@ pub fn run(args: MapArgs) -> Result<()> {
             .await
             .context("following the robot's frames")?
             .into_inner();
-        let (mut queue, reader) = spawn_frame_reader(frames);
+        let mut queue = FrameQueue::spawn(frames, args.idle_exit);
 
         let shutdown = crate::signal::shutdown();
         tokio::pin!(shutdown);
-        let idle = (args.idle_exit > 0.0).then(|| Duration::from_secs_f64(args.idle_exit));
         // Timed from the first frame to the last acknowledgement: the
         // rate of the pipeline, not of waiting for frames.
         let mut began: Option<Instant> = None;
@@ -180,24 +180,11 @@ pub fn run(args: MapArgs) -> Result<()> {
         let mut deltas = Vec::new();
         let mut batch = Vec::new();
         'follow: loop {
-            let next = async {
-                match idle {
-                    Some(idle) => tokio::time::timeout(idle, queue.recv()).await.ok(),
-                    None => Some(queue.recv().await),
-                }
-            };
             let first = tokio::select! {
                 () = &mut shutdown => break,
-                frame = next => match frame {
-                    None => {
-                        tracing::info!("no frame for {:.1} s; stopping", args.idle_exit);
-                        break;
-                    }
-                    Some(Some(frame)) => frame,
-                    Some(None) => {
-                        reader.await.context("the frame reader panicked")??;
-                        break;
-                    }
+                frame = queue.next() => match frame? {
+                    Some(frame) => frame,
+                    None => break,
                 },
             };
             began.get_or_insert_with(Instant::now);
@@ -207,9 +194,9 @@ pub fn run(args: MapArgs) -> Result<()> {
             batch.clear();
             batch.push(first);
             while batch.len() < args.batch_frames {
-                match queue.try_recv() {
-                    Ok(frame) => batch.push(frame),
-                    Err(_) => break,
+                match queue.try_next() {
+                    Some(frame) => batch.push(frame),
+                    None => break,
                 }
             }
             let mut stop = false;
@@ -294,24 +281,4 @@ async fn send(
         log.flush().context("writing the ack log")?;
     }
     Ok(())
-}
-
-pub(crate) type FrameReader = (
-    tokio::sync::mpsc::Receiver<pb::SonarFrame>,
-    tokio::task::JoinHandle<Result<()>>,
-);
-
-/// Reads the frame stream into a queue as fast as it comes, so the main
-/// loop can take whatever has arrived as one batch.
-pub(crate) fn spawn_frame_reader(mut stream: tonic::Streaming<pb::SonarFrame>) -> FrameReader {
-    let (tx, rx) = tokio::sync::mpsc::channel(1024);
-    let task = tokio::spawn(async move {
-        while let Some(frame) = stream.message().await.context("the frame stream failed")? {
-            if tx.send(frame).await.is_err() {
-                break;
-            }
-        }
-        Ok(())
-    });
-    (rx, task)
 }

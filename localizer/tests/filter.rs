@@ -76,9 +76,13 @@ fn room() -> LocalMap {
 
 /// The ranges the Scout's sonars read at `pose` in the room (no echo as 11 m).
 fn frame(map: &LocalMap, pose: &Pose2) -> Vec<f64> {
+    frame_of(&SensorRing::scout(), map, pose)
+}
+
+/// The ranges `ring`'s sonars read at `pose` in the room.
+fn frame_of(ring: &SensorRing, map: &LocalMap, pose: &Pose2) -> Vec<f64> {
     let geometry = ConeGeometry::default();
-    SensorRing::scout()
-        .sensor_poses(pose)
+    ring.sensor_poses(pose)
         .map(|s| {
             expected_range_by_marching(map, Resolution::DEFAULT, &geometry, s.x, s.y, s.theta)
                 .unwrap_or(11.0)
@@ -221,6 +225,37 @@ fn a_kidnapped_robot_is_found_again() {
         position < 0.25 && heading < 0.25,
         "after the kidnap: {position:.3} m, {heading:.3} rad"
     );
+}
+
+#[test]
+fn any_number_of_sonars_works() {
+    let mut map = room();
+    let steps = path(120);
+    for count in [5, 24] {
+        let ring = SensorRing::uniform(count, 0.2).unwrap();
+        let mut settings = FilterSettings {
+            ring: ring.clone(),
+            seed: 4,
+            ..FilterSettings::default()
+        };
+        settings.kld.max_particles = 3_000;
+        let mut mcl = Mcl::new(settings).unwrap();
+        mcl.start_at(steps[0].0, 0.1, 0.05).unwrap();
+        let mut last = (f64::MAX, f64::MAX);
+        for (truth, odometry) in &steps {
+            if mcl.predict(odometry).unwrap() {
+                let ranges = frame_of(&ring, &map, truth);
+                mcl.correct(&mut map, &ranges).unwrap();
+            }
+            last = error(&mcl.estimate(odometry).unwrap().pose, truth);
+        }
+        assert!(
+            last.0 < 0.1 && last.1 < 0.1,
+            "{count} sonars: error {last:?}"
+        );
+        // A frame of the wrong length is refused.
+        assert!(mcl.correct(&mut map, &[1.0; 16]).is_err());
+    }
 }
 
 #[test]

@@ -72,6 +72,30 @@ pub fn succeeded(output: &Output) -> String {
     String::from_utf8_lossy(&output.stdout).into_owned()
 }
 
+/// The stderr of a run that must have failed; panics with its stdout
+/// otherwise.
+pub fn failure(output: &Output) -> String {
+    assert!(
+        !output.status.success(),
+        "deog succeeded but should not have: {}",
+        String::from_utf8_lossy(&output.stdout)
+    );
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+/// The text of the value after the first `"name": ` in a JSON report
+/// (numbers, `true`, `null`), for tests that read a few figures.
+pub fn json_field(json: &str, name: &str) -> String {
+    let key = format!("\"{name}\": ");
+    let start = json
+        .find(&key)
+        .unwrap_or_else(|| panic!("{name} in {json}"))
+        + key.len();
+    let rest = &json[start..];
+    let end = rest.find([',', '\n', '}']).unwrap_or(rest.len());
+    rest[..end].trim().to_string()
+}
+
 /// A free port on 127.0.0.1: bound, then released for a child to bind.
 pub fn free_loopback_addr() -> SocketAddr {
     let listener = std::net::TcpListener::bind("127.0.0.1:0").expect("bind a free port");

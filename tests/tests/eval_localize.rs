@@ -6,7 +6,7 @@
 
 use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient};
-use deog_tests::{ServerProcess, run_deog, succeeded};
+use deog_tests::{ServerProcess, failure, run_deog, succeeded};
 use std::path::Path;
 use std::process::Output;
 
@@ -14,16 +14,6 @@ const ROBOT: &str = "r1";
 
 fn deog(args: &[&str], server: &ServerProcess) -> Output {
     run_deog(args, &[("DEOG_SERVER", server.addr.to_string())])
-}
-
-/// The stderr of a run that must fail.
-fn failure(output: &Output) -> String {
-    assert!(
-        !output.status.success(),
-        "deog succeeded but should not have: {}",
-        String::from_utf8_lossy(&output.stdout)
-    );
-    String::from_utf8_lossy(&output.stderr).into_owned()
 }
 
 fn pose(x: f64, y: f64, theta: f64) -> pb::Pose2 {

@@ -4,19 +4,7 @@
 //! on the server's map. `deog eval localize` judges the estimates it
 //! published against the simulator's true poses.
 
-use deog_tests::{ServerProcess, run_deog, succeeded};
-
-/// The number after `"name": ` in the report (the first such key).
-fn field(json: &str, name: &str) -> String {
-    let key = format!("\"{name}\": ");
-    let start = json
-        .find(&key)
-        .unwrap_or_else(|| panic!("{name} in {json}"))
-        + key.len();
-    let rest = &json[start..];
-    let end = rest.find([',', '\n', '}']).unwrap_or(rest.len());
-    rest[..end].trim().to_string()
-}
+use deog_tests::{ServerProcess, json_field as field, run_deog, succeeded};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_robot_is_found_on_the_map_the_cartographer_built() {

@@ -7,7 +7,7 @@ use deog_grid::{CellIndex, ClampLimits, LogOdds, Resolution, Tile, TileKey, Tile
 use deog_mapfile::{Cell, MapImage};
 use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient};
-use deog_tests::{ServerProcess, run_deog, succeeded};
+use deog_tests::{ServerProcess, failure, run_deog, succeeded};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
@@ -17,16 +17,6 @@ fn deog(args: &[&str], server: &ServerProcess) -> Output {
 
 fn stdout(output: &Output) -> String {
     succeeded(output)
-}
-
-/// The stderr of a run that must fail.
-fn failure(output: &Output) -> String {
-    assert!(
-        !output.status.success(),
-        "deog succeeded but should not have: {}",
-        String::from_utf8_lossy(&output.stdout)
-    );
-    String::from_utf8_lossy(&output.stderr).into_owned()
 }
 
 fn data(path: &str) -> String {

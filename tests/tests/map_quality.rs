@@ -11,7 +11,7 @@ use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient, UpdateSenderConfig};
 use deog_simulator::world_file::load_world;
 use deog_simulator::{Point2, SegmentIndex, World};
-use deog_tests::{ServerProcess, deog_binary};
+use deog_tests::{ServerProcess, deog_binary, json_field};
 
 const RESOLUTION_M: f64 = 0.05;
 /// The patch written: cells covering [-0.1, 5.0) x [-0.1, 4.0) m, the
@@ -88,18 +88,9 @@ fn eval(server: &ServerProcess, name: &str, out: &Path) -> Result<String, String
     Ok(std::fs::read_to_string(out).expect("json written"))
 }
 
-/// The number after `"name": ` in a flat JSON object (the names are
-/// unique in the report).
+/// The number after `"name": ` in the report.
 fn field(json: &str, name: &str) -> f64 {
-    let key = format!("\"{name}\": ");
-    let start = json
-        .find(&key)
-        .unwrap_or_else(|| panic!("{name} in {json}"))
-        + key.len();
-    let rest = &json[start..];
-    let end = rest.find([',', '\n', '}']).unwrap_or(rest.len());
-    rest[..end]
-        .trim()
+    json_field(json, name)
         .parse()
         .unwrap_or_else(|_| panic!("{name} is a number in {json}"))
 }
