@@ -183,6 +183,13 @@ fn build_map(world: deog_simulator::World, config: &SimConfig, minutes: f64) -> 
     let mut wanderer = Wanderer::new(WanderParams::default(), &SensorRing::scout(), 1000)?;
     let params = SonarModelParams {
         max_occupied: 0.6,
+        // A specular sonar's no-echo readings are mostly lost echoes, not
+        // free space: the cartographer is told to ignore them.
+        no_echo_free_range: if matches!(config.sonar.specular, Specular::Off) {
+            SonarModelParams::default().no_echo_free_range
+        } else {
+            0.0
+        },
         ..SonarModelParams::default()
     };
     let mut cartographer = Cartographer::with_model(res, size, PoseChoice::True, params)?;
@@ -216,7 +223,16 @@ fn build_map(world: deog_simulator::World, config: &SimConfig, minutes: f64) -> 
         resolution: res,
         tile_size: size,
         thresholds: OccupancyThresholds::default(),
-        geometry: ConeGeometry::default(),
+        // The localizer knows its sonar: specular past the same angle.
+        geometry: ConeGeometry {
+            specular_max_incidence: match config.sonar.specular {
+                Specular::Off => None,
+                Specular::Lost { max_incidence } | Specular::Long { max_incidence, .. } => {
+                    Some(max_incidence)
+                }
+            },
+            ..ConeGeometry::default()
+        },
         budget_bytes: 512 << 20,
     })?;
     for (key, tile) in tiles.tiles() {

@@ -56,6 +56,11 @@ pub struct LocalizeArgs {
     /// beams.
     #[arg(long, default_value_t = FilterSettings::default().beam.tempering)]
     pub tempering: f64,
+    /// The sonar is specular past this incidence, degrees from a wall's
+    /// normal: such walls are expected to send no echo (as `deog sim
+    /// --specular lost --specular-angle`). Unset: every wall echoes.
+    #[arg(long)]
+    pub specular_angle: Option<f64>,
     /// Seed of the filter's random draws.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -82,6 +87,12 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         "--refresh-s must be zero or positive, got {}",
         args.refresh_s
     );
+    if let Some(angle) = args.specular_angle {
+        ensure!(
+            angle.is_finite() && (0.0..=90.0).contains(&angle),
+            "--specular-angle must be in [0, 90] degrees, got {angle}"
+        );
+    }
     ensure!(
         args.cache_mb >= 16,
         "--cache-mb must be at least 16, got {}",
@@ -110,7 +121,10 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             resolution,
             tile_size,
             thresholds: OccupancyThresholds::default(),
-            geometry: ConeGeometry::default(),
+            geometry: ConeGeometry {
+                specular_max_incidence: args.specular_angle.map(f64::to_radians),
+                ..ConeGeometry::default()
+            },
             budget_bytes: args.cache_mb << 20,
         })?;
         // Watch first, so no change between the first read and the stream is missed.

@@ -80,6 +80,11 @@ pub struct MapArgs {
     /// Half the depth of the sonar model's region I, metres.
     #[arg(long, default_value_t = SonarModelParams::default().region_i_tolerance)]
     pub region_tolerance: f64,
+    /// How far a no-echo reading marks its cone free, metres (0: no-echo
+    /// readings are ignored). With a specular sonar, lost echoes are
+    /// common, and marking them free erases the walls they missed.
+    #[arg(long, default_value_t = SonarModelParams::default().no_echo_free_range)]
+    pub no_echo_free_range: f64,
     #[command(flatten)]
     pub connection: ConnectionArgs,
 }
@@ -132,6 +137,7 @@ pub fn run(args: MapArgs) -> Result<()> {
             max_occupied: args.max_occupied,
             max_empty: args.max_empty,
             region_i_tolerance: args.region_tolerance,
+            no_echo_free_range: args.no_echo_free_range,
             ..SonarModelParams::default()
         };
         let mut cartographer = Cartographer::with_model(resolution, tile_size, pose, params)

@@ -39,6 +39,11 @@ pub struct ConeGeometry {
     /// Rays cast per heading step (the rays are `headings · rays_per_heading`
     /// per full turn).
     pub rays_per_heading: usize,
+    /// Sonar is specular: a wall struck more than this far from its normal
+    /// (radians) sends the sound away, and that ray brings no echo (another
+    /// ray of the cone may still). `None`: every wall echoes. The wall's
+    /// normal is the distance field's gradient just before the hit.
+    pub specular_max_incidence: Option<f64>,
 }
 
 impl Default for ConeGeometry {
@@ -50,6 +55,7 @@ impl Default for ConeGeometry {
             max_range: 10.668,
             headings: 120,
             rays_per_heading: 3,
+            specular_max_incidence: None,
         }
     }
 }
@@ -59,6 +65,14 @@ impl ConeGeometry {
     pub fn validate(self) -> Result<Self, LocalizerError> {
         within("half_angle", self.half_angle, 1e-3, 1.4)?;
         within("max_range", self.max_range, 0.1, 60.0)?;
+        if let Some(angle) = self.specular_max_incidence {
+            within(
+                "specular_max_incidence",
+                angle,
+                0.0,
+                std::f64::consts::FRAC_PI_2,
+            )?;
+        }
         if !(4..=1024).contains(&self.headings) || !(1..=16).contains(&self.rays_per_heading) {
             return Err(LocalizerError::Invalid(format!(
                 "headings must be in [4, 1024] and rays_per_heading in [1, 16], got {} and {}",
@@ -125,6 +139,17 @@ impl OccupancyRaster {
         self.bounds
     }
 
+    /// The unit normal of the nearest wall seen from free cell `(x, y)`:
+    /// the distance field's gradient by central differences; `None` where
+    /// it vanishes (a corner's diagonal, or cells at the raster's edge).
+    fn normal_at(&self, x: i64, y: i64) -> Option<(f64, f64)> {
+        let d = |x: i64, y: i64| self.slot(x, y).map(|s| f64::from(self.distance[s]));
+        let gx = d(x + 1, y)? - d(x - 1, y)?;
+        let gy = d(x, y + 1)? - d(x, y - 1)?;
+        let norm = gx.hypot(gy);
+        (norm > 1e-6).then(|| (gx / norm, gy / norm))
+    }
+
     #[inline]
     fn slot(&self, x: i64, y: i64) -> Option<usize> {
         (x >= 0 && y >= 0 && (x as usize) < self.width && (y as usize) < self.height)
@@ -154,6 +179,7 @@ pub fn build_table(
     let step = std::f64::consts::TAU / rays as f64;
     let reach = (geometry.half_angle / step + 1e-9).floor() as i64;
     let mut ray_ranges = vec![f32::INFINITY; rays];
+    let cos_cutoff = geometry.specular_max_incidence.map(f64::cos);
     let mut table =
         Vec::with_capacity(tile.width() as usize * tile.height() as usize * geometry.headings);
     for cy in tile.min.y..=tile.max.y {
@@ -166,7 +192,7 @@ pub fn build_table(
             }
             let origin = (rx as f64 + 0.5, ry as f64 + 0.5);
             for (range, dir) in ray_ranges.iter_mut().zip(&directions) {
-                *range = march(raster, origin, *dir, max_cells);
+                *range = march(raster, origin, *dir, max_cells, cos_cutoff);
             }
             for h in 0..geometry.headings {
                 let centre = (h * geometry.rays_per_heading) as i64;
@@ -195,9 +221,17 @@ fn to_millimetres(range: f64, max_range: f64) -> u16 {
 
 /// The distance in cells from `origin` (raster coordinates, cells) along
 /// `dir` to the nearest point of the first occupied cell, or infinity if
-/// none lies within `max_cells`.
-fn march(raster: &OccupancyRaster, origin: (f64, f64), dir: (f64, f64), max_cells: f64) -> f32 {
+/// none lies within `max_cells`, or if the ray strikes it with an incidence
+/// whose cosine is below `cos_cutoff` (a specular reflection).
+fn march(
+    raster: &OccupancyRaster,
+    origin: (f64, f64),
+    dir: (f64, f64),
+    max_cells: f64,
+    cos_cutoff: Option<f64>,
+) -> f32 {
     let mut t = 0.0f64;
+    let mut last_free = None;
     loop {
         let (px, py) = (origin.0 + t * dir.0, origin.1 + t * dir.1);
         let (cx, cy) = (px.floor(), py.floor());
@@ -205,10 +239,17 @@ fn march(raster: &OccupancyRaster, origin: (f64, f64), dir: (f64, f64), max_cell
             return f32::INFINITY;
         };
         if raster.occupied[slot] {
+            if let (Some(cutoff), Some((fx, fy))) = (cos_cutoff, last_free)
+                && let Some((nx, ny)) = raster.normal_at(fx, fy)
+                && -(dir.0 * nx + dir.1 * ny) < cutoff
+            {
+                return f32::INFINITY;
+            }
             let gap_x = ((cx + 0.5 - origin.0).abs() - 0.5).max(0.0);
             let gap_y = ((cy + 0.5 - origin.1).abs() - 0.5).max(0.0);
             return gap_x.hypot(gap_y) as f32;
         }
+        last_free = Some((cx as i64, cy as i64));
         // No occupied square comes closer than the distance between centres
         // less a cell's diagonal (half from each square).
         let clear = f64::from(raster.distance[slot]) - std::f64::consts::SQRT_2;
@@ -419,6 +460,39 @@ mod tests {
         let h30 = geometry.headings / 12;
         let expected = 1.975 / 15f64.to_radians().cos();
         assert_abs_diff_eq!(f64::from(table[h30]) / 1000.0, expected, epsilon = 0.01);
+    }
+
+    #[test]
+    fn specular_walls_answer_only_near_their_normal() {
+        // The wall of `wall_ahead_reads_its_distance`, with echoes lost past
+        // 40° of incidence: straight ahead it still answers; at 60° off its
+        // normal (a cone from 45° to 75°) it does not.
+        let res = Resolution::DEFAULT;
+        let wall = Cells((-400..=400).map(|y| CellIndex::new(40, y)).collect());
+        let geometry = ConeGeometry {
+            specular_max_incidence: Some(40f64.to_radians()),
+            ..ConeGeometry::default()
+        };
+        let margin = geometry.margin_cells(res);
+        let raster = raster_of(&wall, cell_box(-margin, -margin, margin, margin));
+        let table = build_table(&raster, cell_box(0, 0, 0, 0), res, &geometry);
+        assert_eq!(table[0], 1975);
+        assert_eq!(table[geometry.headings / 6], NO_ECHO);
+        // 30°: the cone's near edge (15°) still meets the wall within 40°.
+        let h30 = geometry.headings / 12;
+        assert_abs_diff_eq!(
+            f64::from(table[h30]) / 1000.0,
+            1.975 / 15f64.to_radians().cos(),
+            epsilon = 0.01
+        );
+        assert!(
+            ConeGeometry {
+                specular_max_incidence: Some(2.0),
+                ..geometry
+            }
+            .validate()
+            .is_err()
+        );
     }
 
     #[test]
