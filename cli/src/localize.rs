@@ -38,8 +38,8 @@ pub struct LocalizeArgs {
     pub idle_exit: f64,
     /// Track from a known pose "x,y,theta" (metres, radians) instead of
     /// localizing globally.
-    #[arg(long, value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
-    pub initial_pose: Option<Vec<f64>>,
+    #[arg(long, value_parser = crate::wander::parse_pose, allow_hyphen_values = true)]
+    pub initial_pose: Option<Pose2>,
     /// Standard deviation of the initial position, metres (with --initial-pose).
     #[arg(long, default_value_t = 0.25)]
     pub initial_std_xy: f64,
@@ -146,10 +146,10 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             .into_inner();
         let (mut changes, watcher) = spawn_watcher(watch);
         match &args.initial_pose {
-            Some(p) => {
-                mcl.start_at(Pose2::new(p[0], p[1], p[2]), args.initial_std_xy, args.initial_std_theta)
+            Some(pose) => {
+                mcl.start_at(*pose, args.initial_std_xy, args.initial_std_theta)
                     .context("--initial-pose")?;
-                tracing::info!(x = p[0], y = p[1], theta = p[2], "tracking from the given pose");
+                tracing::info!(x = pose.x, y = pose.y, theta = pose.theta, "tracking from the given pose");
             }
             None => {
                 let Some(region) = info.bounds_cells else {

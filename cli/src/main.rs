@@ -14,6 +14,7 @@ mod map;
 mod server;
 mod signal;
 mod sim;
+mod teleport;
 mod wander;
 
 use anyhow::Result;
@@ -51,6 +52,9 @@ enum Command {
     /// map held by the server (Monte Carlo Localization), publishing each
     /// estimate.
     Localize(localize::LocalizeArgs),
+    /// Carries a simulated robot to another pose without telling its
+    /// odometry: the kidnapped-robot test.
+    Teleport(teleport::TeleportArgs),
     /// Imports recorded data into the map server: a wanderer data file as
     /// a robot's frames (--robot), or a map_server map as a map (--map).
     Import(import::ImportArgs),
@@ -92,6 +96,7 @@ fn run(command: Command) -> Result<()> {
         Command::Export(args) => export::run(args),
         Command::Map(args) => map::run(args),
         Command::Localize(args) => localize::run(args),
+        Command::Teleport(args) => teleport::run(args),
         Command::Frames(args) => frames::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Bench(args) => bench::run(args),

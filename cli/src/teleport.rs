@@ -1,0 +1,43 @@
+//! `deog teleport`: carries a simulated robot to another pose without
+//! telling its odometry (the kidnapped-robot test).
+
+use anyhow::{Context, Result};
+use clap::Args;
+use deog_grid::Pose2;
+use deog_robot_client::{ClientConfig, SimClient};
+
+use crate::wander::parse_pose;
+
+/// Options of `deog teleport`.
+#[derive(Debug, Args)]
+pub struct TeleportArgs {
+    /// The robot to carry off.
+    #[arg(long, env = "DEOG_ROBOT")]
+    pub robot: String,
+    /// Where to put it: x,y,theta (metres, radians).
+    #[arg(long, value_parser = parse_pose, allow_hyphen_values = true)]
+    pub pose: Pose2,
+    /// The simulator's address.
+    #[arg(long, env = "DEOG_SIM", default_value = "127.0.0.1:50052")]
+    pub sim: String,
+}
+
+/// Runs `deog teleport`.
+pub fn run(args: TeleportArgs) -> Result<()> {
+    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    runtime.block_on(async {
+        let sim = SimClient::connect(ClientConfig::new(args.sim.clone()))
+            .await
+            .with_context(|| format!("connecting to the simulator at {}", args.sim))?;
+        let state = sim
+            .teleport(&args.robot, args.pose)
+            .await
+            .with_context(|| format!("teleporting {}", args.robot))?;
+        let pose = state.true_pose.unwrap_or_default();
+        println!(
+            "{} is now at ({:.3}, {:.3}, {:.3}); its odometry did not notice",
+            args.robot, pose.x, pose.y, pose.theta
+        );
+        Ok(())
+    })
+}
