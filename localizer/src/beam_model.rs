@@ -101,21 +101,60 @@ impl BeamModelParams {
     }
 }
 
-/// The beam model with its constants worked out.
+/// The beam model with its constants worked out, and the tables of the
+/// measured ranges met so far.
 #[derive(Debug, Clone)]
 pub struct BeamModel {
     params: BeamModelParams,
     no_echo_slot: usize,
+    /// Per measured range in whole centimetres (and no echo, last): its
+    /// table, built the first time a frame holds that range. Ranges repeat
+    /// from frame to frame, so after a few frames tabulating costs nothing.
+    cache: Vec<Option<Box<[i16]>>>,
 }
 
 impl BeamModel {
     /// A model from validated parameters.
     pub fn new(params: BeamModelParams) -> Result<Self, LocalizerError> {
         let params = params.validate()?;
+        let len = table_len(params.max_range);
         Ok(Self {
-            no_echo_slot: table_len(params.max_range) - 1,
+            no_echo_slot: len - 1,
+            cache: vec![None; len],
             params,
         })
+    }
+
+    /// The slot of a measured range: whole centimetres (below the no-echo
+    /// slot), or the no-echo slot at or past the maximum range.
+    pub fn measured_slot(&self, measured: f64) -> usize {
+        if !(measured < self.params.max_range) {
+            return self.no_echo_slot;
+        }
+        ((measured.max(0.0) * 100.0).round() as usize).min(self.no_echo_slot - 1)
+    }
+
+    /// The table ([`Self::tabulate`]) of the measured range of `slot`
+    /// ([`Self::measured_slot`]), built once and kept.
+    pub fn cached_table(&mut self, slot: usize) -> &[i16] {
+        let slot = slot.min(self.no_echo_slot);
+        if self.cache[slot].is_none() {
+            let measured = if slot == self.no_echo_slot {
+                self.params.max_range
+            } else {
+                // The last slot rounds up past the maximum; keep it an echo.
+                (slot as f64 / 100.0).min(self.params.max_range - 1e-6)
+            };
+            let mut table = Vec::new();
+            self.tabulate(measured, &mut table);
+            self.cache[slot] = Some(table.into_boxed_slice());
+        }
+        self.cache[slot].as_deref().unwrap_or_default()
+    }
+
+    /// A table [`Self::cached_table`] has built.
+    pub fn built_table(&self, slot: usize) -> Option<&[i16]> {
+        self.cache.get(slot)?.as_deref()
     }
 
     /// The parameters.
@@ -272,6 +311,24 @@ mod tests {
         m.tabulate(20.0, &mut table);
         let best = (0..table.len()).max_by_key(|&a| table[a]).unwrap();
         assert_eq!(best, m.no_echo_slot());
+    }
+
+    #[test]
+    fn cached_tables_are_the_tables_of_whole_centimetres() {
+        let mut m = model();
+        let mut table = Vec::new();
+        m.tabulate(2.34, &mut table);
+        let slot = m.measured_slot(2.3449);
+        assert_eq!(slot, 234);
+        assert_eq!(m.cached_table(slot), &table[..]);
+        assert_eq!(m.measured_slot(10.668), m.no_echo_slot());
+        assert_eq!(m.measured_slot(f64::INFINITY), m.no_echo_slot());
+        assert_eq!(m.measured_slot(10.6675), m.no_echo_slot() - 1);
+        m.tabulate(20.0, &mut table);
+        let no_echo = m.no_echo_slot();
+        assert_eq!(m.cached_table(no_echo), &table[..]);
+        assert!(m.built_table(no_echo).is_some());
+        assert!(m.built_table(5).is_none());
     }
 
     #[test]

@@ -170,8 +170,8 @@ pub struct Mcl {
     w_slow: f64,
     w_fast: f64,
     cluster: Option<ClusterEstimate>,
-    /// Per-beam likelihood tables of the current frame.
-    beam_tables: Vec<Vec<i16>>,
+    /// The current frame's measured-range slot per beam.
+    beam_slots: Vec<usize>,
     scratch_log: Vec<f64>,
     scratch_indices: Vec<usize>,
 }
@@ -184,7 +184,7 @@ impl Mcl {
         Ok(Self {
             model: BeamModel::new(settings.beam)?,
             rng: ChaCha8Rng::seed_from_u64(settings.seed),
-            beam_tables: vec![Vec::new(); settings.ring.len()],
+            beam_slots: Vec::with_capacity(settings.ring.len()),
             settings,
             particles: Vec::new(),
             weights: Vec::new(),
@@ -380,9 +380,7 @@ impl Mcl {
                 "the filter has no particles: start it first".into(),
             ));
         }
-        for (table, &z) in self.beam_tables.iter_mut().zip(ranges) {
-            self.model.tabulate(z, table);
-        }
+        self.prepare_beams(ranges);
         let keys = self.tiles_needed(map);
         let tables_built = map.ensure_tables(keys.iter().copied())?;
         let window = map.window(&keys);
@@ -401,12 +399,13 @@ impl Mcl {
             })
             .collect();
         let to_nats = self.settings.beam.tempering / TABLE_SCALE;
+        let tables = beam_tables(&self.model, &self.beam_slots)?;
         self.scratch_log.clear();
         for p in &self.particles {
             let (sin, cos) = p.theta.sin_cos();
             let base = window.heading_position(p.theta);
             let mut log_likelihood = 0i32;
-            for (&(mx, my, mc, ms, mp), table) in mounts.iter().zip(&self.beam_tables) {
+            for (&(mx, my, mc, ms, mp), table) in mounts.iter().zip(&tables) {
                 let sx = p.x + cos * mx - sin * my;
                 let sy = p.y + sin * mx + cos * my;
                 let beam_cos = cos * mc - sin * ms;
@@ -421,6 +420,16 @@ impl Mcl {
             self.scratch_log.push(f64::from(log_likelihood) * to_nats);
         }
         Ok(tables_built)
+    }
+
+    /// Each beam's slot of the measured range, and its table built.
+    fn prepare_beams(&mut self, ranges: &[f64]) {
+        self.beam_slots.clear();
+        for &z in ranges {
+            let slot = self.model.measured_slot(z);
+            self.model.cached_table(slot);
+            self.beam_slots.push(slot);
+        }
     }
 
     /// The log-likelihoods [`Self::score`] last computed, one per particle.
@@ -497,9 +506,7 @@ impl Mcl {
                 self.settings.ring.len()
             )));
         }
-        for (table, &z) in self.beam_tables.iter_mut().zip(ranges) {
-            self.model.tabulate(z, table);
-        }
+        self.prepare_beams(ranges);
         let res = map.settings().resolution;
         let mut keys: Vec<TileKey> = self
             .settings
@@ -514,7 +521,8 @@ impl Mcl {
         let window = map.window(&keys);
         let no_echo = self.model.no_echo_slot();
         let mut total = 0i32;
-        for (sensor, table) in self.settings.ring.sensor_poses(pose).zip(&self.beam_tables) {
+        let tables = beam_tables(&self.model, &self.beam_slots)?;
+        for (sensor, table) in self.settings.ring.sensor_poses(pose).zip(&tables) {
             let (sin, cos) = sensor.theta.sin_cos();
             let slot = window.expected_slot(sensor.x, sensor.y, sensor.theta, (cos, sin), no_echo);
             total += i32::from(table[slot]);
@@ -606,6 +614,21 @@ impl Mcl {
             lost_score: self.injection_share(),
         })
     }
+}
+
+/// The tables `Mcl::prepare_beams` made ready, one per beam.
+fn beam_tables<'a>(
+    model: &'a BeamModel,
+    slots: &[usize],
+) -> Result<Vec<&'a [i16]>, LocalizerError> {
+    slots
+        .iter()
+        .map(|&slot| {
+            model.built_table(slot).ok_or_else(|| {
+                LocalizerError::Invalid(format!("no beam table for range slot {slot}"))
+            })
+        })
+        .collect()
 }
 
 /// A pose uniformly inside `cell`, any heading.
