@@ -128,7 +128,8 @@ impl BeamModel {
     /// The slot of a measured range: whole centimetres (below the no-echo
     /// slot), or the no-echo slot at or past the maximum range.
     pub fn measured_slot(&self, measured: f64) -> usize {
-        if !(measured < self.params.max_range) {
+        // NaN counts as no echo too.
+        if measured.is_nan() || measured >= self.params.max_range {
             return self.no_echo_slot;
         }
         ((measured.max(0.0) * 100.0).round() as usize).min(self.no_echo_slot - 1)
