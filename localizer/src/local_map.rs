@@ -337,6 +337,7 @@ impl LocalMap {
             shift: side.trailing_zeros(),
             mask: side as i64 - 1,
             headings: self.settings.geometry.headings,
+            stride: self.settings.geometry.stride(),
             inv_res: 1.0 / self.settings.resolution.metres(),
             res: self.settings.resolution.metres(),
         }
@@ -507,6 +508,7 @@ pub struct RangeWindow<'a> {
     shift: u32,
     mask: i64,
     headings: usize,
+    stride: usize,
     inv_res: f64,
     res: f64,
 }
@@ -572,15 +574,12 @@ impl RangeWindow<'_> {
             return 0;
         };
         let index = (((cy & self.mask) << self.shift) + (cx & self.mask)) as usize;
-        let cell = &table[index * self.headings..(index + 1) * self.headings];
         let lower = (position as usize).min(self.headings - 1);
         let frac = position - lower as f64;
-        let upper = if lower + 1 == self.headings {
-            0
-        } else {
-            lower + 1
+        let at = index * self.stride + lower;
+        let (Some(&a), Some(&b)) = (table.get(at), table.get(at + 1)) else {
+            return 0;
         };
-        let (a, b) = (cell[lower], cell[upper]);
         let millimetres = if a.min(b) == 0 {
             return 0;
         } else if a.max(b) == NO_ECHO {
@@ -597,8 +596,9 @@ impl RangeWindow<'_> {
         let off_x = x - (cx as f64 + 0.5) * self.res;
         let off_y = y - (cy as f64 + 0.5) * self.res;
         let centimetres = millimetres * 0.1 - (off_x * cos + off_y * sin) * 100.0;
-        // Rounded by truncating after adding a half: non-negative here.
-        ((centimetres.max(0.0) + 0.5) as usize).min(no_echo_slot - 1)
+        // Rounded by truncating after adding a half; a negative range
+        // saturates to 0 in the conversion.
+        ((centimetres + 0.5) as usize).min(no_echo_slot - 1)
     }
 }
 

@@ -14,8 +14,9 @@
 //!
 //! Ranges are stored as whole millimetres in a `u16`: [`NO_ECHO`] when no
 //! occupied cell lies within the maximum range, 0 for a cell that is itself
-//! occupied (a sensor inside a wall). One tile of 64 × 64 cells and 120
-//! headings takes 960 KiB.
+//! occupied (a sensor inside a wall). Each cell's headings are followed by
+//! its first again, so interpolation never wraps. One tile of 64 × 64 cells
+//! and 120 headings takes 968 KiB.
 //!
 //! [`expected_range_by_marching`] is the plain reference: one cone, each
 //! ray walked cell by cell, nothing precomputed.
@@ -92,9 +93,15 @@ impl ConeGeometry {
         (self.max_range / res.metres()).ceil() as i32 + 2
     }
 
+    /// Entries per cell in a table: every heading, then the first again,
+    /// so that interpolating between neighbouring headings never wraps.
+    pub fn stride(&self) -> usize {
+        self.headings + 1
+    }
+
     /// Bytes of one tile's table.
     pub fn table_bytes(&self, tile_area: usize) -> usize {
-        tile_area * self.headings * std::mem::size_of::<u16>()
+        tile_area * self.stride() * std::mem::size_of::<u16>()
     }
 }
 
@@ -181,19 +188,20 @@ pub fn build_table(
     let mut ray_ranges = vec![f32::INFINITY; rays];
     let cos_cutoff = geometry.specular_max_incidence.map(f64::cos);
     let mut table =
-        Vec::with_capacity(tile.width() as usize * tile.height() as usize * geometry.headings);
+        Vec::with_capacity(tile.width() as usize * tile.height() as usize * geometry.stride());
     for cy in tile.min.y..=tile.max.y {
         for cx in tile.min.x..=tile.max.x {
             let rx = i64::from(cx) - i64::from(raster.bounds.min.x);
             let ry = i64::from(cy) - i64::from(raster.bounds.min.y);
             if raster.slot(rx, ry).is_some_and(|s| raster.occupied[s]) {
-                table.extend(std::iter::repeat_n(0u16, geometry.headings));
+                table.extend(std::iter::repeat_n(0u16, geometry.stride()));
                 continue;
             }
             let origin = (rx as f64 + 0.5, ry as f64 + 0.5);
             for (range, dir) in ray_ranges.iter_mut().zip(&directions) {
                 *range = march(raster, origin, *dir, max_cells, cos_cutoff);
             }
+            let first = table.len();
             for h in 0..geometry.headings {
                 let centre = (h * geometry.rays_per_heading) as i64;
                 let mut nearest = f32::INFINITY;
@@ -205,6 +213,7 @@ pub fn build_table(
                     geometry.max_range,
                 ));
             }
+            table.push(table[first]);
         }
     }
     table.into_boxed_slice()
@@ -450,7 +459,7 @@ mod tests {
         let tile = cell_box(0, 0, 3, 3);
         let raster = raster_of(&wall, cell_box(-margin, -margin, 3 + margin, 3 + margin));
         let table = build_table(&raster, tile, res, &geometry);
-        assert_eq!(table.len(), 16 * geometry.headings);
+        assert_eq!(table.len(), 16 * geometry.stride());
         // Cell (0, 0), heading 0: the nearest point of the wall straight ahead.
         assert_eq!(table[0], 1975);
         // Heading 180°: nothing within 10.668 m.
@@ -503,7 +512,7 @@ mod tests {
         let m = geometry.margin_cells(res);
         let raster = raster_of(&cells, cell_box(-m, -m, 3 + m, 3 + m));
         let table = build_table(&raster, cell_box(0, 0, 3, 3), res, &geometry);
-        let at = |x: usize, y: usize, h: usize| table[(y * 4 + x) * geometry.headings + h];
+        let at = |x: usize, y: usize, h: usize| table[(y * 4 + x) * geometry.stride() + h];
         assert_eq!(at(1, 1, 0), 0);
         // Its neighbour to the left sees it at 0 m (touching squares).
         assert_eq!(at(0, 1, 0), 25);
@@ -529,7 +538,7 @@ mod tests {
             let m = geometry.margin_cells(res);
             let raster = raster_of(&cells, cell_box(-m, -m, 7 + m, 7 + m));
             let table = build_table(&raster, cell_box(0, 0, 7, 7), res, &geometry);
-            let got = table[(cell_y as usize * 8 + cell_x as usize) * geometry.headings + heading];
+            let got = table[(cell_y as usize * 8 + cell_x as usize) * geometry.stride() + heading];
             let (cx, cy) = res.cell_center(CellIndex::new(cell_x, cell_y));
             let angle = heading as f64 * std::f64::consts::TAU / geometry.headings as f64;
             let reference = expected_range_by_marching(&cells, res, &geometry, cx, cy, angle);
