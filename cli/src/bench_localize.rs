@@ -55,6 +55,9 @@ pub struct LocalizeBenchArgs {
     /// dropouts on in the simulator.
     #[arg(long)]
     pub specular: bool,
+    /// Fewest particles.
+    #[arg(long, default_value_t = FilterSettings::default().kld.min_particles)]
+    pub min_particles: usize,
     /// The beam model's tempering τ (see deog_localizer::beam_model).
     #[arg(long, default_value_t = deog_localizer::beam_model::BeamModelParams::default().tempering)]
     pub tempering: f64,
@@ -256,6 +259,7 @@ fn run_once(
         ..FilterSettings::default()
     };
     settings.kld.max_particles = args.max_particles;
+    settings.kld.min_particles = args.min_particles;
     settings.beam.tempering = args.tempering;
     settings.beam.hit_sigma_m = args.hit_sigma;
     settings.beam.hit_sigma_per_m = args.hit_sigma_per_m;
