@@ -8,12 +8,12 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, bail, ensure};
 use clap::Args;
-use deog_grid::{OccupancyThresholds, Pose2, Resolution, Tile, TileKey, TileSize};
+use deog_grid::{OccupancyThresholds, Pose2, Resolution, TileKey, TileSize};
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::range_table::ConeGeometry;
 use deog_proto::v1 as pb;
-use deog_robot_client::MapClient;
+use deog_robot_client::{MapClient, decode_tile};
 
 use crate::connection::ConnectionArgs;
 use crate::frame_queue::FrameQueue;
@@ -94,8 +94,8 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         );
     }
     ensure!(
-        args.cache_mb >= 16,
-        "--cache-mb must be at least 16, got {}",
+        (16..=1 << 20).contains(&args.cache_mb),
+        "--cache-mb must be in [16, 1048576] MiB, got {}",
         args.cache_mb
     );
     let mut settings = FilterSettings {
@@ -293,24 +293,6 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         );
         Ok(())
     })
-}
-
-/// A tile as the server sent it, decoded.
-fn decode_tile(tile: &pb::Tile, size: TileSize) -> Result<(TileKey, u64, Tile)> {
-    let key = tile
-        .key
-        .map(|k| TileKey::new(k.x, k.y))
-        .context("the server sent a tile without a key")?;
-    ensure!(
-        tile.encoding == pb::CellEncoding::DenseI16Le as i32,
-        "the server sent tile ({}, {}) in encoding {}, expected dense",
-        key.x,
-        key.y,
-        tile.encoding
-    );
-    let cells = Tile::from_dense_bytes(size, &tile.cells)
-        .with_context(|| format!("tile ({}, {})", key.x, key.y))?;
-    Ok((key, tile.version, cells))
 }
 
 /// Fetches `keys` into the cache; keys the server has no tile for are

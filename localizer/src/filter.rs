@@ -362,19 +362,7 @@ impl Mcl {
     /// returned by [`Self::scores`]). Returns how many range tables it
     /// built. Public so that benchmarks can time it alone.
     pub fn score(&mut self, map: &mut LocalMap, ranges: &[f64]) -> Result<usize, LocalizerError> {
-        if ranges.len() != self.settings.ring.len() {
-            return Err(LocalizerError::Invalid(format!(
-                "the frame has {} ranges, the sensor ring {} sonars",
-                ranges.len(),
-                self.settings.ring.len()
-            )));
-        }
-        if let Some(i) = ranges.iter().position(|r| r.is_nan() || *r < 0.0) {
-            return Err(LocalizerError::Invalid(format!(
-                "ranges[{i}] is {}, not a range",
-                ranges[i]
-            )));
-        }
+        self.check_frame(ranges)?;
         if self.particles.is_empty() {
             return Err(LocalizerError::Invalid(
                 "the filter has no particles: start it first".into(),
@@ -420,6 +408,24 @@ impl Mcl {
             self.scratch_log.push(f64::from(log_likelihood) * to_nats);
         }
         Ok(tables_built)
+    }
+
+    /// One range per sonar, none NaN or negative (infinite is no echo).
+    fn check_frame(&self, ranges: &[f64]) -> Result<(), LocalizerError> {
+        if ranges.len() != self.settings.ring.len() {
+            return Err(LocalizerError::Invalid(format!(
+                "the frame has {} ranges, the sensor ring {} sonars",
+                ranges.len(),
+                self.settings.ring.len()
+            )));
+        }
+        match ranges.iter().position(|r| r.is_nan() || *r < 0.0) {
+            Some(i) => Err(LocalizerError::Invalid(format!(
+                "ranges[{i}] is {}, not a range",
+                ranges[i]
+            ))),
+            None => Ok(()),
+        }
     }
 
     /// Each beam's slot of the measured range, and its table built.
@@ -499,13 +505,8 @@ impl Mcl {
         pose: &Pose2,
         ranges: &[f64],
     ) -> Result<f64, LocalizerError> {
-        if ranges.len() != self.settings.ring.len() {
-            return Err(LocalizerError::Invalid(format!(
-                "the frame has {} ranges, the sensor ring {} sonars",
-                ranges.len(),
-                self.settings.ring.len()
-            )));
-        }
+        self.check_frame(ranges)?;
+        let pose = &pose.validate("pose")?;
         self.prepare_beams(ranges);
         let res = map.settings().resolution;
         let mut keys: Vec<TileKey> = self

@@ -79,16 +79,8 @@ impl MapClient {
             })
             .await?;
         for tile in tiles {
-            let key = tile.key.map(|k| TileKey::new(k.x, k.y)).ok_or_else(|| {
-                ClientError::Config("the server sent a tile without a key".into())
-            })?;
-            if tile.encoding != pb::CellEncoding::DenseI16Le as i32 {
-                return Err(ClientError::Config(format!(
-                    "the server sent tile ({}, {}) in encoding {}, expected dense",
-                    key.x, key.y, tile.encoding
-                )));
-            }
-            map.insert(key, Tile::from_dense_bytes(tile_size, &tile.cells)?)?;
+            let (key, _, cells) = decode_tile(&tile, tile_size)?;
+            map.insert(key, cells)?;
         }
         Ok((info, map))
     }
@@ -215,4 +207,24 @@ impl MapClient {
         let last = self.update_cursor(map, client_id).await?;
         UpdateSender::start(self.clone(), info, client_id.to_string(), last + 1, config)
     }
+}
+
+/// A whole tile as the server sends it (dense cells): its key, version and
+/// cells.
+pub fn decode_tile(tile: &pb::Tile, size: TileSize) -> Result<(TileKey, u64, Tile), ClientError> {
+    let key = tile
+        .key
+        .map(|k| TileKey::new(k.x, k.y))
+        .ok_or_else(|| ClientError::Config("the server sent a tile without a key".into()))?;
+    if tile.encoding != pb::CellEncoding::DenseI16Le as i32 {
+        return Err(ClientError::Config(format!(
+            "the server sent tile ({}, {}) in encoding {}, expected dense",
+            key.x, key.y, tile.encoding
+        )));
+    }
+    Ok((
+        key,
+        tile.version,
+        Tile::from_dense_bytes(size, &tile.cells)?,
+    ))
 }

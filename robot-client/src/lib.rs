@@ -18,7 +18,7 @@ pub mod sim_client;
 pub mod tile_cache;
 pub mod updates;
 
-pub use client::MapClient;
+pub use client::{MapClient, decode_tile};
 pub use connect::{ClientConfig, RawMapClient, RetryPolicy};
 pub use error::ClientError;
 pub use sim_client::SimClient;
