@@ -4,13 +4,13 @@
 //! on the server's map. `deog eval localize` judges the estimates it
 //! published against the simulator's true poses.
 
-use deog_tests::{ServerProcess, failure, json_field as field, run_deog, succeeded};
+use deog_tests::{ServerProcess, json_field as field, run_deog, succeeded};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_robot_is_found_on_the_map_the_cartographer_built() {
     let dir = tempfile::tempdir().expect("temp dir");
     let server = ServerProcess::start(&dir.path().join("data"), &[]).await;
-    let sim = ServerProcess::start_sim("map2", &["--speed", "40", "--seed", "5"]).await;
+    let sim = ServerProcess::start_sim("map2", &["--speed", "20", "--seed", "5"]).await;
     let env = [
         ("DEOG_SERVER", server.addr.to_string()),
         ("DEOG_SIM", sim.addr.to_string()),
@@ -95,40 +95,4 @@ async fn a_robot_is_found_on_the_map_the_cartographer_built() {
     assert!(x < 0.1 && y < 0.1, "mean errors {x} m, {y} m\n{table}");
     assert!(degrees < 3.0, "mean heading error {degrees}°\n{table}");
     assert!(std::fs::metadata(&plot).expect("plot written").len() > 1000);
-}
-
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn bad_options_and_unknown_maps_are_clear_errors() {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let server = ServerProcess::start(&dir.path().join("data"), &[]).await;
-    let env = [("DEOG_SERVER", server.addr.to_string())];
-    let localize = |extra: &[&str]| {
-        let mut args = vec![
-            "localize",
-            "--robot",
-            "scout",
-            "--map",
-            "m",
-            "--idle-exit",
-            "1",
-        ];
-        args.extend_from_slice(extra);
-        failure(&run_deog(&args, &env))
-    };
-    let cases: [(&[&str], &str); 6] = [
-        (&[], "does not exist"),
-        (&["--cache-mb", "4"], "--cache-mb"),
-        (&["--specular-angle", "120"], "--specular-angle"),
-        (&["--tempering", "0"], "tempering"),
-        (
-            &["--max-particles", "10", "--min-particles", "20"],
-            "min_particles",
-        ),
-        (&["--initial-pose", "1,nan,0"], "--initial-pose"),
-    ];
-    for (extra, expected) in cases {
-        let stderr = localize(extra);
-        assert!(stderr.contains(expected), "{extra:?}: {stderr}");
-        assert!(!stderr.contains("panicked"), "{extra:?}: {stderr}");
-    }
 }
