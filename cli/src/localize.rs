@@ -264,6 +264,21 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
                     })
                     .await
                     .with_context(|| format!("publishing the estimate of frame {}", frame.sequence))?;
+                if let Some(truth) = &frame.true_pose {
+                    tracing::debug!(
+                        frame = frame.sequence,
+                        x = format!("{:.3}", estimate.pose.x),
+                        y = format!("{:.3}", estimate.pose.y),
+                        theta = format!("{:.3}", estimate.pose.theta),
+                        true_x = format!("{:.3}", truth.x),
+                        true_y = format!("{:.3}", truth.y),
+                        true_theta = format!("{:.3}", truth.theta),
+                        particles = estimate.particle_count,
+                        converged = estimate.converged,
+                        lost = format!("{:.2}", estimate.lost_score),
+                        "estimate beside the simulator's true pose"
+                    );
+                }
                 if processed % 100 == 0 {
                     tracing::info!(
                         frame = frame.sequence,

@@ -1,8 +1,9 @@
 //! `deog localize` as its own process: a server, the simulator, a wanderer
-//! and a cartographer build map2's map; a second robot then wanders, and
-//! the localizer, knowing nothing of where it started, follows its frames
-//! on the server's map. `deog eval localize` judges the estimates it
-//! published against the simulator's true poses.
+//! and a cartographer build map2's map; a second robot then wanders (its
+//! cartographer adding its frames), and the localizer, knowing nothing of
+//! where it started, follows its frames on the server's map. `deog eval
+//! localize` judges the estimates it published against the simulator's
+//! true poses.
 
 use deog_tests::{ServerProcess, json_field as field, run_deog, succeeded};
 
@@ -34,7 +35,7 @@ async fn a_robot_is_found_on_the_map_the_cartographer_built() {
         &env,
     ));
     // Another robot drives for a simulated minute and a half; the localizer
-    // follows its frames from the first, starting from a uniform prior.
+    // then follows its frames from the first, starting from a uniform prior.
     succeeded(&run_deog(
         &[
             "wander",
@@ -46,6 +47,13 @@ async fn a_robot_is_found_on_the_map_the_cartographer_built() {
             "--duration",
             "90",
         ],
+        &env,
+    ));
+    // Its cartographer maps its frames too, as every robot's does: the
+    // wanderer's path depends on how the machine keeps pace with the
+    // simulator, and the mapper may have left the scout's corners unmapped.
+    succeeded(&run_deog(
+        &["map", "--robot", "scout", "--map", "m", "--idle-exit", "2"],
         &env,
     ));
     let out = succeeded(&run_deog(
