@@ -148,7 +148,7 @@ fn run_map(args: EvalMapArgs) -> Result<()> {
 }
 
 /// Every stored tile of `name`, as a tile map with the map's settings.
-async fn fetch_map(client: &MapClient, name: &str) -> Result<TileMap> {
+pub(crate) async fn fetch_map(client: &MapClient, name: &str) -> Result<TileMap> {
     let (_, map) = client
         .download(name)
         .await
@@ -160,7 +160,7 @@ async fn fetch_map(client: &MapClient, name: &str) -> Result<TileMap> {
 /// of its first frame. Robots whose first frame has no true pose (frames
 /// imported with odometry only) give none; with no seed at all the whole
 /// free space of the world counts as reachable.
-async fn robot_starts(client: &MapClient) -> Result<Vec<Point2>> {
+pub(crate) async fn robot_starts(client: &MapClient) -> Result<Vec<Point2>> {
     let robots = client
         .raw()
         .list_robots(pb::ListRobotsRequest {})
@@ -185,10 +185,10 @@ async fn robot_starts(client: &MapClient) -> Result<Vec<Point2>> {
 }
 
 /// One robot's true poses and estimates, as the evaluation takes them.
-struct RobotSamples {
-    name: String,
-    truth: Vec<TruthSample>,
-    estimates: Vec<EstimateSample>,
+pub(crate) struct RobotSamples {
+    pub name: String,
+    pub truth: Vec<TruthSample>,
+    pub estimates: Vec<EstimateSample>,
 }
 
 /// Reads the robots' frames and estimates (and the map, to plot over),
@@ -277,7 +277,7 @@ fn run_localize(args: EvalLocalizeArgs) -> Result<()> {
 
 /// A robot's frames with a true pose and its estimates (on `map`, when
 /// given) for frames `from..=to` (0 = open).
-async fn read_robot(
+pub(crate) async fn read_robot(
     client: &MapClient,
     name: &str,
     map: Option<&str>,

@@ -69,6 +69,8 @@ pub struct LocalizeArgs {
     pub cache_mb: usize,
     /// Least time between two refreshes of tiles the map server reports
     /// changed, seconds: a map still being built changes all the time.
+    /// Up to four times longer when the range-table rebuilds a refresh
+    /// causes would take more than a fifth of the time.
     #[arg(long, default_value_t = 5.0)]
     pub refresh_s: f64,
     #[command(flatten)]
@@ -192,6 +194,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         let mut stale: HashSet<TileKey> = HashSet::new();
         let mut resync = false;
         let mut last_refresh = tokio::time::Instant::now();
+        let mut last_rebuild = Duration::ZERO;
         let (mut processed, mut corrections, mut last_sequence) = (0u64, 0u64, 0u64);
         loop {
             let frame = tokio::select! {
@@ -217,7 +220,13 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
                     Change::All => resync = true,
                 }
             }
-            if (resync || !stale.is_empty()) && last_refresh.elapsed() >= refresh {
+            // Rebuilding tables after a refresh may take a fifth of the
+            // time: with particles spread over the whole map (global
+            // localization, a kidnap) a rebuild covers every tile, and a map
+            // still being built would otherwise keep the filter rebuilding.
+            // Never longer than four refresh periods, so the map stays fresh.
+            let interval = refresh.max((last_rebuild * 4).min(refresh * 4));
+            if (resync || !stale.is_empty()) && last_refresh.elapsed() >= interval {
                 if resync {
                     map.all_changed();
                 } else {
@@ -228,6 +237,12 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
                 stale.clear();
                 resync = false;
                 last_refresh = tokio::time::Instant::now();
+                // Held tiles are fetched again now; a tile whose occupied
+                // cells did not change keeps the range tables.
+                let refetch = map.stale_tiles();
+                if !refetch.is_empty() {
+                    fetch_tiles(&client, &args.map, tile_size, &refetch, &mut map).await?;
+                }
             }
             let odometry = frame
                 .odometry
@@ -239,8 +254,13 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
                 if !missing.is_empty() {
                     fetch_tiles(&client, &args.map, tile_size, &missing, &mut map).await?;
                 }
-                tokio::task::block_in_place(|| mcl.correct(&mut map, &frame.ranges))
-                    .with_context(|| format!("frame {}", frame.sequence))?;
+                let started = std::time::Instant::now();
+                let report =
+                    tokio::task::block_in_place(|| mcl.correct(&mut map, &frame.ranges))
+                        .with_context(|| format!("frame {}", frame.sequence))?;
+                if report.tables_built > 0 {
+                    last_rebuild = started.elapsed();
+                }
                 map.evict_to_budget(&needed.into_iter().collect());
                 corrections += 1;
             }

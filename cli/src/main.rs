@@ -14,8 +14,11 @@ mod map;
 mod server;
 mod signal;
 mod sim;
+mod supervisor;
 mod teleport;
 mod wander;
+
+use std::io::IsTerminal;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -31,8 +34,10 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Maps the embedded default room in-process with the grid core and
-    /// writes the map and a quality summary.
+    /// The whole system at once, each part its own process: a map server, the
+    /// simulator, and per robot a wanderer, a cartographer and a localizer
+    /// that starts knowing nothing; one robot is kidnapped half-way. Writes
+    /// the map, path plots and a report to demo-out/.
     Demo(demo::DemoArgs),
     /// Runs the map server: maps, frames and poses in an embedded store,
     /// served over gRPC.
@@ -74,6 +79,8 @@ fn main() -> std::process::ExitCode {
             EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
         )
         .with_writer(std::io::stderr)
+        // Colour only on a terminal: logs written to files stay plain text.
+        .with_ansi(std::io::stderr().is_terminal())
         .init();
     match run(Cli::parse().command) {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -35,8 +35,11 @@ use crate::motion::{MotionNoise, OdometryMove};
 use crate::sampling::{KldSettings, systematic_resample};
 
 /// Up to this many tiles, a correction reads every tile of the particles'
-/// bounding box rather than finding the tiles under each particle.
-const BOUNDING_BOX_TILES: i64 = 64;
+/// bounding box rather than finding the tiles under each particle. A
+/// tracking filter's box is a few tiles; a spread one's covers tiles with
+/// no particle in them (walls, the unknown beyond them), whose range
+/// tables would cost more to build than finding the tiles does.
+const BOUNDING_BOX_TILES: i64 = 4;
 
 /// Every setting of the filter.
 #[derive(Debug, Clone, PartialEq)]
@@ -333,7 +336,7 @@ impl Mcl {
                     .collect();
             }
         }
-        // Far-apart clusters: only the tiles under particles.
+        // Spread particles: only the tiles under them.
         let mut keys = HashSet::new();
         let mut last = None;
         for p in &self.particles {

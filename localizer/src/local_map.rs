@@ -4,10 +4,16 @@
 //!
 //! The map server owns the map; this is a cache of it. Tiles come in
 //! through [`LocalMap::insert_tile`] (the network edge fetches them) and go
-//! stale through [`LocalMap::tile_changed`] (the watch stream). A tile's
-//! range table reads every tile within the sonar's range of it, so a change
-//! to one tile drops the tables of its neighbours too; they are rebuilt
-//! when a particle next needs them. When the cache holds more than its
+//! stale through [`LocalMap::tile_changed`] (the watch stream); the edge
+//! fetches [`LocalMap::stale_tiles`] again. A tile's range table reads the
+//! occupied cells of every tile within the sonar's range of it, so a tile
+//! whose occupied cells changed drops the tables of its neighbours too;
+//! they are rebuilt when a particle next needs them. A map being built
+//! changes all the time, but mostly in its log-odds, its free cells and
+//! the one-cell ragged edges of its walls, none of which moves an expected
+//! range by more than a cell: the tables stay until a tile's occupied
+//! cells differ from those the tables were built with by more than that
+//! (see [`occupied_moved`]). When the cache holds more than its
 //! budget, [`LocalMap::evict_to_budget`] drops the least recently used
 //! tables and tiles outside the working set.
 
@@ -53,6 +59,11 @@ struct MapTile {
     free_cells: u32,
     ranges: Option<Box<[u16]>>,
     last_used: u64,
+    /// The server changed it since it was fetched.
+    stale: bool,
+    /// Its occupied cells when the tables near it were last dropped, one
+    /// bit per cell: what later versions are compared with.
+    reference: Box<[u64]>,
 }
 
 /// Counts of what the cache did, for logs and tests.
@@ -162,9 +173,15 @@ impl LocalMap {
         };
         let free_cells = cells.iter().filter(|&&c| c == FREE).count() as u32;
         let now = self.tick();
+        let reference_bytes = area.div_ceil(64) * 8;
+        let side = self.settings.tile_size.cells() as usize;
         let changed = match self.tiles.get_mut(&key) {
             Some(existing) => {
-                let changed = existing.cells.as_deref() != Some(&cells[..]);
+                let changed = occupied_moved(&existing.reference, &cells, side);
+                if changed {
+                    existing.reference = occupied_bits(&cells);
+                }
+                existing.stale = false;
                 if existing.cells.is_none() {
                     self.bytes += area;
                 }
@@ -175,6 +192,7 @@ impl LocalMap {
                 changed
             }
             None => {
+                let reference = occupied_bits(&cells);
                 self.tiles.insert(
                     key,
                     MapTile {
@@ -183,9 +201,11 @@ impl LocalMap {
                         free_cells,
                         ranges: None,
                         last_used: now,
+                        stale: false,
+                        reference,
                     },
                 );
-                self.bytes += area;
+                self.bytes += area + reference_bytes;
                 true
             }
         };
@@ -195,24 +215,43 @@ impl LocalMap {
         Ok(())
     }
 
-    /// The server says tile `key` changed: its cells are fetched again when
-    /// needed, and the tables that read it are dropped.
+    /// The server says tile `key` changed. A held tile goes stale and
+    /// keeps its tables until it is fetched again and its occupied cells
+    /// turn out to differ; for a tile not held, whose cells are unknown,
+    /// the tables that read it are dropped at once.
     pub fn tile_changed(&mut self, key: TileKey) {
-        let area = self.settings.tile_size.area();
-        if let Some(tile) = self.tiles.get_mut(&key)
-            && tile.cells.take().is_some()
-        {
-            self.bytes -= area;
+        match self.tiles.get_mut(&key) {
+            Some(tile) if tile.cells.is_some() => tile.stale = true,
+            _ => self.drop_tables_near(key),
         }
-        self.drop_tables_near(key);
     }
 
-    /// Every held tile becomes stale (after the watch stream lost events).
+    /// Every held tile goes stale and every table is dropped (after the
+    /// watch stream lost events, tiles never held may have changed too).
     pub fn all_changed(&mut self) {
         let keys: Vec<TileKey> = self.tiles.keys().copied().collect();
         for key in keys {
-            self.tile_changed(key);
+            if let Some(tile) = self.tiles.get_mut(&key) {
+                tile.stale = tile.cells.is_some();
+                if let Some(table) = tile.ranges.take() {
+                    self.bytes -= table.len() * std::mem::size_of::<u16>();
+                    self.stats.tables_dropped += 1;
+                }
+            }
         }
+    }
+
+    /// The held tiles the server changed since they were fetched, in key
+    /// order: fetch them again and [`Self::insert_tile`] them.
+    pub fn stale_tiles(&self) -> Vec<TileKey> {
+        let mut keys: Vec<TileKey> = self
+            .tiles
+            .iter()
+            .filter(|(_, t)| t.stale)
+            .map(|(k, _)| *k)
+            .collect();
+        keys.sort();
+        keys
     }
 
     /// The version of a held tile.
@@ -290,6 +329,8 @@ impl LocalMap {
                     free_cells: 0,
                     ranges: None,
                     last_used: now,
+                    stale: false,
+                    reference: Box::default(),
                 });
                 tile.ranges = Some(table);
                 tile.last_used = now;
@@ -375,6 +416,7 @@ impl LocalMap {
                 return;
             }
             if let Some(t) = self.tiles.remove(key) {
+                self.bytes -= t.reference.len() * 8;
                 if t.cells.is_some() {
                     self.bytes -= area;
                     self.stats.tiles_evicted += 1;
@@ -488,6 +530,47 @@ impl OccupancyView for LocalMap {
             _ => Occupancy::Unknown,
         }
     }
+}
+
+/// One bit per cell: occupied or not.
+fn occupied_bits(cells: &[u8]) -> Box<[u64]> {
+    let mut bits = vec![0u64; cells.len().div_ceil(64)];
+    for (i, _) in cells.iter().enumerate().filter(|(_, c)| **c == OCCUPIED) {
+        bits[i / 64] |= 1 << (i % 64);
+    }
+    bits.into_boxed_slice()
+}
+
+/// Whether a tile's occupied `cells` (row-major, `side` a row) moved from
+/// `reference` by more than the ragged edge of a wall: a cell that turned
+/// occupied or free counts only if none of its eight neighbours is
+/// occupied both in the reference and now. A wall that grew or lost a cell
+/// at its edge moves no expected range by more than a cell, a fraction of
+/// the beam model's spread; a new obstacle or a vanished wall does. An
+/// empty reference (none kept) always counts as moved.
+fn occupied_moved(reference: &[u64], cells: &[u8], side: usize) -> bool {
+    if reference.len() != cells.len().div_ceil(64) || side * side != cells.len() {
+        return true;
+    }
+    let was = |i: usize| reference[i / 64] >> (i % 64) & 1 == 1;
+    let is = |i: usize| cells[i] == OCCUPIED;
+    for i in 0..cells.len() {
+        if was(i) == is(i) {
+            continue;
+        }
+        let (x, y) = (i % side, i / side);
+        let mut anchored = false;
+        for ny in y.saturating_sub(1)..=(y + 1).min(side - 1) {
+            for nx in x.saturating_sub(1)..=(x + 1).min(side - 1) {
+                let j = ny * side + nx;
+                anchored |= j != i && was(j) && is(j);
+            }
+        }
+        if !anchored {
+            return true;
+        }
+    }
+    false
 }
 
 fn widen(b: CellBox, by: i32) -> CellBox {

@@ -243,10 +243,16 @@ fn march(
     let mut last_free = None;
     loop {
         let (px, py) = (origin.0 + t * dir.0, origin.1 + t * dir.1);
-        let (cx, cy) = (px.floor(), py.floor());
-        let Some(slot) = raster.slot(cx as i64, cy as i64) else {
+        // Off the raster's low edges the ray has left it; elsewhere a cast
+        // is the floor, without a libm call on baseline x86-64.
+        if px < 0.0 || py < 0.0 {
+            return f32::INFINITY;
+        }
+        let (ix, iy) = (px as i64, py as i64);
+        let Some(slot) = raster.slot(ix, iy) else {
             return f32::INFINITY;
         };
+        let (cx, cy) = (ix as f64, iy as f64);
         if raster.occupied[slot] {
             if let (Some(cutoff), Some((fx, fy))) = (cos_cutoff, last_free)
                 && let Some((nx, ny)) = raster.normal_at(fx, fy)
@@ -256,9 +262,9 @@ fn march(
             }
             let gap_x = ((cx + 0.5 - origin.0).abs() - 0.5).max(0.0);
             let gap_y = ((cy + 0.5 - origin.1).abs() - 0.5).max(0.0);
-            return gap_x.hypot(gap_y) as f32;
+            return (gap_x * gap_x + gap_y * gap_y).sqrt() as f32;
         }
-        last_free = Some((cx as i64, cy as i64));
+        last_free = Some((ix, iy));
         // No occupied square comes closer than the distance between centres
         // less a cell's diagonal (half from each square).
         let clear = f64::from(raster.distance[slot]) - std::f64::consts::SQRT_2;

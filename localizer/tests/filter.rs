@@ -1,7 +1,8 @@
 //! The particle filter on a synthetic room, with sonar frames cast from the
 //! same map by the plain reference (so the map is exact and any error is the
 //! filter's): tracking, global localization, kidnapping, determinism, bad
-//! input; and the cache staying within its budget on a map far larger.
+//! input; the cache staying within its budget on a map far larger, and
+//! keeping its tables through changes that leave the occupied cells be.
 
 use std::collections::HashSet;
 
@@ -41,6 +42,22 @@ fn settings(budget_bytes: usize) -> MapSettings {
 
 /// The room's tile `key`: cells inside 0..8 × 0..6 m known, the rest unknown.
 fn room_tile(key: TileKey) -> Tile {
+    tile_of(key, room_log_odds)
+}
+
+/// The room's log-odds at a point: unknown outside it.
+fn room_log_odds(x: f64, y: f64) -> i16 {
+    if !(0.0..8.0).contains(&x) || !(0.0..6.0).contains(&y) {
+        i16::MIN
+    } else if solid(x, y) {
+        OCCUPIED
+    } else {
+        FREE
+    }
+}
+
+/// Tile `key` with each cell's log-odds from its centre.
+fn tile_of(key: TileKey, log_odds: impl Fn(f64, f64) -> i16) -> Tile {
     let s = settings(0);
     let origin = s.tile_size.origin(key).unwrap();
     let side = s.tile_size.cells() as i32;
@@ -50,14 +67,7 @@ fn room_tile(key: TileKey) -> Tile {
             let (x, y) = s
                 .resolution
                 .cell_center(CellIndex::new(origin.x + cx, origin.y + cy));
-            let value = if !(0.0..8.0).contains(&x) || !(0.0..6.0).contains(&y) {
-                i16::MIN
-            } else if solid(x, y) {
-                OCCUPIED
-            } else {
-                FREE
-            };
-            bytes.extend_from_slice(&value.to_le_bytes());
+            bytes.extend_from_slice(&log_odds(x, y).to_le_bytes());
         }
     }
     Tile::from_dense_bytes(s.tile_size, &bytes).unwrap()
@@ -322,4 +332,62 @@ fn cache_stays_within_budget_on_a_map_a_hundred_times_larger() {
         "nothing was evicted: {:?}",
         map.stats()
     );
+}
+
+#[test]
+fn a_changed_tile_keeps_the_tables_while_its_walls_stay_put() {
+    let mut map = room();
+    let here = TileKey::new(0, 0);
+    let next = TileKey::new(1, 0);
+    assert_eq!(map.ensure_tables([here]).unwrap(), 1);
+
+    // The server reports a change: the tile goes stale, the table stays.
+    map.tile_changed(next);
+    assert_eq!(map.stale_tiles(), vec![next]);
+    assert_eq!(map.ensure_tables([here]).unwrap(), 0);
+
+    // Fetched again with other log-odds but the same occupied cells.
+    let firmer = tile_of(next, |x, y| {
+        let v = room_log_odds(x, y);
+        if v == FREE { FREE * 2 } else { v }
+    });
+    map.insert_tile(next, 2, Some(&firmer)).unwrap();
+    assert!(map.stale_tiles().is_empty());
+    assert_eq!(map.ensure_tables([here]).unwrap(), 0, "table kept");
+    assert_eq!(map.version(next), Some(2));
+
+    // The block's edge a cell thicker, as sonar noise makes it: kept.
+    map.tile_changed(next);
+    let ragged = tile_of(next, |x, y| {
+        if (4.95..5.0).contains(&x) && (3.1..3.15).contains(&y) {
+            OCCUPIED
+        } else {
+            room_log_odds(x, y)
+        }
+    });
+    map.insert_tile(next, 3, Some(&ragged)).unwrap();
+    assert_eq!(map.ensure_tables([here]).unwrap(), 0, "table kept");
+
+    // A new obstacle: the tables that read the tile are rebuilt.
+    map.tile_changed(next);
+    let with_box = tile_of(next, |x, y| {
+        if (4.0..4.2).contains(&x) && (2.0..2.2).contains(&y) {
+            OCCUPIED
+        } else {
+            room_log_odds(x, y)
+        }
+    });
+    map.insert_tile(next, 4, Some(&with_box)).unwrap();
+    assert_eq!(map.ensure_tables([here]).unwrap(), 1, "table rebuilt");
+
+    // A tile never held that changes drops the tables near it at once.
+    let beyond = TileKey::new(4, 0);
+    map.tile_changed(beyond);
+    assert!(map.stale_tiles().is_empty());
+    assert_eq!(map.ensure_tables([here]).unwrap(), 1);
+
+    // Lost events: every held tile is stale and every table dropped.
+    map.all_changed();
+    assert_eq!(map.stale_tiles().len(), 20);
+    assert_eq!(map.ensure_tables([here]).unwrap(), 1);
 }

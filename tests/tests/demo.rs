@@ -1,56 +1,139 @@
-//! The `deog demo` binary, run as a user would.
+//! `deog demo` run as a user would, shortened: every part its own process,
+//! two robots in map2, one kidnapped. The figures in report.json must show
+//! that the system works, not only that the files exist.
 
 use std::process::Command;
+use std::time::Instant;
 
 use deog_tests::deog_binary;
+use serde_json::Value;
 
 #[test]
-fn demo_maps_the_room_and_writes_a_pgm() {
-    let out = tempfile::tempdir().unwrap();
+fn a_short_demo_localizes_every_robot_and_maps_the_room() {
+    let out = tempfile::tempdir().expect("temp dir");
+    let started = Instant::now();
     let output = Command::new(deog_binary())
-        .args(["demo", "--frames", "200", "--out"])
+        .args([
+            "demo",
+            "--robots",
+            "2",
+            "--duration",
+            "100",
+            "--localize-at",
+            "50",
+            "--kidnap-at",
+            "75",
+            "--seed",
+            "2",
+            "--out",
+        ])
         .arg(out.path())
         .output()
-        .unwrap();
+        .expect("deog runs");
     let stdout = String::from_utf8_lossy(&output.stdout);
-    assert!(
-        output.status.success(),
-        "demo failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "demo failed:\n{stdout}\n{stderr}");
+    let elapsed = started.elapsed().as_secs_f64();
 
-    // "... cells observed; 83.0% of the 27113 classified cells match the room"
-    let percent: f64 = stdout
-        .split("observed; ")
-        .nth(1)
-        .and_then(|rest| rest.split('%').next())
-        .and_then(|p| p.parse().ok())
-        .unwrap_or_else(|| panic!("no score in: {stdout}"));
-    assert!(
-        percent > 75.0,
-        "map matches the room in only {percent}% of cells"
-    );
-
-    let pgm = std::fs::read(out.path().join("map.pgm")).unwrap();
-    let header = String::from_utf8_lossy(&pgm[..20]);
-    let mut fields = header.split_whitespace();
-    assert_eq!(fields.next(), Some("P5"));
-    let width: usize = fields.next().unwrap().parse().unwrap();
-    let height: usize = fields.next().unwrap().parse().unwrap();
-    // The room is 10 m x 8 m: at 5 cm, at least 200 x 160 cells.
-    assert!(width >= 200 && height >= 160, "{width} x {height}");
-    let pixels = &pgm[pgm.len() - width * height..];
-    for value in [0u8, 254, 205] {
-        assert!(pixels.contains(&value), "no pixel of value {value}");
+    let text = std::fs::read_to_string(out.path().join("report.json")).expect("report.json");
+    let report: Value = serde_json::from_str(&text).expect("report.json is JSON");
+    let context = format!("{stdout}\n{text}");
+    let robots = report["robots"].as_array().expect("robots");
+    assert_eq!(robots.len(), 2, "{context}");
+    for robot in robots {
+        let name = robot["name"].as_str().expect("name");
+        assert_eq!(robot["converged"], Value::Bool(true), "{name}\n{context}");
+        let converge_s = robot["converge_s"].as_f64().expect("converge_s");
+        assert!(
+            converge_s < 30.0,
+            "{name} converged after {converge_s} s\n{context}"
+        );
+        let x = robot["mean_abs_error_m"]["x"].as_f64().expect("x");
+        let y = robot["mean_abs_error_m"]["y"].as_f64().expect("y");
+        let degrees = robot["mean_abs_error_deg"].as_f64().expect("deg");
+        assert!(x < 0.1 && y < 0.1, "{name}: {x} m, {y} m\n{context}");
+        assert!(degrees < 3.0, "{name}: {degrees}°\n{context}");
+        assert!(
+            robot["rms_position_m"].as_f64().expect("rms") < 0.15,
+            "{context}"
+        );
+        let kidnapped = name == "scout-1";
+        assert_eq!(
+            robot["kidnapped"],
+            Value::Bool(kidnapped),
+            "{name}\n{context}"
+        );
+        if kidnapped {
+            assert_eq!(robot["recovered"], Value::Bool(true), "{context}");
+            let recover_s = robot["recover_s"].as_f64().expect("recover_s");
+            assert!(recover_s < 30.0, "found after {recover_s} s\n{context}");
+        } else {
+            assert_eq!(robot["recovered"], Value::Null, "{context}");
+        }
     }
+    let map = &report["map"];
+    assert!(
+        map["cells_observed"].as_u64().expect("cells") > 20_000,
+        "{context}"
+    );
+    let correct = map["fraction_correct"].as_f64().expect("fraction_correct");
+    assert!(correct > 0.93, "map {correct} correct\n{context}");
+    assert!(
+        map["occupied_precision"].as_f64().expect("precision") > 0.9,
+        "{context}"
+    );
+    assert!(
+        map["occupied_recall"].as_f64().expect("recall") > 0.7,
+        "{context}"
+    );
+    let duration = report["duration_s"].as_f64().expect("duration_s");
+    assert!(
+        duration > 0.0 && duration <= elapsed,
+        "{duration} s\n{context}"
+    );
+
+    for file in [
+        "map.pgm",
+        "map.yaml",
+        "map.png",
+        "scout-1.png",
+        "scout-2.png",
+    ] {
+        let len = std::fs::metadata(out.path().join(file)).map_or(0, |m| m.len());
+        assert!(len > 100, "{file}: {len} bytes");
+    }
+    let markdown = std::fs::read_to_string(out.path().join("report.md")).expect("report.md");
+    assert!(markdown.contains("kidnapped"), "{markdown}");
+    assert!(markdown.contains("| robot | converged after"), "{markdown}");
+    // Every process was stopped: the logs say the server flushed its store.
+    let server_log = std::fs::read_to_string(out.path().join("logs/server.log")).expect("log");
+    assert!(server_log.contains("store flushed"), "{server_log}");
 }
 
 #[test]
-fn demo_rejects_zero_frames() {
-    let output = Command::new(deog_binary())
-        .args(["demo", "--frames", "0"])
-        .output()
-        .unwrap();
-    assert!(!output.status.success());
-    assert!(String::from_utf8_lossy(&output.stderr).contains("--frames"));
+fn bad_demo_options_are_refused_before_anything_starts() {
+    let out = tempfile::tempdir().expect("temp dir");
+    for (args, expected) in [
+        (&["--duration", "0"][..], "--duration"),
+        (&["--speed", "0"][..], "--speed"),
+        (&["--localize-at", "500"][..], "--localize-at"),
+        (
+            &["--kidnap-at", "10", "--localize-at", "20"][..],
+            "--kidnap-at",
+        ),
+        (&["--world", "no-such-world"][..], "no world"),
+        (&["--robots", "0"][..], "--robots"),
+    ] {
+        let output = Command::new(deog_binary())
+            .arg("demo")
+            .args(args)
+            .arg("--out")
+            .arg(out.path().join("o"))
+            .output()
+            .expect("deog runs");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(!output.status.success(), "{args:?} accepted");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(!out.path().join("o").exists(), "{args:?} wrote files");
+    }
 }
