@@ -9,9 +9,11 @@
 
 use std::ffi::OsString;
 use std::fmt::Write as _;
+use std::future::Future;
 use std::io::{IsTerminal, Write as _};
 use std::net::{SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
+use std::pin::Pin;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
@@ -200,7 +202,7 @@ async fn demo(args: &DemoArgs, plan: &Plan) -> Result<()> {
     .await?;
 
     for (i, robot) in plan.robots.iter().enumerate() {
-        let robot_seed = (args.seed.wrapping_mul(1000) + i as u64 + 1).to_string();
+        let robot_seed = robot_seed(args.seed, i);
         children.start(
             &format!("wander-{robot}"),
             Role::Task,
@@ -237,27 +239,19 @@ async fn demo(args: &DemoArgs, plan: &Plan) -> Result<()> {
     }
 
     let mut status = StatusLine::new();
-    let shutdown = crate::signal::shutdown();
-    tokio::pin!(shutdown);
-    let mut tick = tokio::time::interval(Duration::from_millis(250));
+    let mut pacer = Pacer::new();
     let mut localizing = false;
     let mut kidnap: Option<KidnapDone> = None;
     let mut follow = vec![Follow::default(); plan.robots.len()];
     // Driving: until every wanderer has finished its simulated time.
     loop {
-        tokio::select! {
-            () = &mut shutdown => {
-                status.finish();
-                bail!("interrupted: every process of the demo was stopped");
-            }
-            _ = tick.tick() => {}
-        }
+        pacer.next(&mut status).await?;
         children.check()?;
         let states = sim.robots().await.context("asking the simulator")?;
         let now = states.iter().map(|s| s.time_s).fold(0.0, f64::max);
         if !localizing && now >= plan.localize_at && states.len() == plan.robots.len() {
             for (i, robot) in plan.robots.iter().enumerate() {
-                let robot_seed = (args.seed.wrapping_mul(1000) + i as u64 + 1).to_string();
+                let robot_seed = robot_seed(args.seed, i);
                 children.start(
                     &format!("localize-{robot}"),
                     Role::Task,
@@ -302,13 +296,7 @@ async fn demo(args: &DemoArgs, plan: &Plan) -> Result<()> {
     // Draining: the cartographers and localizers end once idle.
     let finishing = Instant::now();
     while !(children.all_done("map-") && children.all_done("localize-")) {
-        tokio::select! {
-            () = &mut shutdown => {
-                status.finish();
-                bail!("interrupted: every process of the demo was stopped");
-            }
-            _ = tick.tick() => {}
-        }
+        pacer.next(&mut status).await?;
         children.check()?;
         let mut waiting = children.running("map-");
         waiting.extend(children.running("localize-"));
@@ -355,6 +343,40 @@ async fn demo(args: &DemoArgs, plan: &Plan) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The seed of robot `index`'s wanderer and localizer.
+fn robot_seed(seed: u64, index: usize) -> String {
+    seed.wrapping_mul(1000)
+        .wrapping_add(index as u64 + 1)
+        .to_string()
+}
+
+/// The demo's clock: a tick every quarter second, and ctrl-c or SIGTERM.
+struct Pacer {
+    tick: tokio::time::Interval,
+    shutdown: Pin<Box<dyn Future<Output = ()> + Send>>,
+}
+
+impl Pacer {
+    fn new() -> Self {
+        Self {
+            tick: tokio::time::interval(Duration::from_millis(250)),
+            shutdown: Box::pin(crate::signal::shutdown()),
+        }
+    }
+
+    /// Waits for the next tick. An interrupt is an error: on its way out
+    /// the supervisor stops every process.
+    async fn next(&mut self, status: &mut StatusLine) -> Result<()> {
+        tokio::select! {
+            () = &mut self.shutdown => {
+                status.finish();
+                bail!("interrupted: every process of the demo was stopped");
+            }
+            _ = self.tick.tick() => Ok(()),
+        }
+    }
 }
 
 /// Creates `out` and clears what an earlier demo left in it.
