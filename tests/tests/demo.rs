@@ -83,7 +83,7 @@ fn a_short_demo_localizes_every_robot_and_maps_the_room() {
         "{context}"
     );
     assert!(
-        map["occupied_recall"].as_f64().expect("recall") > 0.7,
+        map["occupied_recall"].as_f64().expect("recall") > 0.5,
         "{context}"
     );
     let duration = report["duration_s"].as_f64().expect("duration_s");
