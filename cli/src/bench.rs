@@ -59,6 +59,9 @@ enum BenchTarget {
     /// Localization accuracy over seeded runs per world, in one process:
     /// global convergence, error after convergence, kidnap recovery.
     Localize(crate::bench_localize::LocalizeBenchArgs),
+    /// The localizer's memory against its cache setting, with the real
+    /// processes, on a generated city map at least 100 times the cache.
+    LocalizeMemory(crate::bench_memory::LocalizeMemoryArgs),
 }
 
 /// Options of `deog bench map-server`.
@@ -95,6 +98,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     match args.target {
         BenchTarget::MapServer(args) => map_server(args),
         BenchTarget::Localize(args) => crate::bench_localize::run(args),
+        BenchTarget::LocalizeMemory(args) => crate::bench_memory::run(args),
     }
 }
 
@@ -292,7 +296,7 @@ impl Drop for ServerProcess {
 }
 
 /// A `kB` field of `/proc/<pid>/status`, such as `VmRSS` or `VmHWM`.
-fn proc_status_kb(pid: u32, field: &str) -> Result<u64> {
+pub(crate) fn proc_status_kb(pid: u32, field: &str) -> Result<u64> {
     let status = fs::read_to_string(format!("/proc/{pid}/status"))
         .with_context(|| format!("reading /proc/{pid}/status"))?;
     status

@@ -11,7 +11,6 @@ use std::ffi::OsString;
 use std::fmt::Write as _;
 use std::future::Future;
 use std::io::{IsTerminal, Write as _};
-use std::net::{SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
 use std::pin::Pin;
 use std::time::{Duration, Instant};
@@ -32,7 +31,7 @@ use deog_simulator::simulation::{SimConfig, Simulation};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::supervisor::{Role, Supervisor};
+use crate::supervisor::{Role, Supervisor, connect, free_loopback_addr, os};
 
 /// Options of `deog demo`.
 #[derive(Debug, Args)]
@@ -390,38 +389,6 @@ fn prepare_out(out: &Path) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// A loopback address no one listens on at the moment of asking.
-fn free_loopback_addr() -> Result<SocketAddr> {
-    let listener = TcpListener::bind("127.0.0.1:0").context("finding a free loopback port")?;
-    listener
-        .local_addr()
-        .context("finding a free loopback port")
-}
-
-fn os(args: &[&str]) -> Vec<OsString> {
-    args.iter().map(OsString::from).collect()
-}
-
-/// Connects to a child's service, retrying while the child starts, and
-/// failing at once if it dies.
-async fn connect<C, E, F, Fut>(children: &mut Supervisor, what: &str, mut attempt: F) -> Result<C>
-where
-    F: FnMut() -> Fut,
-    Fut: std::future::Future<Output = Result<C, E>>,
-    E: std::fmt::Display,
-{
-    let deadline = Instant::now() + Duration::from_secs(30);
-    loop {
-        children.check()?;
-        match tokio::time::timeout(Duration::from_secs(5), attempt()).await {
-            Ok(Ok(client)) => return Ok(client),
-            Ok(Err(e)) if Instant::now() > deadline => bail!("connecting to the {what}: {e}"),
-            Err(_) if Instant::now() > deadline => bail!("connecting to the {what}: timed out"),
-            _ => tokio::time::sleep(Duration::from_millis(100)).await,
-        }
-    }
 }
 
 /// Carries `state`'s robot to a random free pose at least 2 m away, with

@@ -108,7 +108,13 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     settings.kld.min_particles = args.min_particles;
     settings.beam.tempering = args.tempering;
     let mut mcl = Mcl::new(settings).context("the filter's settings")?;
-    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    // One thread: the filter is sequential, and its allocations then come
+    // from one arena of the allocator, not one per worker thread each
+    // holding memory the others freed.
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
     runtime.block_on(async move {
         let client = MapClient::connect(args.connection.client_config()?)
             .await
@@ -255,9 +261,12 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
                     fetch_tiles(&client, &args.map, tile_size, &missing, &mut map).await?;
                 }
                 let started = std::time::Instant::now();
-                let report =
-                    tokio::task::block_in_place(|| mcl.correct(&mut map, &frame.ranges))
-                        .with_context(|| format!("frame {}", frame.sequence))?;
+                // The frame and watch streams wait meanwhile: the server
+                // keeps their backlog (frames are re-read from storage, a
+                // watcher that falls behind gets a resync).
+                let report = mcl
+                    .correct(&mut map, &frame.ranges)
+                    .with_context(|| format!("frame {}", frame.sequence))?;
                 if report.tables_built > 0 {
                     last_rebuild = started.elapsed();
                 }

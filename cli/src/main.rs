@@ -2,6 +2,7 @@
 
 mod bench;
 mod bench_localize;
+mod bench_memory;
 mod connection;
 mod demo;
 mod eval;
@@ -69,7 +70,8 @@ enum Command {
     /// Evaluation reports: `eval map` judges a map on the server against
     /// a world's ground truth.
     Eval(eval::EvalArgs),
-    /// Runs the release benchmarks of the map server.
+    /// Runs the release benchmarks: the map server, localization accuracy,
+    /// the localizer's memory.
     Bench(bench::BenchArgs),
 }
 

@@ -66,6 +66,9 @@ pub struct SimArgs {
     /// Scale of the odometry noise (0 turns it off, 1 is the default model).
     #[arg(long, default_value_t = 1.0)]
     pub odometry_noise: f64,
+    /// Largest request message accepted, bytes (at least 1024).
+    #[arg(long, env = "DEOG_SIM_MAX_MESSAGE_BYTES", default_value_t = SimServeConfig::default().max_message_bytes)]
+    pub max_message_bytes: usize,
 }
 
 /// Loads a world by built-in name or path.
@@ -128,6 +131,7 @@ pub fn run(args: SimArgs) -> Result<()> {
     }
     let serve_config = SimServeConfig {
         speed: args.speed,
+        max_message_bytes: args.max_message_bytes,
         ..SimServeConfig::default()
     };
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;

@@ -6,6 +6,7 @@
 
 use std::ffi::OsString;
 use std::fs::File;
+use std::net::{SocketAddr, TcpListener};
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -241,5 +242,41 @@ pub fn log_tail(path: &Path, lines: usize) -> String {
             }
         }
         Err(e) => format!("  (cannot read it: {e})"),
+    }
+}
+
+/// A loopback address no one listens on at the moment of asking.
+pub(crate) fn free_loopback_addr() -> Result<SocketAddr> {
+    let listener = TcpListener::bind("127.0.0.1:0").context("finding a free loopback port")?;
+    listener
+        .local_addr()
+        .context("finding a free loopback port")
+}
+
+pub(crate) fn os(args: &[&str]) -> Vec<OsString> {
+    args.iter().map(OsString::from).collect()
+}
+
+/// Connects to a child's service, retrying while the child starts, and
+/// failing at once if it dies.
+pub(crate) async fn connect<C, E, F, Fut>(
+    children: &mut Supervisor,
+    what: &str,
+    mut attempt: F,
+) -> Result<C>
+where
+    F: FnMut() -> Fut,
+    Fut: std::future::Future<Output = Result<C, E>>,
+    E: std::fmt::Display,
+{
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        children.check()?;
+        match tokio::time::timeout(Duration::from_secs(5), attempt()).await {
+            Ok(Ok(client)) => return Ok(client),
+            Ok(Err(e)) if Instant::now() > deadline => bail!("connecting to the {what}: {e}"),
+            Err(_) if Instant::now() > deadline => bail!("connecting to the {what}: timed out"),
+            _ => tokio::time::sleep(Duration::from_millis(100)).await,
+        }
     }
 }

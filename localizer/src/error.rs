@@ -24,6 +24,18 @@ pub enum LocalizerError {
     /// The map has no known-free cell to put particles on.
     #[error("the map has no known-free cell to spread particles over")]
     NoFreeSpace,
+    /// Global localization would need more range tables than the cache
+    /// holds.
+    #[error(
+        "global localization needs range tables for the {tiles} tiles with free cells, \
+         but the cache budget holds {capacity}: give an initial pose or a larger cache"
+    )]
+    MapLargerThanCache {
+        /// Held tiles with a known-free cell.
+        tiles: usize,
+        /// Range tables the budget holds.
+        capacity: usize,
+    },
     /// A grid operation failed.
     #[error(transparent)]
     Grid(#[from] deog_grid::GridError),

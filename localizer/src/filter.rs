@@ -13,7 +13,9 @@
 //!   fast falls below the slow (the scene no longer fits the map where the
 //!   particles are: kidnapping, or a wrong early convergence), a share
 //!   `max(0, 1 − w_fast / w_slow)` of the particles drawn at the next
-//!   resampling come from the known-free cells of the map instead;
+//!   resampling come from the known-free cells of the map instead (of the
+//!   tiles nearest the estimate when the map is larger than the cache
+//!   can hold range tables for);
 //! - resampling happens only when the effective sample size `1 / Σ w²`
 //!   falls below a fraction of the particle count, or when particles are
 //!   to be injected; the new count comes from the KLD bound on the number
@@ -21,7 +23,7 @@
 //!
 //! Deterministic for a given seed: one ChaCha stream drives every draw.
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 
 use deog_grid::{CellIndex, Pose2, SensorRing, TileKey, normalize_angle};
 use rand::{Rng, SeedableRng};
@@ -217,7 +219,16 @@ impl Mcl {
 
     /// Global localization: the most particles the settings allow, spread
     /// uniformly over the known-free cells the map holds, all headings.
+    ///
+    /// Every particle must be scored against a range table each frame, so
+    /// the tiles with free cells must fit in the cache's budget: a map
+    /// larger than that is refused rather than rebuilt tile by tile every
+    /// frame.
     pub fn start_global(&mut self, map: &LocalMap) -> Result<(), LocalizerError> {
+        let (tiles, capacity) = (map.free_tile_count(), map.table_capacity());
+        if tiles > capacity {
+            return Err(LocalizerError::MapLargerThanCache { tiles, capacity });
+        }
         let free = map.free_cells();
         if free.is_empty() {
             return Err(LocalizerError::NoFreeSpace);
@@ -305,7 +316,8 @@ impl Mcl {
     }
 
     /// The tiles whose range tables the next correction reads: those under
-    /// every particle's sonars.
+    /// every particle's sonars, or the [`LocalMap::table_capacity`] of them
+    /// under the most.
     pub fn tiles_needed(&self, map: &LocalMap) -> Vec<TileKey> {
         let reach = self
             .settings
@@ -340,13 +352,8 @@ impl Mcl {
         let mut keys = HashSet::new();
         let mut last = None;
         for p in &self.particles {
-            for (dx, dy) in [
-                (-reach, -reach),
-                (reach, reach),
-                (-reach, reach),
-                (reach, -reach),
-            ] {
-                if let Ok(cell) = res.cell_of(p.x + dx, p.y + dy) {
+            for (x, y) in reach_corners(p, reach) {
+                if let Ok(cell) = res.cell_of(x, y) {
                     let key = map.tile_of(cell);
                     if last != Some(key) {
                         keys.insert(key);
@@ -354,6 +361,23 @@ impl Mcl {
                     }
                 }
             }
+        }
+        let capacity = map.table_capacity();
+        if keys.len() > capacity {
+            // More tables than the cache holds: those under the most
+            // particles' sonars. Particles elsewhere read as inside a wall
+            // and die out at the next resampling.
+            let mut uses: HashMap<TileKey, usize> = HashMap::with_capacity(keys.len());
+            for p in &self.particles {
+                for (x, y) in reach_corners(p, reach) {
+                    if let Ok(cell) = res.cell_of(x, y) {
+                        *uses.entry(map.tile_of(cell)).or_default() += 1;
+                    }
+                }
+            }
+            let mut ranked: Vec<(usize, TileKey)> = uses.into_iter().map(|(k, n)| (n, k)).collect();
+            ranked.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+            keys = ranked.into_iter().take(capacity).map(|(_, k)| k).collect();
         }
         let mut keys: Vec<TileKey> = keys.into_iter().collect();
         keys.sort();
@@ -558,12 +582,24 @@ impl Mcl {
             &mut self.rng,
             &mut self.scratch_indices,
         )?;
+        let res = map.settings().resolution;
         let free = if inject > 0.0 {
-            map.free_cells()
+            // Recovery searches as far as the cache can hold range tables
+            // for, half of it (the particles' sonars reach into the tiles
+            // around): on a map larger than that, the tiles nearest the
+            // estimate; on a smaller one, all free space.
+            let around = self
+                .cluster
+                .map(|c| c.pose)
+                .or_else(|| self.particles.first().copied());
+            let max_tiles = (map.table_capacity() / 2).max(1);
+            match around.map(|p| res.cell_of(p.x, p.y)) {
+                Some(Ok(cell)) => map.free_cells_near(cell, max_tiles),
+                _ => Vec::new(),
+            }
         } else {
             Vec::new()
         };
-        let res = map.settings().resolution;
         let mut bins = HashSet::new();
         let mut next = Vec::with_capacity(self.particles.len());
         let mut bound = kld.particles_for(0);
@@ -633,6 +669,17 @@ fn beam_tables<'a>(
             })
         })
         .collect()
+}
+
+/// The corners of the square of half-side `reach` about a particle: every
+/// sonar sits inside it.
+fn reach_corners(p: &Pose2, reach: f64) -> [(f64, f64); 4] {
+    [
+        (p.x - reach, p.y - reach),
+        (p.x + reach, p.y + reach),
+        (p.x - reach, p.y + reach),
+        (p.x + reach, p.y - reach),
+    ]
 }
 
 /// A pose uniformly inside `cell`, any heading.

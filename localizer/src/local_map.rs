@@ -13,9 +13,12 @@
 //! the one-cell ragged edges of its walls, none of which moves an expected
 //! range by more than a cell: the tables stay until a tile's occupied
 //! cells differ from those the tables were built with by more than that
-//! (see [`occupied_moved`]). When the cache holds more than its
-//! budget, [`LocalMap::evict_to_budget`] drops the least recently used
-//! tables and tiles outside the working set.
+//! (see [`occupied_moved`]). Before tables are built, the least recently
+//! used ones make room; after a correction, [`LocalMap::evict_to_budget`]
+//! drops tables and tiles outside the working set. Both keep a quarter of
+//! the budget for the rest of the process (allocator overhead, buffers),
+//! so that the process, not only the cache's count, grows by no more than
+//! the budget.
 
 use std::collections::{HashMap, HashSet};
 
@@ -26,7 +29,7 @@ use deog_grid::{
 use rand::Rng;
 
 use crate::error::LocalizerError;
-use crate::range_table::{ConeGeometry, NO_ECHO, OccupancyRaster, build_table};
+use crate::range_table::{ConeGeometry, NO_ECHO, OccupancyRaster, RangeTable, fill_table};
 
 const UNKNOWN: u8 = 0;
 const FREE: u8 = 1;
@@ -34,6 +37,20 @@ const OCCUPIED: u8 = 2;
 
 /// Largest raster built in one go, cells; bigger batches are split.
 const MAX_RASTER_CELLS: u64 = 4_000_000;
+
+/// Bytes per raster cell while it is built: its occupancy, the squared
+/// distance transform (`f64`) and the distance field (`f32`).
+const RASTER_BYTES_PER_CELL: u64 = 13;
+
+/// How the budget is shared, in eighths: the raster tables are built from
+/// takes at most two; two are left to the rest of the process, whose
+/// buffers and allocator overhead grow with the work the cache brings
+/// (memory freed but not yet returned, fragments, frames waiting while
+/// tables are built); the range tables one correction needs take at most
+/// four; what they leave holds the tiles' cells.
+const RASTER_EIGHTHS: usize = 2;
+const ALLOCATOR_EIGHTHS: usize = 2;
+const TABLE_EIGHTHS: usize = 4;
 
 /// How the map is cut and judged, and how much memory the cache may use.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -57,7 +74,7 @@ struct MapTile {
     /// Per cell: unknown, free or occupied. `None` until fetched.
     cells: Option<Box<[u8]>>,
     free_cells: u32,
-    ranges: Option<Box<[u16]>>,
+    ranges: Option<RangeTable>,
     last_used: u64,
     /// The server changed it since it was fetched.
     stale: bool,
@@ -86,6 +103,14 @@ pub struct LocalMap {
     clock: u64,
     margin_tiles: i32,
     stats: CacheStats,
+    /// Dropped tables whose memory the next tables built reuse (counted in
+    /// `bytes`): refilling a table costs less than mapping and touching a
+    /// megabyte anew.
+    spare: Vec<RangeTable>,
+    /// The raster tables are built from, kept and refilled (counted in
+    /// `bytes`): megabytes of it allocated and freed on the heap at every
+    /// batch would leave the allocator holding pieces of them.
+    raster: Option<OccupancyRaster>,
 }
 
 impl LocalMap {
@@ -104,6 +129,8 @@ impl LocalMap {
             clock: 0,
             margin_tiles: (margin_cells + side - 1) / side,
             stats: CacheStats::default(),
+            spare: Vec::new(),
+            raster: None,
         })
     }
 
@@ -234,7 +261,7 @@ impl LocalMap {
             if let Some(tile) = self.tiles.get_mut(&key) {
                 tile.stale = tile.cells.is_some();
                 if let Some(table) = tile.ranges.take() {
-                    self.bytes -= table.len() * std::mem::size_of::<u16>();
+                    self.spare.push(table);
                     self.stats.tables_dropped += 1;
                 }
             }
@@ -282,16 +309,17 @@ impl LocalMap {
     }
 
     /// Builds the range tables `keys` lack, from the tiles held (tiles not
-    /// held count as unknown). Returns how many were built.
+    /// held count as unknown), first dropping least recently used tables
+    /// of other tiles as the budget requires. Returns how many were built.
     pub fn ensure_tables(
         &mut self,
         keys: impl IntoIterator<Item = TileKey>,
     ) -> Result<usize, LocalizerError> {
-        let mut todo: Vec<TileKey> = keys
-            .into_iter()
+        let keep: HashSet<TileKey> = keys.into_iter().collect();
+        let mut todo: Vec<TileKey> = keep
+            .iter()
             .filter(|k| self.tiles.get(k).is_none_or(|t| t.ranges.is_none()))
-            .collect::<HashSet<_>>()
-            .into_iter()
+            .copied()
             .collect();
         todo.sort();
         let count = todo.len();
@@ -300,26 +328,60 @@ impl LocalMap {
             .settings
             .geometry
             .margin_cells(self.settings.resolution);
-        // Batches of nearby tiles share one raster.
+        // Batches of nearby tiles share one raster, as large as its share
+        // of the budget allows.
+        let raster_cells = ((self.settings.budget_bytes / 8 * RASTER_EIGHTHS) as u64
+            / RASTER_BYTES_PER_CELL)
+            .min(MAX_RASTER_CELLS);
         let mut remaining = todo.as_slice();
         while let Some(first) = remaining.first() {
             let mut bounds = widen(size.cell_box(*first)?, margin);
             let mut taken = 1;
             for key in &remaining[1..] {
                 let candidate = bounds.union(&widen(size.cell_box(*key)?, margin));
-                if candidate.width() * candidate.height() > MAX_RASTER_CELLS {
+                if candidate.width() * candidate.height() > raster_cells {
                     break;
                 }
                 bounds = candidate;
                 taken += 1;
             }
-            let raster = OccupancyRaster::new(bounds, |cell| self.cell_state(cell) == OCCUPIED);
+            // Room first, for the new tables and the raster, so that with
+            // the process's share the cache stays within the budget
+            // unless the correction's own tables do not fit.
+            let needed = (bounds.width() * bounds.height() * RASTER_BYTES_PER_CELL) as usize;
+            let held = self.raster.as_ref().map_or(0, OccupancyRaster::held_bytes);
+            self.make_room(taken, needed.saturating_sub(held), &keep);
+            let raster = match self.raster.take() {
+                Some(mut raster) => {
+                    raster.refill(bounds, |cell| self.cell_state(cell) == OCCUPIED);
+                    raster
+                }
+                None => OccupancyRaster::new(bounds, |cell| self.cell_state(cell) == OCCUPIED),
+            };
+            self.bytes = self.bytes - held + raster.held_bytes();
+            let entries = size.area() * self.settings.geometry.stride();
             for key in &remaining[..taken] {
-                let table = build_table(
+                // Checked when the batch was formed: cannot fail here.
+                let tile_box = size.cell_box(*key)?;
+                let mut table = match self.spare.pop() {
+                    Some(spare) => {
+                        self.bytes -= spare.len() * std::mem::size_of::<u16>();
+                        spare
+                    }
+                    None => match RangeTable::zeroed(entries) {
+                        Ok(table) => table,
+                        Err(error) => {
+                            self.raster = Some(raster);
+                            return Err(error);
+                        }
+                    },
+                };
+                fill_table(
                     &raster,
-                    size.cell_box(*key)?,
+                    tile_box,
                     self.settings.resolution,
                     &self.settings.geometry,
+                    &mut table,
                 );
                 let now = self.tick();
                 let bytes = table.len() * std::mem::size_of::<u16>();
@@ -337,6 +399,7 @@ impl LocalMap {
                 self.bytes += bytes;
                 self.stats.tables_built += 1;
             }
+            self.raster = Some(raster);
             remaining = &remaining[taken..];
         }
         Ok(count)
@@ -384,10 +447,65 @@ impl LocalMap {
         }
     }
 
+    /// Makes room for `tables` new tables, which take the spares' memory
+    /// first, and `scratch` bytes beside them: frees spares beyond those
+    /// tables, then drops least recently used tables outside `keep` (as
+    /// spares while fewer than `tables`), until it fits the budget or no
+    /// such table is left.
+    fn make_room(&mut self, tables: usize, scratch: usize, keep: &HashSet<TileKey>) {
+        let table_bytes = self
+            .settings
+            .geometry
+            .table_bytes(self.settings.tile_size.area());
+        let fresh = |spares: usize| tables.saturating_sub(spares) * table_bytes + scratch;
+        let limit = self.limit();
+        let fits = |map: &Self| map.bytes + fresh(map.spare.len()) <= limit;
+        while !fits(self) && self.spare.len() > tables {
+            self.free_spare();
+        }
+        if fits(self) {
+            return;
+        }
+        let mut candidates: Vec<(u64, TileKey)> = self
+            .tiles
+            .iter()
+            .filter(|(k, t)| t.ranges.is_some() && !keep.contains(k))
+            .map(|(k, t)| (t.last_used, *k))
+            .collect();
+        candidates.sort();
+        for (_, key) in candidates {
+            if fits(self) {
+                return;
+            }
+            if let Some(table) = self.tiles.get_mut(&key).and_then(|t| t.ranges.take()) {
+                self.stats.tables_dropped += 1;
+                if self.spare.len() < tables {
+                    self.spare.push(table);
+                } else {
+                    self.bytes -= table.len() * std::mem::size_of::<u16>();
+                }
+            }
+        }
+    }
+
+    /// What the cache may hold: the budget less the process's share.
+    fn limit(&self) -> usize {
+        self.settings.budget_bytes / 8 * (8 - ALLOCATOR_EIGHTHS)
+    }
+
+    /// Frees one spare table's memory.
+    fn free_spare(&mut self) {
+        if let Some(spare) = self.spare.pop() {
+            self.bytes -= spare.len() * std::mem::size_of::<u16>();
+        }
+    }
+
     /// Drops least recently used tables, then tiles, outside `keep` until
-    /// the cache fits its budget (or nothing else can go).
+    /// the cache fits its budget less the process's share (or nothing
+    /// else can go).
     pub fn evict_to_budget(&mut self, keep: &HashSet<TileKey>) {
-        if self.bytes <= self.settings.budget_bytes {
+        let limit = self.limit();
+        if self.bytes <= limit {
             return;
         }
         let mut candidates: Vec<(u64, TileKey)> = self
@@ -398,10 +516,18 @@ impl LocalMap {
             .collect();
         candidates.sort();
         let area = self.settings.tile_size.area();
+        while self.bytes > limit && !self.spare.is_empty() {
+            self.free_spare();
+        }
+        if self.bytes > limit
+            && let Some(raster) = self.raster.take()
+        {
+            self.bytes -= raster.held_bytes();
+        }
         // Tables are large and rebuilt from tiles; tiles are small and cost
         // a fetch. Tables go first.
         for (_, key) in &candidates {
-            if self.bytes <= self.settings.budget_bytes {
+            if self.bytes <= limit {
                 return;
             }
             if let Some(t) = self.tiles.get_mut(key)
@@ -412,7 +538,7 @@ impl LocalMap {
             }
         }
         for (_, key) in &candidates {
-            if self.bytes <= self.settings.budget_bytes {
+            if self.bytes <= limit {
                 return;
             }
             if let Some(t) = self.tiles.remove(key) {
@@ -463,13 +589,57 @@ impl LocalMap {
         Err(LocalizerError::NoFreeSpace)
     }
 
+    /// How many range tables a correction may need at once: half the
+    /// budget (at least one).
+    pub fn table_capacity(&self) -> usize {
+        let table = self
+            .settings
+            .geometry
+            .table_bytes(self.settings.tile_size.area());
+        (self.settings.budget_bytes / 8 * TABLE_EIGHTHS / table).max(1)
+    }
+
+    /// Held tiles with at least one known-free cell.
+    pub fn free_tile_count(&self) -> usize {
+        self.tiles.values().filter(|t| t.free_cells > 0).count()
+    }
+
     /// Every held free cell, for the uniform prior (in tile order).
     pub fn free_cells(&self) -> Vec<CellIndex> {
-        let mut keys: Vec<&TileKey> = self.tiles.keys().collect();
+        let mut keys: Vec<TileKey> = self.tiles.keys().copied().collect();
         keys.sort();
+        self.free_cells_of(&keys)
+    }
+
+    /// The free cells of at most `max_tiles` held tiles: every one when
+    /// no more tiles have free cells, else those of the tiles nearest
+    /// `around` (ties broken by key). In tile order either way.
+    pub fn free_cells_near(&self, around: CellIndex, max_tiles: usize) -> Vec<CellIndex> {
+        let mut keys: Vec<TileKey> = self
+            .tiles
+            .iter()
+            .filter(|(_, t)| t.free_cells > 0)
+            .map(|(k, _)| *k)
+            .collect();
+        if keys.len() > max_tiles {
+            let centre = self.tile_of(around);
+            let distance = |k: &TileKey| {
+                let dx = i64::from(k.x) - i64::from(centre.x);
+                let dy = i64::from(k.y) - i64::from(centre.y);
+                dx * dx + dy * dy
+            };
+            keys.sort_by_key(|k| (distance(k), *k));
+            keys.truncate(max_tiles);
+        }
+        keys.sort();
+        self.free_cells_of(&keys)
+    }
+
+    /// The free cells of the held tiles among `keys`, in the keys' order.
+    fn free_cells_of(&self, keys: &[TileKey]) -> Vec<CellIndex> {
         let mut out = Vec::new();
         for key in keys {
-            if let Some(cells) = self.tiles[key].cells.as_deref() {
+            if let Some(cells) = self.tiles.get(key).and_then(|t| t.cells.as_deref()) {
                 for (i, c) in cells.iter().enumerate() {
                     if *c == FREE
                         && let Ok(cell) = self.settings.tile_size.join(
@@ -510,7 +680,7 @@ impl LocalMap {
             if let Some(t) = self.tiles.get_mut(&k)
                 && let Some(table) = t.ranges.take()
             {
-                self.bytes -= table.len() * std::mem::size_of::<u16>();
+                self.spare.push(table);
                 self.stats.tables_dropped += 1;
             }
         }

@@ -115,30 +115,55 @@ pub struct OccupancyRaster {
     /// Distance from each cell's centre to the nearest occupied cell's
     /// centre, in cells.
     distance: Vec<f32>,
+    /// The squared distances while the field is computed.
+    squared: Vec<f64>,
 }
 
 impl OccupancyRaster {
     /// A raster of `bounds` with each cell's occupancy from `occupied`.
-    pub fn new(bounds: CellBox, mut occupied: impl FnMut(CellIndex) -> bool) -> Self {
-        let width = bounds.width() as usize;
-        let height = bounds.height() as usize;
-        let mut cells = Vec::with_capacity(width * height);
-        for y in 0..height {
-            for x in 0..width {
-                cells.push(occupied(CellIndex::new(
+    pub fn new(bounds: CellBox, occupied: impl FnMut(CellIndex) -> bool) -> Self {
+        let mut raster = Self {
+            bounds,
+            width: 0,
+            height: 0,
+            occupied: Vec::new(),
+            distance: Vec::new(),
+            squared: Vec::new(),
+        };
+        raster.refill(bounds, occupied);
+        raster
+    }
+
+    /// Makes this the raster of `bounds`, in the memory it already holds
+    /// where that is enough: a cache building one batch after another
+    /// would otherwise allocate and free megabytes a batch.
+    pub fn refill(&mut self, bounds: CellBox, mut occupied: impl FnMut(CellIndex) -> bool) {
+        self.bounds = bounds;
+        self.width = bounds.width() as usize;
+        self.height = bounds.height() as usize;
+        self.occupied.clear();
+        for y in 0..self.height {
+            for x in 0..self.width {
+                self.occupied.push(occupied(CellIndex::new(
                     bounds.min.x + x as i32,
                     bounds.min.y + y as i32,
                 )));
             }
         }
-        let distance = distance_field(&cells, width, height);
-        Self {
-            bounds,
-            width,
-            height,
-            occupied: cells,
-            distance,
-        }
+        distance_field(
+            &self.occupied,
+            self.width,
+            self.height,
+            &mut self.squared,
+            &mut self.distance,
+        );
+    }
+
+    /// Bytes the raster holds.
+    pub fn held_bytes(&self) -> usize {
+        self.occupied.capacity()
+            + self.distance.capacity() * std::mem::size_of::<f32>()
+            + self.squared.capacity() * std::mem::size_of::<f64>()
     }
 
     /// The cells the raster covers.
@@ -173,6 +198,70 @@ pub fn build_table(
     res: Resolution,
     geometry: &ConeGeometry,
 ) -> Box<[u16]> {
+    let mut table = vec![0; tile.width() as usize * tile.height() as usize * geometry.stride()];
+    fill_table(raster, tile, res, geometry, &mut table);
+    table.into_boxed_slice()
+}
+
+/// One tile's table in memory of its own, mapped from the system and
+/// returned to it when dropped. A cache that dropped and built tables of a
+/// megabyte each on the heap would leave the allocator holding freed
+/// pieces between its other allocations, and the process would grow past
+/// what the cache holds.
+#[derive(Debug)]
+pub struct RangeTable {
+    memory: memmap2::MmapMut,
+    len: usize,
+}
+
+impl RangeTable {
+    /// A table of `len` entries, all zero.
+    pub fn zeroed(len: usize) -> Result<Self, LocalizerError> {
+        let bytes = len.max(1) * std::mem::size_of::<u16>();
+        let memory = memmap2::MmapMut::map_anon(bytes).map_err(|e| {
+            LocalizerError::Invalid(format!("mapping {bytes} bytes for a range table: {e}"))
+        })?;
+        Ok(Self { memory, len })
+    }
+
+    /// [`build_table`] into memory of its own.
+    pub fn build(
+        raster: &OccupancyRaster,
+        tile: CellBox,
+        res: Resolution,
+        geometry: &ConeGeometry,
+    ) -> Result<Self, LocalizerError> {
+        let mut table =
+            Self::zeroed(tile.width() as usize * tile.height() as usize * geometry.stride())?;
+        fill_table(raster, tile, res, geometry, &mut table);
+        Ok(table)
+    }
+}
+
+impl std::ops::Deref for RangeTable {
+    type Target = [u16];
+
+    fn deref(&self) -> &[u16] {
+        // Page-aligned memory of at least `len` entries.
+        &bytemuck::cast_slice(&self.memory[..])[..self.len]
+    }
+}
+
+impl std::ops::DerefMut for RangeTable {
+    fn deref_mut(&mut self) -> &mut [u16] {
+        &mut bytemuck::cast_slice_mut(&mut self.memory[..])[..self.len]
+    }
+}
+
+/// Writes [`build_table`]'s entries into `table` (one [`ConeGeometry::stride`]
+/// a cell of `tile`, row-major; entries past the tile's are left alone).
+pub fn fill_table(
+    raster: &OccupancyRaster,
+    tile: CellBox,
+    res: Resolution,
+    geometry: &ConeGeometry,
+    table: &mut [u16],
+) {
     let rays = geometry.rays();
     let directions: Vec<(f64, f64)> = (0..rays)
         .map(|j| {
@@ -187,36 +276,36 @@ pub fn build_table(
     let reach = (geometry.half_angle / step + 1e-9).floor() as i64;
     let mut ray_ranges = vec![f32::INFINITY; rays];
     let cos_cutoff = geometry.specular_max_incidence.map(f64::cos);
-    let mut table =
-        Vec::with_capacity(tile.width() as usize * tile.height() as usize * geometry.stride());
+    let mut entries = table.chunks_exact_mut(geometry.stride());
     for cy in tile.min.y..=tile.max.y {
         for cx in tile.min.x..=tile.max.x {
+            let Some(entry) = entries.next() else {
+                return;
+            };
             let rx = i64::from(cx) - i64::from(raster.bounds.min.x);
             let ry = i64::from(cy) - i64::from(raster.bounds.min.y);
             if raster.slot(rx, ry).is_some_and(|s| raster.occupied[s]) {
-                table.extend(std::iter::repeat_n(0u16, geometry.stride()));
+                entry.fill(0);
                 continue;
             }
             let origin = (rx as f64 + 0.5, ry as f64 + 0.5);
             for (range, dir) in ray_ranges.iter_mut().zip(&directions) {
                 *range = march(raster, origin, *dir, max_cells, cos_cutoff);
             }
-            let first = table.len();
-            for h in 0..geometry.headings {
+            let (headings, wrap) = entry.split_at_mut(geometry.headings);
+            for (h, slot) in headings.iter_mut().enumerate() {
                 let centre = (h * geometry.rays_per_heading) as i64;
                 let mut nearest = f32::INFINITY;
                 for j in centre - reach..=centre + reach {
                     nearest = nearest.min(ray_ranges[j.rem_euclid(rays as i64) as usize]);
                 }
-                table.push(to_millimetres(
-                    f64::from(nearest) * cell_m,
-                    geometry.max_range,
-                ));
+                *slot = to_millimetres(f64::from(nearest) * cell_m, geometry.max_range);
             }
-            table.push(table[first]);
+            if let (Some(last), Some(first)) = (wrap.first_mut(), headings.first()) {
+                *last = *first;
+            }
         }
     }
-    table.into_boxed_slice()
 }
 
 /// A range in metres as stored: whole millimetres, [`NO_ECHO`] past `max_range`.
@@ -296,12 +385,16 @@ fn boundary(pos: f64, cell: f64, dir: f64) -> f64 {
 /// Exact Euclidean distance from every cell to the nearest occupied cell,
 /// in cells (Felzenszwalb and Huttenlocher's two-pass transform); a large
 /// value where nothing is occupied.
-fn distance_field(occupied: &[bool], width: usize, height: usize) -> Vec<f32> {
+fn distance_field(
+    occupied: &[bool],
+    width: usize,
+    height: usize,
+    squared: &mut Vec<f64>,
+    distance: &mut Vec<f32>,
+) {
     const FAR: f64 = 1e12;
-    let mut squared: Vec<f64> = occupied
-        .iter()
-        .map(|&o| if o { 0.0 } else { FAR })
-        .collect();
+    squared.clear();
+    squared.extend(occupied.iter().map(|&o| if o { 0.0 } else { FAR }));
     let longest = width.max(height);
     let mut line = vec![0.0; longest];
     let mut out = vec![0.0; longest];
@@ -322,7 +415,8 @@ fn distance_field(occupied: &[bool], width: usize, height: usize) -> Vec<f32> {
         transform_line(&line[..width], &mut out[..width], &mut hull, &mut bounds);
         row.copy_from_slice(&out[..width]);
     }
-    squared.iter().map(|d| d.sqrt() as f32).collect()
+    distance.clear();
+    distance.extend(squared.iter().map(|d| d.sqrt() as f32));
 }
 
 /// One dimension of the squared distance transform: `out[q] = min_p (q − p)² + f[p]`.
@@ -439,12 +533,26 @@ mod tests {
     }
 
     #[test]
+    fn a_refilled_raster_is_the_raster_of_its_new_bounds() {
+        let walls = |c: CellIndex| (c.x + 2 * c.y) % 7 == 0;
+        let mut reused = OccupancyRaster::new(cell_box(-5, -5, 40, 30), walls);
+        for bounds in [cell_box(0, 0, 9, 6), cell_box(-3, 2, 20, 25)] {
+            reused.refill(bounds, walls);
+            let fresh = OccupancyRaster::new(bounds, walls);
+            assert_eq!(reused.bounds, fresh.bounds);
+            assert_eq!(reused.occupied, fresh.occupied);
+            assert_eq!(reused.distance, fresh.distance);
+        }
+    }
+
+    #[test]
     fn distance_field_is_euclidean() {
         let (w, h) = (9, 7);
         let mut occ = vec![false; w * h];
         occ[3 * w + 4] = true;
         occ[0] = true;
-        let d = distance_field(&occ, w, h);
+        let (mut squared, mut d) = (Vec::new(), Vec::new());
+        distance_field(&occ, w, h, &mut squared, &mut d);
         for y in 0..h {
             for x in 0..w {
                 let to_a = ((x as f64 - 4.0).powi(2) + (y as f64 - 3.0).powi(2)).sqrt();

@@ -335,6 +335,74 @@ fn cache_stays_within_budget_on_a_map_a_hundred_times_larger() {
 }
 
 #[test]
+fn recovery_on_a_map_larger_than_the_cache_stays_within_the_budget() {
+    // 13 × 12 tiles of the room pattern behind a 16 MiB budget, which holds
+    // range tables for about a dozen of them.
+    let budget = 16 << 20;
+    let mut map = LocalMap::new(settings(budget)).unwrap();
+    for ty in -5..=6 {
+        for tx in -5..=7 {
+            let key = TileKey::new(tx, ty);
+            let local = TileKey::new(key.x.rem_euclid(3), key.y.rem_euclid(2));
+            map.insert_tile(key, 1, Some(&room_tile(local))).unwrap();
+        }
+    }
+    let capacity = map.table_capacity();
+    assert!(
+        map.free_tile_count() > 4 * capacity,
+        "{} tiles with free cells, tables for {capacity}",
+        map.free_tile_count()
+    );
+    // Global localization would need every table at once: refused, clearly.
+    let err = filter(10_000, 1)
+        .start_global(&map)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("initial pose"), "{err}");
+    // Tracking, then frames that fit nowhere: the filter injects particles,
+    // but only where the cache can hold tables, and the cache never grows
+    // past its budget, even before eviction.
+    let steps = path(120);
+    let mut mcl = filter(20_000, 5);
+    mcl.start_at(steps[0].0, 0.05, 0.05).unwrap();
+    let size = map.settings().tile_size;
+    let (mut injected, mut widest) = (0, 0);
+    for (i, (truth, odometry)) in steps.iter().enumerate() {
+        if !mcl.predict(odometry).unwrap() {
+            continue;
+        }
+        let ranges = if i < 40 {
+            frame(&map, truth)
+        } else {
+            vec![0.5; 16]
+        };
+        let report = mcl.correct(&mut map, &ranges).unwrap();
+        injected += report.injected;
+        assert!(
+            map.bytes() <= budget,
+            "frame {i}: the cache holds {} bytes, budget {budget}",
+            map.bytes()
+        );
+        let tiles: HashSet<TileKey> = mcl
+            .particles()
+            .iter()
+            .map(|p| {
+                let cell = Resolution::DEFAULT.cell_of(p.x, p.y).unwrap();
+                size.split(cell).0
+            })
+            .collect();
+        widest = widest.max(tiles.len());
+    }
+    assert!(injected > 0, "the frames that fit nowhere injected nothing");
+    // Injected particles come from the tiles nearest the estimate, not
+    // from all 156; the motion noise carries a few over their edges.
+    assert!(
+        widest <= 2 * capacity,
+        "the particles covered {widest} tiles, the cache holds tables for {capacity}"
+    );
+}
+
+#[test]
 fn a_changed_tile_keeps_the_tables_while_its_walls_stay_put() {
     let mut map = room();
     let here = TileKey::new(0, 0);

@@ -4,7 +4,7 @@ use crate::client::MapClient;
 use crate::error::ClientError;
 use deog_grid::{CellBox, CellIndex, LogOdds, Tile, TileKey, TileSize};
 use deog_proto::v1 as pb;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 /// Tiles of one map with the version each was read at.
 #[derive(Debug, Clone)]
@@ -61,12 +61,15 @@ impl TileCache {
     }
 
     /// Brings the tiles of `region` up to date, fetching only the tiles that
-    /// changed since the last refresh. Returns how many tiles were fetched.
+    /// changed since the last refresh; tiles the server no longer has there
+    /// (the map was cleared) are dropped. Returns how many tiles were fetched.
     pub async fn refresh(
         &mut self,
         client: &MapClient,
         region: CellBox,
     ) -> Result<usize, ClientError> {
+        // Read before the tiles: a change in between is fetched again next
+        // time rather than missed.
         let version = client.map_info(&self.map).await?.version;
         let region_wire = pb::CellBox {
             min_x: region.min.x,
@@ -82,29 +85,40 @@ impl TileCache {
             })
             .await?;
         let mut fetched = 0;
-        let mut missing = Vec::new();
+        let mut stale = Vec::new();
+        let mut present = HashSet::with_capacity(listed.len());
         for tile in listed {
             let key = tile
                 .key
                 .map(|k| TileKey::new(k.x, k.y))
                 .ok_or_else(|| ClientError::Updates("tile without a key".into()))?;
+            present.insert(key);
             if tile.cells.is_empty() {
-                // Not newer than our sync point: keep ours, or fetch it if
-                // this region was never read.
-                if !self.tiles.contains_key(&key) {
-                    missing.push(pb::TileKey { x: key.x, y: key.y });
+                // Not newer than the sync point, which another region's
+                // refresh may have moved: fetch it unless ours is current.
+                if self
+                    .tiles
+                    .get(&key)
+                    .is_none_or(|(cached, _)| *cached < tile.version)
+                {
+                    stale.push(pb::TileKey { x: key.x, y: key.y });
                 }
                 continue;
             }
             self.insert_wire(key, &tile)?;
             fetched += 1;
         }
-        if !missing.is_empty() {
+        let (min, max) = self.tile_size.tiles_covering(&region);
+        self.tiles.retain(|key, _| {
+            let inside = (min.x..=max.x).contains(&key.x) && (min.y..=max.y).contains(&key.y);
+            !inside || present.contains(key)
+        });
+        if !stale.is_empty() {
             for tile in client
                 .tiles(pb::TileQuery {
                     map: self.map.clone(),
                     selection: Some(pb::tile_query::Selection::Keys(pb::TileKeys {
-                        keys: missing,
+                        keys: stale,
                     })),
                     newer_than_version: 0,
                 })

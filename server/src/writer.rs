@@ -166,7 +166,8 @@ impl WriterHandle {
         self.call(|r| WriteOp::Frames(frames, r)).await
     }
 
-    /// Stores a pose estimate.
+    /// Stores a pose estimate; [`StoreError::MapNotFound`] if the map it
+    /// names does not exist.
     pub async fn publish_pose(&self, pose: PoseEstimate) -> Result<(), StoreError> {
         let bytes = prost::Message::encode_to_vec(&pose);
         self.call(|r| WriteOp::Pose(Arc::new(pose), bytes, r)).await
@@ -342,10 +343,19 @@ impl<'s, S: Store> Group<'s, S> {
                 self.replies.push(defer(reply, result));
             }
             WriteOp::Pose(pose, bytes, reply) => {
-                self.poses
-                    .push((pose.robot.clone(), pose.frame_sequence, bytes));
-                self.pose_events.push(pose);
-                self.replies.push(defer(reply, Ok(())));
+                // Checked here rather than in the handler, so that a map
+                // deleted meanwhile cannot slip in between.
+                let result = match self.store.map(&pose.map) {
+                    Ok(Some(_)) => Ok(()),
+                    Ok(None) => Err(StoreError::MapNotFound(pose.map.clone())),
+                    Err(error) => Err(error),
+                };
+                if result.is_ok() {
+                    self.poses
+                        .push((pose.robot.clone(), pose.frame_sequence, bytes));
+                    self.pose_events.push(pose);
+                }
+                self.replies.push(defer(reply, result));
             }
             WriteOp::Stop => {}
         }

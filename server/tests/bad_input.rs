@@ -581,6 +581,12 @@ async fn pose_estimates_with_bad_numbers_are_refused_and_not_stored() {
             Code::InvalidArgument,
             "map",
         ),
+        // Like every call, an estimate on a map that does not exist.
+        (
+            with(&|e| e.map = "ghost".into()),
+            Code::NotFound,
+            "map \"ghost\"",
+        ),
         (
             with(&|e| e.frame_sequence = 0),
             Code::InvalidArgument,

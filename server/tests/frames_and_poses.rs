@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::TestServer;
+use common::{TestServer, create_map};
 use deog_proto::v1 as pb;
 use std::time::Duration;
 
@@ -218,6 +218,7 @@ async fn a_subscriber_that_falls_behind_misses_no_frame() {
 async fn poses_are_stored_read_by_range_and_watched() {
     let server = TestServer::start().await;
     let mut client = server.client().await;
+    create_map(&mut client, "m", 0).await;
     let mut all = client
         .watch_poses(pb::WatchPosesRequest {
             robot: String::new(),

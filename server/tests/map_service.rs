@@ -277,6 +277,24 @@ async fn concurrent_clients_unclamped_map_is_the_exact_sum_in_any_order() {
     }
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn concurrent_batches_share_flushes_in_group_commits() {
+    let server = TestServer::start().await;
+    let mut client = server.client().await;
+    let info = create_map(&mut client, "grouped", 16).await;
+    let size = TileSize::new(info.tile_size).unwrap();
+    let before = server.flushes();
+    let sent = eight_clients_at_once(&server, "grouped", size).await;
+    let flushes = server.flushes() - before;
+    // Every ack came after its flush, so each batch was covered by one.
+    assert!(flushes >= 1);
+    assert!(
+        flushes < sent.len() as u64,
+        "{flushes} flushes for {} acknowledged batches: no group held two",
+        sent.len()
+    );
+}
+
 #[tokio::test]
 async fn resent_batches_after_a_reconnect_are_applied_once() {
     let server = TestServer::start().await;

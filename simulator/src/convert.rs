@@ -15,6 +15,7 @@ impl From<SimError> for Status {
     fn from(error: SimError) -> Self {
         let code = match &error {
             SimError::Invalid { .. } => Code::InvalidArgument,
+            SimError::TooLarge { .. } => Code::ResourceExhausted,
             SimError::UnknownRobot(_) => Code::NotFound,
             SimError::RobotExists(_) => Code::AlreadyExists,
             SimError::Blocked(_) => Code::FailedPrecondition,
@@ -22,6 +23,21 @@ impl From<SimError> for Status {
         };
         Status::new(code, error.to_string())
     }
+}
+
+/// Refuses a request whose encoding exceeds `limit` bytes, naming the
+/// message.
+pub fn check_size(what: &str, message: &impl prost::Message, limit: usize) -> Result<(), SimError> {
+    let len = message.encoded_len();
+    if len > limit {
+        return Err(SimError::TooLarge {
+            field: what.to_string(),
+            reason: format!(
+                "message of {len} bytes exceeds the simulator's limit of {limit} bytes"
+            ),
+        });
+    }
+    Ok(())
 }
 
 /// A robot name: 1 to 128 characters of `[A-Za-z0-9_.-]`.

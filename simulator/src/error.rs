@@ -59,6 +59,14 @@ pub enum SimError {
     /// the file, and for the YAML the line and key.
     #[error(transparent)]
     MapFile(#[from] deog_mapfile::MapFileError),
+    /// A request was larger than the simulator accepts.
+    #[error("{field}: {reason}")]
+    TooLarge {
+        /// The message that is too large.
+        field: String,
+        /// Its size and the limit.
+        reason: String,
+    },
     /// A value given to the simulator is out of range or malformed.
     #[error("{field}: {reason}")]
     Invalid {

@@ -17,6 +17,10 @@ use crate::simulation::Simulation;
 /// The gRPC name of the robot service, as health reports it.
 pub const ROBOT_SERVICE_NAME: &str = "deog.v1.RobotService";
 
+/// The smallest request limit [`serve_sim`] takes: room for any sane
+/// request.
+pub const MIN_MESSAGE_BYTES: usize = 1024;
+
 /// How the simulator serves.
 #[derive(Debug, Clone)]
 pub struct SimServeConfig {
@@ -26,8 +30,8 @@ pub struct SimServeConfig {
     pub tick: Duration,
     /// Messages buffered per watch stream.
     pub stream_buffer: usize,
-    /// Largest request accepted, bytes (requests are small; this stops
-    /// absurd ones early).
+    /// Largest request accepted, bytes, at least [`MIN_MESSAGE_BYTES`]
+    /// (requests are small; this stops absurd ones early).
     pub max_message_bytes: usize,
     /// How long open calls may take to finish after shutdown begins.
     pub shutdown_grace: Duration,
@@ -59,8 +63,23 @@ pub async fn serve_sim(
             format!("must be in (0, 1000], got {}", config.speed),
         ));
     }
+    if config.max_message_bytes < MIN_MESSAGE_BYTES {
+        return Err(SimError::invalid(
+            "max_message_bytes",
+            format!(
+                "must be at least {MIN_MESSAGE_BYTES} bytes, got {}",
+                config.max_message_bytes
+            ),
+        ));
+    }
     let stop = CancellationToken::new();
-    let server = SimServer::new(sim, config.speed, config.stream_buffer, stop.clone());
+    let server = SimServer::new(
+        sim,
+        config.speed,
+        config.stream_buffer,
+        config.max_message_bytes,
+        stop.clone(),
+    );
     // At most two sonar periods per tick: a stalled process slows the world
     // instead of skipping frames.
     let max_step = Duration::from_millis(200);
@@ -78,8 +97,14 @@ pub async fn serve_sim(
         .with_service_name("grpc.reflection.v1.ServerReflection")
         .build_v1()
         .map_err(|e| SimError::Serve(e.to_string()))?;
-    let service = RobotServiceServer::new(server)
-        .max_decoding_message_size(config.max_message_bytes.max(1024));
+    // tonic's own decoder limit is a backstop well above ours, so that an
+    // oversized request reaches the handlers' check and gets an answer
+    // naming it, as the map server does.
+    let transport_limit = config
+        .max_message_bytes
+        .saturating_mul(2)
+        .saturating_add(1 << 20);
+    let service = RobotServiceServer::new(server).max_decoding_message_size(transport_limit);
 
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
     let serving = Server::builder()

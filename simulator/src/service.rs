@@ -29,6 +29,7 @@ struct Shared {
     watchers: Mutex<HashMap<String, broadcast::Sender<Arc<pb::RobotState>>>>,
     speed: f64,
     stream_buffer: usize,
+    max_message_bytes: usize,
     shutdown: CancellationToken,
 }
 
@@ -47,12 +48,14 @@ impl std::fmt::Debug for SimServer {
 }
 
 impl SimServer {
-    /// Serves `sim`, run at `speed` simulated seconds per wall-clock second;
-    /// `shutdown` ends the clock and the watch streams.
+    /// Serves `sim`, run at `speed` simulated seconds per wall-clock second,
+    /// refusing requests over `max_message_bytes`; `shutdown` ends the clock
+    /// and the watch streams.
     pub fn new(
         sim: Simulation,
         speed: f64,
         stream_buffer: usize,
+        max_message_bytes: usize,
         shutdown: CancellationToken,
     ) -> Self {
         Self {
@@ -61,6 +64,7 @@ impl SimServer {
                 watchers: Mutex::new(HashMap::new()),
                 speed,
                 stream_buffer: stream_buffer.max(1),
+                max_message_bytes,
                 shutdown,
             }),
         }
@@ -73,6 +77,14 @@ impl SimServer {
             .sim
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    fn check_size(&self, what: &str, message: &impl prost::Message) -> Result<(), Status> {
+        Ok(convert::check_size(
+            what,
+            message,
+            self.shared.max_message_bytes,
+        )?)
     }
 
     fn sender(&self, robot: &str) -> broadcast::Sender<Arc<pb::RobotState>> {
@@ -155,6 +167,7 @@ impl RobotService for SimServer {
         request: Request<pb::SpawnRequest>,
     ) -> Result<Response<pb::RobotState>, Status> {
         let request = request.into_inner();
+        self.check_size("SpawnRequest", &request)?;
         let name = convert::robot_name("name", &request.name)?;
         let pose = match &request.pose {
             Some(p) => Some(convert::pose("pose", Some(p))?),
@@ -170,6 +183,7 @@ impl RobotService for SimServer {
         request: Request<pb::DriveRequest>,
     ) -> Result<Response<pb::RobotState>, Status> {
         let request = request.into_inner();
+        self.check_size("DriveRequest", &request)?;
         let name = convert::robot_name("name", &request.name)?;
         let (linear, angular) = convert::twist("command", request.command.as_ref())?;
         let state = self.sim().drive(&name, linear, angular)?;
@@ -180,6 +194,7 @@ impl RobotService for SimServer {
         &self,
         request: Request<pb::RobotRef>,
     ) -> Result<Response<pb::RobotState>, Status> {
+        self.check_size("RobotRef", request.get_ref())?;
         let name = convert::robot_name("name", &request.get_ref().name)?;
         let state = self.sim().snapshot(&name)?;
         Ok(reply(state))
@@ -190,6 +205,7 @@ impl RobotService for SimServer {
         request: Request<pb::TeleportRequest>,
     ) -> Result<Response<pb::RobotState>, Status> {
         let request = request.into_inner();
+        self.check_size("TeleportRequest", &request)?;
         let name = convert::robot_name("name", &request.name)?;
         let pose = convert::pose("pose", request.pose.as_ref())?;
         let state = self.sim().teleport(&name, pose)?;
@@ -216,6 +232,7 @@ impl RobotService for SimServer {
         &self,
         request: Request<pb::RobotRef>,
     ) -> Result<Response<Self::WatchStateStream>, Status> {
+        self.check_size("RobotRef", request.get_ref())?;
         let name = convert::robot_name("name", &request.get_ref().name)?;
         // Subscribe before reading the current state, so no firing falls
         // between the two.

@@ -1,6 +1,6 @@
 //! `RobotService` over real TCP on 127.0.0.1: several robots driven at
-//! once, watch streams, kidnapping, and bad input refused with the right
-//! code and a message naming the field.
+//! once, watch streams, kidnapping, and bad or oversized input refused with
+//! the right code and a message naming the field or message.
 
 use std::time::Duration;
 
@@ -38,16 +38,20 @@ struct Sim {
 
 impl Sim {
     async fn start(speed: f64) -> Self {
+        Self::start_with(SimServeConfig {
+            speed,
+            ..SimServeConfig::default()
+        })
+        .await
+    }
+
+    async fn start_with(config: SimServeConfig) -> Self {
         let sim = Simulation::new(room(), SimConfig::default(), 7).expect("simulation");
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
             .await
             .expect("bind");
         let addr = listener.local_addr().expect("addr");
         let (stop, stopped) = oneshot::channel::<()>();
-        let config = SimServeConfig {
-            speed,
-            ..SimServeConfig::default()
-        };
         let task = tokio::spawn(serve_sim(sim, listener, config, async {
             let _ = stopped.await;
         }));
@@ -339,5 +343,160 @@ async fn bad_requests_are_refused_with_the_field_named() {
         .into_inner();
     assert_eq!(world.name, "room");
     assert_eq!(world.sonar_count, 16);
+    sim.stop().await;
+}
+
+#[tokio::test]
+async fn oversized_requests_are_refused_as_resource_exhausted_naming_the_message() {
+    let sim = Sim::start_with(SimServeConfig {
+        max_message_bytes: 4096,
+        ..SimServeConfig::default()
+    })
+    .await;
+    let mut client = sim.client.clone();
+    let start = client
+        .spawn(pb::SpawnRequest {
+            name: "a".into(),
+            pose: pose(1.0, 1.0, 0.0),
+        })
+        .await
+        .expect("spawn")
+        .into_inner();
+    // Past the limit of 4096 bytes, though well within what tonic decodes.
+    let huge = "a".repeat(8 << 10);
+    let results = [
+        (
+            "SpawnRequest",
+            client
+                .spawn(pb::SpawnRequest {
+                    name: huge.clone(),
+                    pose: pose(2.0, 2.0, 0.0),
+                })
+                .await
+                .map(drop),
+        ),
+        (
+            "DriveRequest",
+            client
+                .drive(pb::DriveRequest {
+                    name: huge.clone(),
+                    command: Some(pb::Twist2 {
+                        linear: 0.3,
+                        angular: 0.0,
+                    }),
+                })
+                .await
+                .map(drop),
+        ),
+        (
+            "TeleportRequest",
+            client
+                .teleport(pb::TeleportRequest {
+                    name: huge.clone(),
+                    pose: pose(2.0, 2.0, 0.0),
+                })
+                .await
+                .map(drop),
+        ),
+        (
+            "RobotRef",
+            client
+                .get_state(pb::RobotRef { name: huge.clone() })
+                .await
+                .map(drop),
+        ),
+        (
+            "RobotRef",
+            match client
+                .watch_state(pb::RobotRef { name: huge.clone() })
+                .await
+            {
+                Ok(stream) => stream.into_inner().message().await.map(drop),
+                Err(status) => Err(status),
+            },
+        ),
+    ];
+    for (message, result) in results {
+        let status = result.expect_err("oversized");
+        assert_eq!(status.code(), Code::ResourceExhausted, "{status:?}");
+        assert!(
+            status.message().contains(message),
+            "{status:?} should name {message}"
+        );
+    }
+    let robots = client
+        .list_robots(pb::ListSimRobotsRequest {})
+        .await
+        .expect("list")
+        .into_inner()
+        .robots;
+    assert_eq!(robots.len(), 1, "nothing was spawned");
+    assert_eq!(robots[0].true_pose, start.true_pose, "nothing moved");
+    assert_eq!(robots[0].velocity, start.velocity, "nothing was driven");
+    sim.stop().await;
+}
+
+#[tokio::test]
+async fn a_message_limit_below_the_minimum_is_refused() {
+    let sim = Simulation::new(room(), SimConfig::default(), 7).expect("simulation");
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+        .await
+        .expect("bind");
+    let config = SimServeConfig {
+        max_message_bytes: 100,
+        ..SimServeConfig::default()
+    };
+    let error = tokio::time::timeout(
+        Duration::from_secs(10),
+        serve_sim(sim, listener, config, std::future::pending()),
+    )
+    .await
+    .expect("refused at once")
+    .expect_err("refused");
+    assert!(error.to_string().contains("max_message_bytes"), "{error}");
+}
+
+#[tokio::test]
+async fn a_teleport_to_a_non_finite_pose_is_refused_and_the_robot_stays() {
+    let sim = Sim::start(1.0).await;
+    let mut client = sim.client.clone();
+    let start = client
+        .spawn(pb::SpawnRequest {
+            name: "t".into(),
+            pose: pose(2.0, 2.0, 0.5),
+        })
+        .await
+        .expect("spawn")
+        .into_inner();
+    let cases = [
+        (pose(f64::NAN, 2.0, 0.0), "pose.x"),
+        (pose(f64::INFINITY, 2.0, 0.0), "pose.x"),
+        (pose(3.0, f64::NEG_INFINITY, 0.0), "pose.y"),
+        (pose(3.0, f64::NAN, 0.0), "pose.y"),
+        (pose(3.0, 3.0, f64::NAN), "pose.theta"),
+        (pose(3.0, 3.0, f64::INFINITY), "pose.theta"),
+    ];
+    for (bad, field) in cases {
+        let status = client
+            .teleport(pb::TeleportRequest {
+                name: "t".into(),
+                pose: bad,
+            })
+            .await
+            .expect_err("refused");
+        assert_eq!(status.code(), Code::InvalidArgument, "{bad:?}: {status:?}");
+        assert!(
+            status.message().contains(field),
+            "{status:?} should name {field}"
+        );
+        let now = client
+            .get_state(pb::RobotRef { name: "t".into() })
+            .await
+            .expect("state")
+            .into_inner();
+        assert_eq!(now.true_pose, start.true_pose, "after {bad:?}");
+        assert_eq!(now.odometry, start.odometry, "after {bad:?}");
+    }
+    assert_eq!(start.true_pose, pose(2.0, 2.0, 0.5));
     sim.stop().await;
 }

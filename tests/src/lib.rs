@@ -205,12 +205,21 @@ impl ServerProcess {
 
     /// SIGTERM, then waits (bounded: 30 s) for the process to exit; returns
     /// whether it exited successfully.
-    pub fn terminate(mut self) -> bool {
+    pub fn terminate(self) -> bool {
+        self.stop_with("-TERM")
+    }
+
+    /// SIGINT (ctrl-c), then as [`Self::terminate`].
+    pub fn interrupt(self) -> bool {
+        self.stop_with("-INT")
+    }
+
+    fn stop_with(mut self, signal: &str) -> bool {
         let Some(mut child) = self.child.take() else {
             return false;
         };
         let sent = Command::new("kill")
-            .args(["-TERM", &child.id().to_string()])
+            .args([signal, &child.id().to_string()])
             .status()
             .is_ok_and(|s| s.success());
         if sent {

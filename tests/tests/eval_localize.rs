@@ -66,6 +66,16 @@ async fn publish(client: &MapClient) {
         .collect();
     let (stored, _) = client.publish_frames(frames).await.expect("frames");
     assert_eq!(stored, 65);
+    // Estimates name maps that exist.
+    client
+        .ensure_map(pb::CreateMapRequest {
+            name: "other".into(),
+            resolution_m: 0.05,
+            tile_size: 64,
+            ..Default::default()
+        })
+        .await
+        .expect("map other");
     for s in 1..=60 {
         let (pose, map) = estimate(s);
         client
@@ -92,12 +102,12 @@ async fn eval_localize_reports_the_known_errors_and_plots_the_paths() {
     let client = MapClient::connect(ClientConfig::new(server.addr.to_string()))
         .await
         .expect("map client");
-    publish(&client).await;
     let arena = format!(
         "{}/../mapfile/tests/data/lse_arena.yaml",
         env!("CARGO_MANIFEST_DIR")
     );
     succeeded(&deog(&["import", "--map", "m", &arena], &server));
+    publish(&client).await;
     let path = |name: &str| dir.path().join(name).to_str().expect("utf-8").to_string();
 
     // On map m: the estimate for frame 20 does not count, so the filter

@@ -1,5 +1,5 @@
 //! The real `deog server` process: acknowledged writes survive SIGKILL, and
-//! SIGTERM shuts down cleanly.
+//! SIGTERM and ctrl-c shut down cleanly.
 
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_client::MapServiceClient;
@@ -160,4 +160,40 @@ async fn acknowledged_updates_and_frames_survive_sigkill() {
     assert_eq!(robots.len(), 1);
     assert_eq!(robots[0].frame_count, 20);
     assert!(server.terminate(), "SIGTERM ends the server cleanly");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn ctrl_c_stops_the_server_cleanly_and_keeps_what_it_acknowledged() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let data = dir.path().join("data");
+    let server = ServerProcess::start(&data, &[]).await;
+    let mut map = client(&server).await;
+    map.create_map(pb::CreateMapRequest {
+        name: "durable".into(),
+        tile_size: SIDE as u32,
+        ..Default::default()
+    })
+    .await
+    .expect("create map");
+    let batches: Vec<pb::UpdateBatch> = (0..10).map(numbered_batch).collect();
+    let mut acks = map
+        .apply_updates(tokio_stream::iter(batches))
+        .await
+        .expect("open stream")
+        .into_inner();
+    for _ in 0..10 {
+        let ack = acks.message().await.expect("ack").expect("stream open");
+        assert!(ack.applied);
+    }
+    drop(acks);
+    drop(map);
+    assert!(server.interrupt(), "SIGINT ends the server cleanly");
+
+    let server = ServerProcess::start(&data, &[]).await;
+    let tiles = stored_tiles(&mut client(&server).await).await;
+    assert_eq!(tiles.len(), 10);
+    for (x, cells) in &tiles {
+        assert_eq!(cells, &numbered_batch(*x as u64).tiles[0].cells);
+    }
+    assert!(server.terminate());
 }

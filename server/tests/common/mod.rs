@@ -1,21 +1,53 @@
-//! A real map server on 127.0.0.1:0 over a sled directory in a temp dir.
+//! A real map server on 127.0.0.1:0 over a store directory in a temp dir.
+//!
+//! Every test in `server/tests` opens its store through [`SuiteBackend`], so
+//! the whole suite runs on one [`Store`] backend: sled today. A new backend
+//! runs the same suite by implementing [`TestBackend`] (how it opens, and
+//! after a restart reopens, a directory) and pointing `SuiteBackend` at it.
 #![allow(dead_code)]
 
+use deog_grid::TileKey;
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_client::MapServiceClient;
-use deog_server::{ServerConfig, SledConfig, SledStore};
+use deog_server::store::{FrameWrite, MapRecord, MapWrite, RobotSummary, StoredTile, TileRange};
+use deog_server::{ServerConfig, SledConfig, SledStore, Store, StoreError};
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 use tokio::sync::oneshot;
 use tokio::task::JoinHandle;
 use tonic::transport::Channel;
 
+/// A store backend the suite can run on.
+pub trait TestBackend {
+    /// The store it opens.
+    type Store: Store;
+    /// Opens the store kept in `path`, creating it if missing; a restart
+    /// reopens the same path and must find what was flushed there.
+    fn open(path: &Path) -> Self::Store;
+}
+
+/// The embedded default.
+pub struct Sled;
+
+impl TestBackend for Sled {
+    type Store = SledStore;
+
+    fn open(path: &Path) -> SledStore {
+        SledStore::open(&SledConfig::new(path)).expect("open sled store")
+    }
+}
+
+/// The backend every test of the suite runs on.
+pub type SuiteBackend = Sled;
+
 pub struct TestServer {
     pub addr: SocketAddr,
     pub dir: Option<tempfile::TempDir>,
     pub path: PathBuf,
+    flushes: Arc<AtomicU64>,
     stop: Option<oneshot::Sender<()>>,
     task: Option<JoinHandle<Result<(), deog_server::ServeError>>>,
 }
@@ -35,7 +67,11 @@ impl TestServer {
 
     /// A server over an existing directory (a restart).
     pub async fn start_at(path: PathBuf, config: ServerConfig) -> Self {
-        let store = SledStore::open(&SledConfig::new(&path)).expect("open store");
+        let flushes = Arc::new(AtomicU64::new(0));
+        let store = CountingStore {
+            inner: SuiteBackend::open(&path),
+            flushes: flushes.clone(),
+        };
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
             .await
             .expect("bind");
@@ -54,6 +90,7 @@ impl TestServer {
             addr,
             dir: None,
             path,
+            flushes,
             stop: Some(stop),
             task: Some(task),
         };
@@ -61,6 +98,11 @@ impl TestServer {
             server.wait_ready().await;
         }
         server
+    }
+
+    /// Store flushes that succeeded since this server started.
+    pub fn flushes(&self) -> u64 {
+        self.flushes.load(Ordering::Relaxed)
     }
 
     pub fn url(&self) -> String {
@@ -116,6 +158,83 @@ impl Drop for TestServer {
         if let Some(stop) = self.stop.take() {
             let _ = stop.send(());
         }
+    }
+}
+
+/// A store of any backend that counts its successful flushes, so tests can
+/// see how writes were grouped.
+struct CountingStore<S> {
+    inner: S,
+    flushes: Arc<AtomicU64>,
+}
+
+impl<S: Store> Store for CountingStore<S> {
+    fn maps(&self) -> Result<Vec<MapRecord>, StoreError> {
+        self.inner.maps()
+    }
+    fn map(&self, name: &str) -> Result<Option<MapRecord>, StoreError> {
+        self.inner.map(name)
+    }
+    fn create_map(&self, record: &MapRecord) -> Result<(), StoreError> {
+        self.inner.create_map(record)
+    }
+    fn delete_map(&self, name: &str) -> Result<(), StoreError> {
+        self.inner.delete_map(name)
+    }
+    fn write_map(&self, name: &str, write: MapWrite) -> Result<(), StoreError> {
+        self.inner.write_map(name, write)
+    }
+    fn tile(&self, map: &MapRecord, key: TileKey) -> Result<Option<StoredTile>, StoreError> {
+        self.inner.tile(map, key)
+    }
+    fn tiles_in(
+        &self,
+        map: &MapRecord,
+        range: TileRange,
+        visit: &mut dyn FnMut(TileKey, StoredTile) -> bool,
+    ) -> Result<(), StoreError> {
+        self.inner.tiles_in(map, range, visit)
+    }
+    fn cursor(&self, name: &str, client: &str) -> Result<u64, StoreError> {
+        self.inner.cursor(name, client)
+    }
+    fn write_frames(&self, writes: Vec<FrameWrite>) -> Result<(), StoreError> {
+        self.inner.write_frames(writes)
+    }
+    fn has_frame(&self, robot: &str, sequence: u64) -> Result<bool, StoreError> {
+        self.inner.has_frame(robot, sequence)
+    }
+    fn robot(&self, robot: &str) -> Result<Option<RobotSummary>, StoreError> {
+        self.inner.robot(robot)
+    }
+    fn robots(&self) -> Result<Vec<(String, RobotSummary)>, StoreError> {
+        self.inner.robots()
+    }
+    fn read_frames(
+        &self,
+        robot: &str,
+        from: u64,
+        to: u64,
+        visit: &mut dyn FnMut(u64, &[u8]) -> bool,
+    ) -> Result<(), StoreError> {
+        self.inner.read_frames(robot, from, to, visit)
+    }
+    fn write_poses(&self, poses: Vec<(String, u64, Vec<u8>)>) -> Result<(), StoreError> {
+        self.inner.write_poses(poses)
+    }
+    fn read_poses(
+        &self,
+        robot: &str,
+        from: u64,
+        to: u64,
+        visit: &mut dyn FnMut(u64, &[u8]) -> bool,
+    ) -> Result<(), StoreError> {
+        self.inner.read_poses(robot, from, to, visit)
+    }
+    fn flush(&self) -> Result<(), StoreError> {
+        self.inner.flush()?;
+        self.flushes.fetch_add(1, Ordering::Relaxed);
+        Ok(())
     }
 }
 
