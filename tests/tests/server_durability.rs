@@ -15,6 +15,17 @@ async fn client(server: &ServerProcess) -> MapServiceClient<Channel> {
         .expect("connect")
 }
 
+/// The map every batch here writes to.
+async fn create_durable_map(map: &mut MapServiceClient<Channel>) {
+    map.create_map(pb::CreateMapRequest {
+        name: "durable".into(),
+        tile_size: SIDE as u32,
+        ..Default::default()
+    })
+    .await
+    .expect("create map");
+}
+
 /// Batch `i` writes tile (i, 0) with every cell `i % 1000 + 1`, so each
 /// acknowledged batch is recognisable afterwards.
 fn numbered_batch(i: u64) -> pb::UpdateBatch {
@@ -61,13 +72,7 @@ async fn acknowledged_updates_and_frames_survive_sigkill() {
     let data = dir.path().join("data");
     let server = ServerProcess::start(&data, &[]).await;
     let mut map = client(&server).await;
-    map.create_map(pb::CreateMapRequest {
-        name: "durable".into(),
-        tile_size: SIDE as u32,
-        ..Default::default()
-    })
-    .await
-    .expect("create map");
+    create_durable_map(&mut map).await;
     map.publish_frames(pb::PublishFramesRequest {
         frames: (1..=20)
             .map(|s| pb::SonarFrame {
@@ -168,13 +173,7 @@ async fn ctrl_c_stops_the_server_cleanly_and_keeps_what_it_acknowledged() {
     let data = dir.path().join("data");
     let server = ServerProcess::start(&data, &[]).await;
     let mut map = client(&server).await;
-    map.create_map(pb::CreateMapRequest {
-        name: "durable".into(),
-        tile_size: SIDE as u32,
-        ..Default::default()
-    })
-    .await
-    .expect("create map");
+    create_durable_map(&mut map).await;
     let batches: Vec<pb::UpdateBatch> = (0..10).map(numbered_batch).collect();
     let mut acks = map
         .apply_updates(tokio_stream::iter(batches))
