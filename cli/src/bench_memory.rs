@@ -1524,9 +1524,8 @@ impl Figures {
 mod tests {
     use super::*;
 
-    #[test]
-    fn default_city_is_a_hundred_times_the_smallest_cache() {
-        let args = LocalizeMemoryArgs {
+    fn defaults() -> LocalizeMemoryArgs {
+        LocalizeMemoryArgs {
             cache_mb: 16,
             max_particles: 10_000,
             side_m: None,
@@ -1537,10 +1536,35 @@ mod tests {
             seed: 1,
             out: None,
             out_json: None,
-        };
-        let plan = Plan::new(&args).unwrap();
+        }
+    }
+
+    #[test]
+    fn default_city_is_a_hundred_times_the_smallest_cache() {
+        let plan = Plan::new(&defaults()).unwrap();
         assert!(plan.tiles * plan.tile_bytes as u64 >= 100 * (16 << 20));
         assert_eq!(plan.side_px % TILE_SIDE, 0);
+    }
+
+    #[test]
+    fn bad_options_are_refused_naming_the_flag() {
+        let cases: [(&str, fn(&mut LocalizeMemoryArgs)); 6] = [
+            ("--cache-mb", |a| a.cache_mb = 8),
+            ("--max-particles", |a| a.max_particles = 0),
+            ("--min-ratio", |a| a.min_ratio = f64::NAN),
+            ("--duration", |a| a.duration = 5.0),
+            ("--speed", |a| a.speed = 0.0),
+            ("--robot-speed", |a| a.robot_speed = 2.0),
+        ];
+        for (flag, spoil) in cases {
+            let mut args = defaults();
+            spoil(&mut args);
+            let err = Plan::new(&args).err().map(|e| e.to_string());
+            assert!(
+                err.as_deref().is_some_and(|e| e.starts_with(flag)),
+                "{flag}: {err:?}"
+            );
+        }
     }
 
     #[test]
