@@ -1548,7 +1548,8 @@ mod tests {
 
     #[test]
     fn bad_options_are_refused_naming_the_flag() {
-        let cases: [(&str, fn(&mut LocalizeMemoryArgs)); 6] = [
+        type Spoil = fn(&mut LocalizeMemoryArgs);
+        let cases: [(&str, Spoil); 6] = [
             ("--cache-mb", |a| a.cache_mb = 8),
             ("--max-particles", |a| a.max_particles = 0),
             ("--min-ratio", |a| a.min_ratio = f64::NAN),
