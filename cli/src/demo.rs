@@ -23,7 +23,7 @@ use deog_localizer::evaluation::{
 };
 use deog_mapfile::{to_png, write_map};
 use deog_mapping::quality::{DEFAULT_ROBOT_RADIUS_M, MapQuality};
-use deog_mapping::{QualityInput, export_map, map_quality};
+use deog_mapping::{QualityInput, export_map, map_quality, verdict_image};
 use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient, SimClient};
 use deog_simulator::World;
@@ -562,14 +562,18 @@ struct Results {
 async fn judge(client: &MapClient, plan: &Plan, out: &Path) -> Result<Results> {
     let map = crate::eval::fetch_map(client, MAP).await?;
     let seeds = crate::eval::robot_starts(client).await?;
-    let quality = map_quality(&QualityInput {
+    let input = QualityInput {
         map: &map,
         world: &plan.world,
         seeds: &seeds,
         robot_radius_m: DEFAULT_ROBOT_RADIUS_M,
-    })
-    .context("judging the map against the world")?;
+    };
+    let quality = map_quality(&input).context("judging the map against the world")?;
     let (map_yaml, map_png) = write_map_files(&map, out)?;
+    let verdict = verdict_image(&input).context("drawing where the map is right")?;
+    let png = deog_mapfile::encode_rgb_png(verdict.width, verdict.height, &verdict.rgb)?;
+    std::fs::write(out.join(VERDICT_PNG), png)
+        .with_context(|| format!("writing {}", out.join(VERDICT_PNG).display()))?;
     let mut robots = Vec::with_capacity(plan.robots.len());
     for name in &plan.robots {
         // Judge from the first frame the localizer saw, not from the
@@ -614,6 +618,9 @@ async fn judge(client: &MapClient, plan: &Plan, out: &Path) -> Result<Results> {
         map_yaml,
     })
 }
+
+/// Where the map is right and wrong, drawn over the world.
+const VERDICT_PNG: &str = "map-verdict.png";
 
 /// The map as map_server files and a PNG; returns the YAML and PNG names.
 fn write_map_files(map: &TileMap, out: &Path) -> Result<(String, String)> {
@@ -771,6 +778,13 @@ impl Report<'_> {
             self.results.map_png, self.results.map_yaml
         );
         let _ = writeln!(md, "{}", self.results.quality.table());
+        let _ = writeln!(
+            md,
+            "Where it is right and wrong (white free and black occupied: right; yellow free \
+             but uncertain, red free but occupied, blue occupied but free, purple occupied \
+             but uncertain; light grey never observed, dark grey the world's walls):\n\n\
+             ![where the map is right]({VERDICT_PNG})\n"
+        );
         let _ = writeln!(md, "## The processes\n");
         let _ = writeln!(
             md,

@@ -15,7 +15,7 @@ use deog_localizer::evaluation::{
     EvalInput, EvalParams, LocalizationReport, PlotInput, RobotPath, TruthSample,
 };
 use deog_mapping::quality::DEFAULT_ROBOT_RADIUS_M;
-use deog_mapping::{QualityInput, map_quality};
+use deog_mapping::{QualityInput, map_quality, verdict_image};
 use deog_proto::v1 as pb;
 use deog_robot_client::MapClient;
 use deog_simulator::Point2;
@@ -58,6 +58,12 @@ pub struct EvalMapArgs {
     /// Also write the figures to this file as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Also draw where the map is right and wrong, as a PNG: white free and
+    /// black occupied where right; yellow free but uncertain, red free but
+    /// occupied, blue occupied but free, purple occupied but uncertain;
+    /// light grey never observed, dark grey the world's walls there.
+    #[arg(long)]
+    pub png: Option<PathBuf>,
     /// The robots' radius, metres: free space closer to a wall than this is
     /// not counted as reachable.
     #[arg(long, default_value_t = DEFAULT_ROBOT_RADIUS_M)]
@@ -143,6 +149,11 @@ fn run_map(args: EvalMapArgs) -> Result<()> {
     if let Some(path) = &args.json {
         std::fs::write(path, quality.to_json())
             .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if let Some(path) = &args.png {
+        let image = verdict_image(&input)?;
+        let png = deog_mapfile::encode_rgb_png(image.width, image.height, &image.rgb)?;
+        std::fs::write(path, png).with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
 }

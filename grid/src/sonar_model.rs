@@ -13,7 +13,10 @@
 //! a region I cell never gets `P(occupied) < 0.5` (it would be pushed towards
 //! empty), and a region II cell never gets `P(empty) < 0.5` (it would be
 //! pushed towards occupied) nor above `max_empty` (eq. 3.4 reaches 1 at the
-//! sensor, an infinite log-odds). Each probability becomes the log-odds delta
+//! sensor, an infinite log-odds). Optionally, a region II cell whose
+//! `P(empty)` falls below `min_empty` is left alone, as unobserved: the far,
+//! off-axis part of a cone says almost nothing, and recording it would
+//! only mark cells observed that stay undecided. Each probability becomes the log-odds delta
 //! `ln(P(occ) / (1 − P(occ)))`, which the Bayes update of eq. 3.13 adds.
 //!
 //! A reading at or past `R` is no echo: nothing was hit within range. It adds
@@ -42,8 +45,17 @@ pub struct SonarModelParams {
     pub region_i_tolerance: f64,
     /// `Max_occupied`: the strongest belief one reading gives a region I cell.
     pub max_occupied: f64,
+    /// The weakest belief worth recording for a region I cell: where
+    /// `P(occupied)` falls below it the reading leaves the cell alone.
+    /// 0.5 records every belief the equation gives.
+    pub min_occupied: f64,
     /// The strongest belief one reading gives a region II cell.
     pub max_empty: f64,
+    /// The weakest belief worth recording for a region II cell: where
+    /// `P(empty)` falls below it (far out, near the cone's edge) the reading
+    /// leaves the cell as if it had not seen it. 0.5 records every belief
+    /// the equation gives.
+    pub min_empty: f64,
     /// How far a no-echo reading marks its cone empty, metres; 0 ignores
     /// no-echo readings.
     pub no_echo_free_range: f64,
@@ -57,7 +69,9 @@ impl Default for SonarModelParams {
             half_angle: 15f64.to_radians(),
             region_i_tolerance: 0.05,
             max_occupied: 0.98,
+            min_occupied: 0.5,
             max_empty: 0.98,
+            min_empty: 0.5,
             no_echo_free_range: 3.0,
         }
     }
@@ -77,6 +91,8 @@ impl SonarModelParams {
         )?;
         within("max_occupied", self.max_occupied, 0.5, 0.9999)?;
         within("max_empty", self.max_empty, 0.5, 0.9999)?;
+        within("min_empty", self.min_empty, 0.5, self.max_empty)?;
+        within("min_occupied", self.min_occupied, 0.5, self.max_occupied)?;
         within(
             "no_echo_free_range",
             self.no_echo_free_range,
@@ -130,9 +146,16 @@ impl SonarModel {
     /// The model for validated parameters.
     pub fn new(params: SonarModelParams) -> Result<Self, GridError> {
         let params = params.validate()?;
+        // The tables leave out `min_empty`, a step that linear interpolation
+        // would smear: `delta_for_strength` applies it exactly.
+        let unfloored = SonarModelParams {
+            min_occupied: 0.5,
+            min_empty: 0.5,
+            ..params
+        };
         let table = |region| {
             (0..=TABLE_STEPS)
-                .map(|i| exact_delta(&params, region, i as f64 / TABLE_STEPS as f64) as f32)
+                .map(|i| exact_delta(&unfloored, region, i as f64 / TABLE_STEPS as f64) as f32)
                 .collect()
         };
         Ok(Self {
@@ -210,7 +233,11 @@ impl SonarModel {
     #[inline]
     fn delta_for_strength(&self, region: Region, u: f64) -> i16 {
         let table = match region {
+            Region::Occupied if u * self.params.max_occupied < self.params.min_occupied => {
+                return 0;
+            }
             Region::Occupied => &self.occupied_table,
+            Region::Empty if u < self.params.min_empty => return 0,
             Region::Empty => &self.empty_table,
         };
         let (i, frac) = table_position(u * TABLE_STEPS as f64);
@@ -339,7 +366,9 @@ impl SonarModel {
 /// Eqs. 3.1 and 3.3–3.4 with their guards, as a probability of occupancy.
 fn occupied_probability(p: &SonarModelParams, region: Region, u: f64) -> f64 {
     match region {
+        Region::Occupied if u * p.max_occupied < p.min_occupied => 0.5,
         Region::Occupied => (u * p.max_occupied).max(0.5),
+        Region::Empty if u < p.min_empty => 0.5,
         Region::Empty => 1.0 - u.clamp(0.5, p.max_empty),
     }
 }
@@ -483,7 +512,80 @@ mod tests {
         assert_eq!(m.reading(0.01).unwrap().range, m.params().min_range);
     }
 
+    #[test]
+    fn belief_floors_leave_weak_cells_alone() {
+        let floored = SonarModel::new(SonarModelParams {
+            min_empty: 0.6,
+            min_occupied: 0.55,
+            ..SonarModelParams::default()
+        })
+        .unwrap();
+        let beta = floored.params().half_angle;
+        let plain = model();
+        // Eq. 3.4 at 8 m on the axis: P(empty) = 0.625, kept; at 4 m
+        // half-way to the edge, 0.5625: recorded without the floor only.
+        assert!((floored.probability(Region::Empty, 8.0, 0.0) - 0.375).abs() < 0.01);
+        assert!(floored.delta(Region::Empty, 8.0, 0.0) < 0);
+        assert!(plain.delta(Region::Empty, 4.0, beta / 2.0) < 0);
+        assert_eq!(floored.probability(Region::Empty, 4.0, beta / 2.0), 0.5);
+        assert_eq!(floored.delta(Region::Empty, 4.0, beta / 2.0), 0);
+        // Eq. 3.1 with Max_occupied 0.98 at 4 m half-way: 0.98 · 0.5625 =
+        // 0.55125, kept; further off the axis (0.98 · 0.5125 = 0.502),
+        // recorded without the floor only.
+        assert!(floored.delta(Region::Occupied, 4.0, beta / 2.0) > 0);
+        assert!(plain.delta(Region::Occupied, 4.0, 0.6 * beta) > 0);
+        assert_eq!(floored.delta(Region::Occupied, 4.0, 0.6 * beta), 0);
+    }
+
+    #[test]
+    fn floors_out_of_range_are_refused() {
+        for (min_empty, min_occupied) in [
+            (0.49, 0.5),
+            (0.99, 0.5),
+            (0.5, 0.4),
+            (0.5, 0.99),
+            (f64::NAN, 0.5),
+        ] {
+            let params = SonarModelParams {
+                min_empty,
+                min_occupied,
+                ..SonarModelParams::default()
+            };
+            assert!(
+                SonarModel::new(params).is_err(),
+                "{min_empty} {min_occupied}"
+            );
+        }
+    }
+
     proptest! {
+        /// A floored model gives exactly the unfloored model's cells whose
+        /// belief reaches the floor, with the same deltas, and drops only
+        /// cells whose belief falls short of it.
+        #[test]
+        fn floors_only_drop_weak_cells(
+            x in -5.0f64..5.0, y in -5.0f64..5.0, theta in -4.0f64..4.0, range in 0.0f64..12.0,
+        ) {
+            let plain = model();
+            let floored = SonarModel::new(SonarModelParams {
+                min_empty: 0.6,
+                min_occupied: 0.55,
+                ..SonarModelParams::default()
+            })
+            .unwrap();
+            let pose = Pose2::new(x, y, theta);
+            let all = cells(&plain, pose, range);
+            let kept = cells(&floored, pose, range);
+            let strength = |p: f64| (logit(p) * LOG_ODDS_SCALE).abs().round() as i32;
+            for (cell, d) in &kept {
+                prop_assert_eq!(all.get(cell), Some(d));
+            }
+            for (cell, d) in all.iter().filter(|(c, _)| !kept.contains_key(c)) {
+                let floor = if *d < 0 { strength(0.6) } else { strength(0.55) };
+                prop_assert!(i32::from(*d).abs() <= floor + 1, "{:?}: {} dropped", cell, d);
+            }
+        }
+
         /// The tabled, row-clipped path gives the cells and deltas of the
         /// plain trigonometric one, each delta within one fixed-point unit.
         #[test]

@@ -42,5 +42,5 @@ pub mod yaml;
 pub use error::MapFileError;
 pub use map_image::{Cell, MapImage, WorldBox};
 pub use pgm::{Pgm, decode_pgm, encode_pgm};
-pub use write::{encode_png, encode_yaml, to_png, write_map};
+pub use write::{encode_png, encode_rgb_png, encode_yaml, to_png, write_map};
 pub use yaml::{MapYaml, Mode};

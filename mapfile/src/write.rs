@@ -82,12 +82,43 @@ pub fn to_png(path: impl AsRef<Path>, map: &MapImage) -> Result<(), MapFileError
 }
 
 fn png_bytes(map: &MapImage) -> Result<Vec<u8>, png::EncodingError> {
+    encode(
+        map.width,
+        map.height,
+        png::ColorType::Grayscale,
+        &map.pixels,
+    )
+}
+
+/// Encodes `width * height` RGB triples, the top row first, as an 8-bit
+/// RGB PNG (a picture drawn over a map, not a map).
+pub fn encode_rgb_png(width: u32, height: u32, rgb: &[u8]) -> Result<Vec<u8>, MapFileError> {
+    let expected = 3 * u64::from(width) * u64::from(height);
+    if width == 0 || height == 0 || rgb.len() as u64 != expected {
+        return Err(MapFileError::SizeMismatch {
+            file: "<png>".to_owned(),
+            reason: format!(
+                "{width} x {height} RGB needs {expected} bytes (and neither side may be 0), got {}",
+                rgb.len()
+            ),
+        });
+    }
+    encode(width, height, png::ColorType::Rgb, rgb)
+        .map_err(|e| MapFileError::io("<png>", std::io::Error::other(e)))
+}
+
+fn encode(
+    width: u32,
+    height: u32,
+    colour: png::ColorType,
+    data: &[u8],
+) -> Result<Vec<u8>, png::EncodingError> {
     let mut out = Vec::new();
-    let mut encoder = png::Encoder::new(&mut out, map.width, map.height);
-    encoder.set_color(png::ColorType::Grayscale);
+    let mut encoder = png::Encoder::new(&mut out, width, height);
+    encoder.set_color(colour);
     encoder.set_depth(png::BitDepth::Eight);
     let mut writer = encoder.write_header()?;
-    writer.write_image_data(&map.pixels)?;
+    writer.write_image_data(data)?;
     writer.finish()?;
     Ok(out)
 }

@@ -10,7 +10,8 @@
 //! - [`map_import`]: [`import_map`], a map_server image to tile deltas at
 //!   the map's clamp limits ([`MapImport`]).
 //! - [`quality`]: [`map_quality`], a map judged against a world's ground
-//!   truth ([`QualityInput`] in, [`MapQuality`] out).
+//!   truth ([`QualityInput`] in, [`MapQuality`] out), and
+//!   [`verdict_image`], a picture of where it is right and wrong.
 //! - [`error`]: the crate's one error type, [`MappingError`].
 
 pub mod cartographer;
@@ -23,4 +24,6 @@ pub use cartographer::{Cartographer, FrameInput, PoseChoice};
 pub use error::MappingError;
 pub use map_export::{ExportCounts, MapExport, export_map};
 pub use map_import::{ImportTarget, MapImport, image_origin_cell, import_map};
-pub use quality::{Confusion, MapQuality, QualityInput, map_quality};
+pub use quality::{
+    Confusion, MapQuality, QualityInput, Verdict, VerdictImage, map_quality, verdict_image,
+};

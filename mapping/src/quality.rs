@@ -345,6 +345,62 @@ enum Class {
 /// robot radius or seed, or a world too large to rasterise at the map's
 /// resolution.
 pub fn map_quality(input: &QualityInput<'_>) -> Result<MapQuality, MappingError> {
+    let map = input.map;
+    let (truth, grid) = judged_truth(input)?;
+    let seeds_used = grid.seeds_used;
+    let class_at = |cell: CellIndex| map.get(cell).and_then(|b| map_class(b.raw()));
+    let mut quality = MapQuality {
+        resolution_m: map.resolution().metres(),
+        robot_radius_m: input.robot_radius_m,
+        seeds_given: input.seeds.len() as u64,
+        seeds_used,
+        confusion: Confusion::default(),
+        map_occupied: 0,
+        map_occupied_near_truth: 0,
+        surface_cells: 0,
+        surface_cells_found: 0,
+        reachable_cells: 0,
+        reachable_cells_free: 0,
+    };
+    let truth_occupied = |cell: CellIndex| grid.truth_occupied(&truth, cell);
+    for_each_verdict(map, &truth_occupied, |cell, verdict| {
+        let c = &mut quality.confusion;
+        let slot = match verdict {
+            Verdict::FreeAsFree => &mut c.free_as_free,
+            Verdict::FreeAsOccupied => &mut c.free_as_occupied,
+            Verdict::FreeAsUncertain => &mut c.free_as_uncertain,
+            Verdict::OccupiedAsFree => &mut c.occupied_as_free,
+            Verdict::OccupiedAsOccupied => &mut c.occupied_as_occupied,
+            Verdict::OccupiedAsUncertain => &mut c.occupied_as_uncertain,
+        };
+        *slot += 1;
+        if verdict.map_class() == Class::Occupied {
+            quality.map_occupied += 1;
+            if block(cell).any(truth_occupied) {
+                quality.map_occupied_near_truth += 1;
+            }
+        }
+    })?;
+    for (cell, flags) in grid.cells() {
+        if flags & SURFACE != 0 {
+            quality.surface_cells += 1;
+            if block(cell).any(|n| class_at(n) == Some(Class::Occupied)) {
+                quality.surface_cells_found += 1;
+            }
+        }
+        if flags & REACHABLE != 0 {
+            quality.reachable_cells += 1;
+            if class_at(cell) == Some(Class::Free) {
+                quality.reachable_cells_free += 1;
+            }
+        }
+    }
+    Ok(quality)
+}
+
+/// Checks the input and builds the ground truth of the world's cells,
+/// with the reachable, visible and surface cells marked.
+fn judged_truth<'a>(input: &QualityInput<'a>) -> Result<(Truth<'a>, Grid), MappingError> {
     let radius = input.robot_radius_m;
     if !(radius.is_finite() && (0.0..=MAX_ROBOT_RADIUS_M).contains(&radius)) {
         return Err(MappingError::invalid(
@@ -368,28 +424,17 @@ pub fn map_quality(input: &QualityInput<'_>) -> Result<MapQuality, MappingError>
     }
     let truth = Truth::new(input.world, input.map.resolution(), radius);
     let mut grid = truth.raster()?;
-    let seeds_used = grid.fill_reachable(input.seeds, input.map.resolution());
+    grid.seeds_used = grid.fill_reachable(input.seeds, input.map.resolution());
     grid.fill_visible();
+    Ok((truth, grid))
+}
 
-    let map = input.map;
-    let class_at = |cell: CellIndex| map.get(cell).and_then(|b| map_class(b.raw()));
-    let mut quality = MapQuality {
-        resolution_m: map.resolution().metres(),
-        robot_radius_m: radius,
-        seeds_given: input.seeds.len() as u64,
-        seeds_used,
-        confusion: Confusion::default(),
-        map_occupied: 0,
-        map_occupied_near_truth: 0,
-        surface_cells: 0,
-        surface_cells_found: 0,
-        reachable_cells: 0,
-        reachable_cells_free: 0,
-    };
-    let truth_occupied = |cell: CellIndex| match grid.flags(cell) {
-        Some(flags) => flags & OCCUPIED != 0,
-        None => truth.occupied(cell),
-    };
+/// Calls `visit` with the verdict of every observed cell of `map`.
+fn for_each_verdict(
+    map: &TileMap,
+    truth_occupied: &impl Fn(CellIndex) -> bool,
+    mut visit: impl FnMut(CellIndex, Verdict),
+) -> Result<(), MappingError> {
     let side = map.tile_size().cells() as usize;
     for (key, tile) in map.tiles() {
         let origin = map.tile_size().origin(*key)?;
@@ -403,39 +448,115 @@ pub fn map_quality(input: &QualityInput<'_>) -> Result<MapQuality, MappingError>
                 origin.x + (index % side) as i32,
                 origin.y + (index / side) as i32,
             );
-            let c = &mut quality.confusion;
-            let slot = match (truth_occupied(cell), class) {
-                (false, Class::Free) => &mut c.free_as_free,
-                (false, Class::Occupied) => &mut c.free_as_occupied,
-                (false, Class::Uncertain) => &mut c.free_as_uncertain,
-                (true, Class::Free) => &mut c.occupied_as_free,
-                (true, Class::Occupied) => &mut c.occupied_as_occupied,
-                (true, Class::Uncertain) => &mut c.occupied_as_uncertain,
+            visit(cell, Verdict::of(truth_occupied(cell), class));
+        }
+    }
+    Ok(())
+}
+
+/// One observed cell judged: its truth, then its map class.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    /// Free, mapped free: right.
+    FreeAsFree,
+    /// Free, mapped occupied.
+    FreeAsOccupied,
+    /// Free, mapped uncertain.
+    FreeAsUncertain,
+    /// Occupied, mapped free.
+    OccupiedAsFree,
+    /// Occupied, mapped occupied: right.
+    OccupiedAsOccupied,
+    /// Occupied, mapped uncertain.
+    OccupiedAsUncertain,
+}
+
+impl Verdict {
+    fn of(truth_occupied: bool, class: Class) -> Self {
+        match (truth_occupied, class) {
+            (false, Class::Free) => Self::FreeAsFree,
+            (false, Class::Occupied) => Self::FreeAsOccupied,
+            (false, Class::Uncertain) => Self::FreeAsUncertain,
+            (true, Class::Free) => Self::OccupiedAsFree,
+            (true, Class::Occupied) => Self::OccupiedAsOccupied,
+            (true, Class::Uncertain) => Self::OccupiedAsUncertain,
+        }
+    }
+
+    fn map_class(self) -> Class {
+        match self {
+            Self::FreeAsFree | Self::OccupiedAsFree => Class::Free,
+            Self::FreeAsOccupied | Self::OccupiedAsOccupied => Class::Occupied,
+            Self::FreeAsUncertain | Self::OccupiedAsUncertain => Class::Uncertain,
+        }
+    }
+
+    /// The colour [`verdict_image`] paints it.
+    pub fn rgb(self) -> [u8; 3] {
+        match self {
+            Self::FreeAsFree => [255, 255, 255],
+            Self::OccupiedAsOccupied => [0, 0, 0],
+            Self::FreeAsUncertain => [255, 200, 0],
+            Self::FreeAsOccupied => [220, 0, 0],
+            Self::OccupiedAsFree => [0, 90, 255],
+            Self::OccupiedAsUncertain => [170, 0, 200],
+        }
+    }
+}
+
+/// Never observed, free in the world.
+pub const UNOBSERVED_FREE_RGB: [u8; 3] = [205, 205, 205];
+/// Never observed, occupied in the world (the walls, for orientation).
+pub const UNOBSERVED_OCCUPIED_RGB: [u8; 3] = [120, 120, 120];
+
+/// Where a map is right and wrong, one RGB pixel a cell over the world's
+/// bounds (one cell more each side), the top row first: each observed
+/// cell in its [`Verdict::rgb`], the rest in [`UNOBSERVED_FREE_RGB`] or
+/// [`UNOBSERVED_OCCUPIED_RGB`] by the world's truth.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VerdictImage {
+    /// Pixels per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// `width * height` RGB triples, top row first.
+    pub rgb: Vec<u8>,
+    /// The cell of the bottom-left pixel.
+    pub min_cell: CellIndex,
+}
+
+/// Paints `input.map`'s verdicts over its world; the same errors as
+/// [`map_quality`]. Observed cells beyond the world's bounds (all wrong
+/// unless mapped occupied) are counted by [`map_quality`] but not drawn.
+pub fn verdict_image(input: &QualityInput<'_>) -> Result<VerdictImage, MappingError> {
+    let (truth, grid) = judged_truth(input)?;
+    let (width, height) = (grid.width, grid.height);
+    let mut rgb = Vec::with_capacity(3 * width * height);
+    for row in (0..height).rev() {
+        for col in 0..width {
+            let colour = if grid.flags[row * width + col] & OCCUPIED != 0 {
+                UNOBSERVED_OCCUPIED_RGB
+            } else {
+                UNOBSERVED_FREE_RGB
             };
-            *slot += 1;
-            if class == Class::Occupied {
-                quality.map_occupied += 1;
-                if block(cell).any(truth_occupied) {
-                    quality.map_occupied_near_truth += 1;
-                }
-            }
+            rgb.extend_from_slice(&colour);
         }
     }
-    for (cell, flags) in grid.cells() {
-        if flags & SURFACE != 0 {
-            quality.surface_cells += 1;
-            if block(cell).any(|n| class_at(n) == Some(Class::Occupied)) {
-                quality.surface_cells_found += 1;
-            }
+    let truth_occupied = |cell: CellIndex| grid.truth_occupied(&truth, cell);
+    for_each_verdict(input.map, &truth_occupied, |cell, verdict| {
+        if let Some(i) = grid.index(cell) {
+            let (col, row) = (i % width, height - 1 - i / width);
+            let at = 3 * (row * width + col);
+            rgb[at..at + 3].copy_from_slice(&verdict.rgb());
         }
-        if flags & REACHABLE != 0 {
-            quality.reachable_cells += 1;
-            if class_at(cell) == Some(Class::Free) {
-                quality.reachable_cells_free += 1;
-            }
-        }
-    }
-    Ok(quality)
+    })?;
+    // The raster's size passed MAX_TRUTH_CELLS, far below u32::MAX a side.
+    Ok(VerdictImage {
+        width: width as u32,
+        height: height as u32,
+        rgb,
+        min_cell: grid.origin,
+    })
 }
 
 /// The 3 × 3 block of cells centred on `cell`, itself included (fewer at
@@ -559,6 +680,7 @@ impl<'a> Truth<'a> {
             width,
             height,
             flags,
+            seeds_used: 0,
         })
     }
 }
@@ -583,6 +705,8 @@ struct Grid {
     width: usize,
     height: usize,
     flags: Vec<u8>,
+    /// How many seeds started the reachable fill.
+    seeds_used: u64,
 }
 
 impl Grid {
@@ -594,6 +718,15 @@ impl Grid {
 
     fn flags(&self, cell: CellIndex) -> Option<u8> {
         self.index(cell).map(|i| self.flags[i])
+    }
+
+    /// Whether `cell` is truth-occupied: from the raster inside it, from
+    /// `truth` beyond.
+    fn truth_occupied(&self, truth: &Truth<'_>, cell: CellIndex) -> bool {
+        match self.flags(cell) {
+            Some(flags) => flags & OCCUPIED != 0,
+            None => truth.occupied(cell),
+        }
     }
 
     fn cell(&self, index: usize) -> CellIndex {
@@ -821,6 +954,58 @@ mod tests {
             robot_radius_m: radius,
         })
         .unwrap()
+    }
+
+    #[test]
+    fn the_verdict_image_paints_each_cell_by_its_verdict() {
+        let world = room();
+        let map = map_of([
+            ((1, 1), FREE_RAW),
+            ((0, 0), OCC_RAW),
+            ((2, 1), UNCERTAIN_RAW),
+            ((1, 2), OCC_RAW),
+            ((11, 0), FREE_RAW),
+            ((0, 3), UNCERTAIN_RAW),
+        ]);
+        let image = verdict_image(&QualityInput::new(&map, &world)).unwrap();
+        // The world's cells 0..=12 x 0..=8 and one more each side.
+        assert_eq!((image.width, image.height), (15, 11));
+        assert_eq!(image.min_cell, CellIndex::new(-1, -1));
+        assert_eq!(image.rgb.len(), 15 * 11 * 3);
+        let at = |x: i32, y: i32| {
+            let (col, row) = ((x + 1) as usize, (9 - y) as usize);
+            let i = 3 * (row * 15 + col);
+            [image.rgb[i], image.rgb[i + 1], image.rgb[i + 2]]
+        };
+        assert_eq!(at(1, 1), Verdict::FreeAsFree.rgb());
+        assert_eq!(at(0, 0), Verdict::OccupiedAsOccupied.rgb());
+        assert_eq!(at(2, 1), Verdict::FreeAsUncertain.rgb());
+        assert_eq!(at(1, 2), Verdict::FreeAsOccupied.rgb());
+        assert_eq!(at(11, 0), Verdict::OccupiedAsFree.rgb());
+        assert_eq!(at(0, 3), Verdict::OccupiedAsUncertain.rgb());
+        // Never observed: the box's cell by its truth, a free cell, and
+        // the cells beyond the walls.
+        assert_eq!(at(4, 3), UNOBSERVED_OCCUPIED_RGB);
+        assert_eq!(at(8, 4), UNOBSERVED_FREE_RGB);
+        assert_eq!(at(-1, -1), UNOBSERVED_OCCUPIED_RGB);
+        // The same cells as map_quality counts them.
+        let q = judge(&map, &world, &[], 0.3);
+        let c = q.confusion;
+        assert_eq!(
+            (c.free_as_free, c.occupied_as_occupied, c.free_as_uncertain),
+            (1, 1, 1)
+        );
+        assert_eq!(
+            (
+                c.free_as_occupied,
+                c.occupied_as_free,
+                c.occupied_as_uncertain
+            ),
+            (1, 1, 1)
+        );
+        // The same refusals as map_quality.
+        let empty = map_of([]);
+        assert!(verdict_image(&QualityInput::new(&empty, &world)).is_err());
     }
 
     #[test]
