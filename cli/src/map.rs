@@ -8,7 +8,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use deog_grid::{Pose2, Resolution, SonarModelParams, TileSize};
-use deog_mapping::{Cartographer, FrameInput, PoseChoice};
+use deog_mapping::{Cartographer, FrameInput, PoseChoice, mapping_sonar_model};
 use deog_proto::v1 as pb;
 use deog_robot_client::{MapClient, UpdateSenderConfig};
 
@@ -72,40 +72,36 @@ pub struct MapArgs {
     /// (thesis eq. 3.1's Max_occupied). The thesis's 0.98 lets one echo's
     /// whole 30° arc read as a wall; 0.6 lets many readings decide, which
     /// measured far better maps (BENCHMARKS.md, map quality).
-    #[arg(long, default_value_t = DEFAULT_MAX_OCCUPIED)]
+    #[arg(long, default_value_t = mapping_sonar_model().max_occupied)]
     pub max_occupied: f64,
     /// The sonar model's strongest empty belief from one reading.
-    #[arg(long, default_value_t = SonarModelParams::default().max_empty)]
+    #[arg(long, default_value_t = mapping_sonar_model().max_empty)]
     pub max_empty: f64,
     /// The sonar model's weakest empty belief worth recording: cells of a
-    /// cone where one reading says less are left as unobserved.
-    #[arg(long, default_value_t = DEFAULT_MIN_EMPTY)]
+    /// cone where one reading says less are left as unobserved (0.5
+    /// records all).
+    #[arg(long, default_value_t = mapping_sonar_model().min_empty)]
     pub min_empty: f64,
     /// The sonar model's weakest occupied belief worth recording: cells of
     /// a region I where one reading says less are left alone.
-    #[arg(long, default_value_t = SonarModelParams::default().min_occupied)]
+    #[arg(long, default_value_t = mapping_sonar_model().min_occupied)]
     pub min_occupied: f64,
     /// Half the depth of the sonar model's region I, metres.
-    #[arg(long, default_value_t = SonarModelParams::default().region_i_tolerance)]
+    #[arg(long, default_value_t = mapping_sonar_model().region_i_tolerance)]
     pub region_tolerance: f64,
     /// How far a no-echo reading marks its cone free, metres (0: no-echo
     /// readings are ignored). With a specular sonar, lost echoes are
     /// common, and marking them free erases the walls they missed.
-    #[arg(long, default_value_t = SonarModelParams::default().no_echo_free_range)]
+    #[arg(long, default_value_t = mapping_sonar_model().no_echo_free_range)]
     pub no_echo_free_range: f64,
+    /// How far any reading's cone is mapped, metres: an echo farther than
+    /// this marks its cone free out to here and no wall (10.668, the
+    /// sonar's range, maps all).
+    #[arg(long, default_value_t = mapping_sonar_model().max_mapped_range)]
+    pub max_mapped_range: f64,
     #[command(flatten)]
     pub connection: ConnectionArgs,
 }
-
-/// The cartographer's Max_occupied; see `--max-occupied`.
-const DEFAULT_MAX_OCCUPIED: f64 = 0.6;
-
-/// The cartographer's weakest recorded empty belief; see `--min-empty`.
-/// Eq. 3.4 gives a cone's far, off-axis cells beliefs just past 0.5; a
-/// few such readings leave a cell observed yet undecided, a fringe round
-/// every explored area. 0.6 halved that fringe in office at a cost of 2 %
-/// of coverage (BENCHMARKS.md, map quality).
-const DEFAULT_MIN_EMPTY: f64 = 0.6;
 
 /// Tiles a batch may reach before it is sent at the next frame boundary:
 /// well inside the server's message limit even with dense tiles.
@@ -127,6 +123,20 @@ pub fn run(args: MapArgs) -> Result<()> {
             args.idle_exit
         );
     }
+    let params = SonarModelParams {
+        max_occupied: args.max_occupied,
+        max_empty: args.max_empty,
+        min_empty: args.min_empty,
+        min_occupied: args.min_occupied,
+        region_i_tolerance: args.region_tolerance,
+        no_echo_free_range: args.no_echo_free_range,
+        max_mapped_range: args.max_mapped_range,
+        ..mapping_sonar_model()
+    };
+    let params = params.validate().context(
+        "the sonar model's options (--max-occupied, --max-empty, --min-empty, --min-occupied, \
+         --region-tolerance, --no-echo-free-range, --max-mapped-range)",
+    )?;
     let client_id = format!("carto/{}", args.robot);
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     runtime.block_on(async {
@@ -147,15 +157,6 @@ pub fn run(args: MapArgs) -> Result<()> {
         let pose = match args.pose {
             PoseArg::True => PoseChoice::True,
             PoseArg::Odometry => PoseChoice::Odometry,
-        };
-        let params = SonarModelParams {
-            max_occupied: args.max_occupied,
-            max_empty: args.max_empty,
-            min_empty: args.min_empty,
-            min_occupied: args.min_occupied,
-            region_i_tolerance: args.region_tolerance,
-            no_echo_free_range: args.no_echo_free_range,
-            ..SonarModelParams::default()
         };
         let mut cartographer = Cartographer::with_model(resolution, tile_size, pose, params)
             .context("the sonar model's figures")?;

@@ -23,6 +23,12 @@
 //! no region I; its cone is marked empty out to `no_echo_free_range` only,
 //! since sonar loses echoes off walls struck at a grazing angle and a long
 //! free ray would cut through them. Set it to 0 to ignore such readings.
+//!
+//! Any cone can be cut at `max_mapped_range`: an echo farther than that
+//! marks its cone empty out to it and adds no region I. Far readings say
+//! least (eq. 3.4 weakens with range) and are the likeliest to be lost
+//! echoes or thrown by a small heading error; nearer readings map the cells
+//! they would have reached as the robot moves on.
 
 use crate::cell::{CellBox, CellIndex, Resolution};
 use crate::error::{GridError, within};
@@ -59,6 +65,9 @@ pub struct SonarModelParams {
     /// How far a no-echo reading marks its cone empty, metres; 0 ignores
     /// no-echo readings.
     pub no_echo_free_range: f64,
+    /// How far any reading's cone reaches, metres: cells farther than
+    /// this are left to nearer readings. The maximum range reaches all.
+    pub max_mapped_range: f64,
 }
 
 impl Default for SonarModelParams {
@@ -73,6 +82,7 @@ impl Default for SonarModelParams {
             max_empty: 0.98,
             min_empty: 0.5,
             no_echo_free_range: 3.0,
+            max_mapped_range: 10.668,
         }
     }
 }
@@ -96,6 +106,12 @@ impl SonarModelParams {
         within(
             "no_echo_free_range",
             self.no_echo_free_range,
+            0.0,
+            self.max_range,
+        )?;
+        within(
+            "max_mapped_range",
+            self.max_mapped_range,
             0.0,
             self.max_range,
         )?;
@@ -188,13 +204,15 @@ impl SonarModel {
             Reading {
                 range,
                 echo: false,
-                extent: p.no_echo_free_range,
+                extent: p.no_echo_free_range.min(p.max_mapped_range),
             }
         } else {
             Reading {
                 range,
                 echo: true,
-                extent: (range + p.region_i_tolerance).min(p.max_range),
+                extent: (range + p.region_i_tolerance)
+                    .min(p.max_range)
+                    .min(p.max_mapped_range),
             }
         })
     }
@@ -535,6 +553,40 @@ mod tests {
         assert!(floored.delta(Region::Occupied, 4.0, beta / 2.0) > 0);
         assert!(plain.delta(Region::Occupied, 4.0, 0.6 * beta) > 0);
         assert_eq!(floored.delta(Region::Occupied, 4.0, 0.6 * beta), 0);
+    }
+
+    #[test]
+    fn cones_end_at_the_mapped_range() {
+        let near = SonarModel::new(SonarModelParams {
+            max_mapped_range: 5.0,
+            ..SonarModelParams::default()
+        })
+        .unwrap();
+        let pose = Pose2::new(0.5, -1.0, 0.3);
+        let res = Resolution::DEFAULT;
+        let reach = 5.0 + res.metres();
+        let distance = |cell: &CellIndex| {
+            let (x, y) = res.cell_center(*cell);
+            (x - pose.x).hypot(y - pose.y)
+        };
+        // A far echo: region II out to 5 m only, and no region I.
+        let far = cells(&near, pose, 8.0);
+        assert!(!far.is_empty());
+        assert!(far.keys().all(|c| distance(c) <= reach));
+        assert!(far.values().all(|&d| d < 0));
+        // Within 5 m the cells and deltas are the unlimited model's.
+        let plain = cells(&model(), pose, 8.0);
+        for (cell, d) in plain
+            .iter()
+            .filter(|(c, _)| distance(c) < 5.0 - res.metres())
+        {
+            assert_eq!(far.get(cell), Some(d), "{cell:?}");
+        }
+        // A near echo is untouched.
+        assert_eq!(cells(&near, pose, 3.0), cells(&model(), pose, 3.0));
+        // No echo: still at most no_echo_free_range (3 m) here.
+        let none = cells(&near, pose, 50.0);
+        assert!(none.keys().all(|c| distance(c) <= 3.0 + res.metres()));
     }
 
     #[test]

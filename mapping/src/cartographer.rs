@@ -9,6 +9,29 @@ use deog_grid::{
 
 use crate::error::MappingError;
 
+/// The sonar model `deog map` builds maps with unless told otherwise: the
+/// thesis's equations with the figures that measured the best maps
+/// (BENCHMARKS.md, map quality):
+/// - Max_occupied 0.6, not the thesis's 0.98, with which one echo's whole
+///   30° arc reads as wall; with 0.6 many readings decide;
+/// - empty beliefs under 0.6 left unrecorded: eq. 3.4 gives a cone's far,
+///   off-axis cells beliefs barely past 0.5, and a few such readings leave
+///   a cell observed yet undecided, a fringe round every explored area;
+/// - occupied beliefs under 0.52 left unrecorded too: with Max_occupied
+///   0.6, the edge of region I says next to nothing;
+/// - cones cut at 5 m: farther, eq. 3.4 is weak, a small heading error
+///   throws the cone wide, and a lost echo reads long; cells out there are
+///   mapped when the robot comes nearer.
+pub fn mapping_sonar_model() -> SonarModelParams {
+    SonarModelParams {
+        max_occupied: 0.6,
+        min_occupied: 0.52,
+        min_empty: 0.6,
+        max_mapped_range: 5.0,
+        ..SonarModelParams::default()
+    }
+}
+
 /// Which pose of a frame the map is built from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum PoseChoice {

@@ -20,7 +20,7 @@ pub mod map_export;
 pub mod map_import;
 pub mod quality;
 
-pub use cartographer::{Cartographer, FrameInput, PoseChoice};
+pub use cartographer::{Cartographer, FrameInput, PoseChoice, mapping_sonar_model};
 pub use error::MappingError;
 pub use map_export::{ExportCounts, MapExport, export_map};
 pub use map_import::{ImportTarget, MapImport, image_origin_cell, import_map};

@@ -4,8 +4,7 @@
 //! one twice.
 
 use deog_grid::{
-    ClampLimits, FrameIntegrator, Pose2, Resolution, SensorRing, SonarModel, SonarModelParams,
-    TileMap, TileSize,
+    ClampLimits, FrameIntegrator, Pose2, Resolution, SensorRing, SonarModel, TileMap, TileSize,
 };
 use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient};
@@ -72,11 +71,8 @@ async fn the_map_is_the_frames_applied_in_order_and_a_restart_resumes_exactly() 
         ClampLimits::from_probabilities(info.clamp_min_probability, info.clamp_max_probability)
             .expect("limits");
     let mut reference = TileMap::new(resolution, size, limits);
-    let model = SonarModel::new(SonarModelParams {
-        max_occupied: 0.6,
-        ..SonarModelParams::default()
-    })
-    .expect("model");
+    // `deog map`'s own sonar model, which it ran with.
+    let model = SonarModel::new(deog_mapping::mapping_sonar_model()).expect("model");
     let mut integrator = FrameIntegrator::new(model, SensorRing::scout(), resolution, size);
     let mut deltas = Vec::new();
     for frame in &frames {

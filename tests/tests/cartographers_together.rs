@@ -109,7 +109,7 @@ async fn concurrent_cartographers_equal_their_commit_order_replay() {
             .expect("limits");
     let model = SonarModel::new(SonarModelParams {
         max_occupied: MAX_OCCUPIED,
-        ..SonarModelParams::default()
+        ..deog_mapping::mapping_sonar_model()
     })
     .expect("model");
     let mut integrator = FrameIntegrator::new(model, SensorRing::scout(), resolution, size);

@@ -71,11 +71,13 @@ async fn write(client: &MapClient, client_id: &str, deltas: &HashMap<(i32, i32),
 }
 
 /// Runs `deog eval map` on map `name` and returns its JSON, or its stderr
-/// as the error when it fails.
+/// as the error when it fails; the picture goes to `out` with `.png`.
 fn eval(server: &ServerProcess, name: &str, out: &Path) -> Result<String, String> {
     let output = Command::new(deog_binary())
         .args(["eval", "map", "--map", name, "--world", "map2", "--json"])
         .arg(out)
+        .arg("--png")
+        .arg(out.with_extension("png"))
         .env("DEOG_SERVER", server.addr.to_string())
         .env("RUST_LOG", "warn")
         .output()
@@ -86,6 +88,26 @@ fn eval(server: &ServerProcess, name: &str, out: &Path) -> Result<String, String
     let stdout = String::from_utf8_lossy(&output.stdout);
     assert!(stdout.contains("| fraction correct |"), "{stdout}");
     Ok(std::fs::read_to_string(out).expect("json written"))
+}
+
+/// The colour `deog eval map --png` gave cell (`x`, `y`) of map2: the
+/// picture covers the world's cells and one more on each side, top row
+/// first.
+fn verdict_colour(png_path: &Path, truth: &Truth, x: i32, y: i32) -> [u8; 3] {
+    let bytes = std::fs::read(png_path).expect("picture written");
+    let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+    let mut reader = decoder.read_info().expect("a PNG");
+    let mut rgb = vec![0; reader.output_buffer_size().expect("size")];
+    let frame = reader.next_frame(&mut rgb).expect("decodes");
+    assert_eq!(frame.color_type, png::ColorType::Rgb);
+    let (min, max) = truth.world.bounds();
+    let lo = truth.resolution.cell_of(min.x, min.y).expect("cell");
+    let hi = truth.resolution.cell_of(max.x, max.y).expect("cell");
+    let (width, height) = (hi.x - lo.x + 3, hi.y - lo.y + 3);
+    assert_eq!((frame.width, frame.height), (width as u32, height as u32));
+    let (col, row) = (x - (lo.x - 1), height - 1 - (y - (lo.y - 1)));
+    let i = 3 * (row * width + col) as usize;
+    [rgb[i], rgb[i + 1], rgb[i + 2]]
 }
 
 /// The number after `"name": ` in the report.
@@ -200,6 +222,18 @@ async fn eval_map_scores_a_perfect_patch_one_and_counts_each_mistake() {
         reachable_free - 5.0,
         "{json}"
     );
+
+    // The picture shows the mistakes where they are: red for free cells
+    // mapped occupied, yellow for free ones left uncertain, white for the
+    // free floor around them.
+    let picture = out.with_extension("png");
+    for (x, y) in occupied_cells {
+        assert_eq!(verdict_colour(&picture, &truth, x, y), [220, 0, 0]);
+    }
+    for (x, y) in uncertain_cells {
+        assert_eq!(verdict_colour(&picture, &truth, x, y), [255, 200, 0]);
+    }
+    assert_eq!(verdict_colour(&picture, &truth, 90, 75), [255, 255, 255]);
 
     // Bad input: a clear error, no report.
     let err = eval(&server, "no-such-map", &dir.path().join("none.json")).expect_err("fails");
