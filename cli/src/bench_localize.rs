@@ -184,16 +184,16 @@ fn build_map(world: deog_simulator::World, config: &SimConfig, minutes: f64) -> 
     let mut sim = Simulation::new(world, config.clone(), 1000)?;
     let mut state = sim.spawn("cartographer", None)?;
     let mut wanderer = Wanderer::new(WanderParams::default(), &SensorRing::scout(), 1000)?;
+    // The sonar model `deog map` maps with.
     let params = SonarModelParams {
-        max_occupied: 0.6,
         // A specular sonar's no-echo readings are mostly lost echoes, not
         // free space: the cartographer is told to ignore them.
         no_echo_free_range: if matches!(config.sonar.specular, Specular::Off) {
-            SonarModelParams::default().no_echo_free_range
+            deog_mapping::mapping_sonar_model().no_echo_free_range
         } else {
             0.0
         },
-        ..SonarModelParams::default()
+        ..deog_mapping::mapping_sonar_model()
     };
     let mut cartographer = Cartographer::with_model(res, size, PoseChoice::True, params)?;
     let mut tiles = TileMap::new(res, size, ClampLimits::default());
