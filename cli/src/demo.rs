@@ -571,6 +571,7 @@ async fn judge(client: &MapClient, plan: &Plan, out: &Path) -> Result<Results> {
     let quality = map_quality(&input).context("judging the map against the world")?;
     let (map_yaml, map_png) = write_map_files(&map, out)?;
     let verdict = verdict_image(&input).context("drawing where the map is right")?;
+    let verdict = verdict.scaled(verdict.fit_factor(crate::eval::VERDICT_MAX_SIDE_PX));
     let png = deog_mapfile::encode_rgb_png(verdict.width, verdict.height, &verdict.rgb)?;
     std::fs::write(out.join(VERDICT_PNG), png)
         .with_context(|| format!("writing {}", out.join(VERDICT_PNG).display()))?;

@@ -112,6 +112,10 @@ pub struct EvalLocalizeArgs {
     pub connection: ConnectionArgs,
 }
 
+/// The verdict picture's longer side at most, pixels: small worlds are
+/// scaled up to about this, a cell a square of pixels.
+pub(crate) const VERDICT_MAX_SIDE_PX: u32 = 1000;
+
 /// Runs the evaluation asked for.
 pub fn run(args: EvalArgs) -> Result<()> {
     match args.target {
@@ -152,6 +156,7 @@ fn run_map(args: EvalMapArgs) -> Result<()> {
     }
     if let Some(path) = &args.png {
         let image = verdict_image(&input)?;
+        let image = image.scaled(image.fit_factor(VERDICT_MAX_SIDE_PX));
         let png = deog_mapfile::encode_rgb_png(image.width, image.height, &image.rgb)?;
         std::fs::write(path, png).with_context(|| format!("writing {}", path.display()))?;
     }

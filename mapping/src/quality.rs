@@ -525,6 +525,39 @@ pub struct VerdictImage {
     pub min_cell: CellIndex,
 }
 
+impl VerdictImage {
+    /// The image with each pixel a `factor` × `factor` square (a factor
+    /// of 0 counts as 1), so that small worlds can be seen.
+    pub fn scaled(&self, factor: u32) -> VerdictImage {
+        let factor = factor.max(1) as usize;
+        let (width, height) = (self.width as usize, self.height as usize);
+        let mut rgb = Vec::with_capacity(self.rgb.len() * factor * factor);
+        for row in self.rgb.chunks_exact(3 * width).take(height) {
+            let mut line = Vec::with_capacity(row.len() * factor);
+            for pixel in row.chunks_exact(3) {
+                for _ in 0..factor {
+                    line.extend_from_slice(pixel);
+                }
+            }
+            for _ in 0..factor {
+                rgb.extend_from_slice(&line);
+            }
+        }
+        VerdictImage {
+            width: (width * factor) as u32,
+            height: (height * factor) as u32,
+            rgb,
+            min_cell: self.min_cell,
+        }
+    }
+
+    /// The scale factor that brings the longer side to at most
+    /// `max_side` pixels (at least 1).
+    pub fn fit_factor(&self, max_side: u32) -> u32 {
+        (max_side / self.width.max(self.height).max(1)).max(1)
+    }
+}
+
 /// Paints `input.map`'s verdicts over its world; the same errors as
 /// [`map_quality`]. Observed cells beyond the world's bounds (all wrong
 /// unless mapped occupied) are counted by [`map_quality`] but not drawn.
@@ -1003,6 +1036,19 @@ mod tests {
             ),
             (1, 1, 1)
         );
+        // Scaled: each pixel a square, in place.
+        let big = image.scaled(3);
+        assert_eq!((big.width, big.height), (45, 33));
+        let big_at = |col: usize, row: usize| {
+            let i = 3 * (row * 45 + col);
+            [big.rgb[i], big.rgb[i + 1], big.rgb[i + 2]]
+        };
+        for (dc, dr) in [(0, 0), (2, 2), (1, 2)] {
+            // Cell (2, 1): column 3, row 8 of the small image.
+            assert_eq!(big_at(9 + dc, 24 + dr), Verdict::FreeAsUncertain.rgb());
+        }
+        assert_eq!(image.fit_factor(1000), 66);
+        assert_eq!(image.fit_factor(10), 1);
         // The same refusals as map_quality.
         let empty = map_of([]);
         assert!(verdict_image(&QualityInput::new(&empty, &world)).is_err());

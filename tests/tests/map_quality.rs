@@ -92,7 +92,7 @@ fn eval(server: &ServerProcess, name: &str, out: &Path) -> Result<String, String
 
 /// The colour `deog eval map --png` gave cell (`x`, `y`) of map2: the
 /// picture covers the world's cells and one more on each side, top row
-/// first.
+/// first, each cell a square of pixels.
 fn verdict_colour(png_path: &Path, truth: &Truth, x: i32, y: i32) -> [u8; 3] {
     let bytes = std::fs::read(png_path).expect("picture written");
     let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
@@ -104,9 +104,17 @@ fn verdict_colour(png_path: &Path, truth: &Truth, x: i32, y: i32) -> [u8; 3] {
     let lo = truth.resolution.cell_of(min.x, min.y).expect("cell");
     let hi = truth.resolution.cell_of(max.x, max.y).expect("cell");
     let (width, height) = (hi.x - lo.x + 3, hi.y - lo.y + 3);
-    assert_eq!((frame.width, frame.height), (width as u32, height as u32));
+    // Scaled up, each cell a square of pixels, to about 1000 across.
+    let scale = frame.width as i32 / width;
+    assert!(scale >= 1 && scale * width.max(height) <= 1000, "{scale}");
+    assert_eq!(
+        (frame.width, frame.height),
+        ((width * scale) as u32, (height * scale) as u32)
+    );
     let (col, row) = (x - (lo.x - 1), height - 1 - (y - (lo.y - 1)));
-    let i = 3 * (row * width + col) as usize;
+    // The square's far corner: every pixel of it has the cell's colour.
+    let (col, row) = (col * scale + scale - 1, row * scale + scale - 1);
+    let i = 3 * (row * width * scale + col) as usize;
     [rgb[i], rgb[i + 1], rgb[i + 2]]
 }
 
