@@ -23,7 +23,7 @@ use deog_localizer::evaluation::{
 };
 use deog_mapfile::{to_png, write_map};
 use deog_mapping::quality::{DEFAULT_ROBOT_RADIUS_M, MapQuality};
-use deog_mapping::{QualityInput, export_map, map_quality, verdict_image};
+use deog_mapping::{QualityInput, export_map, map_quality};
 use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient, SimClient};
 use deog_simulator::World;
@@ -570,11 +570,7 @@ async fn judge(client: &MapClient, plan: &Plan, out: &Path) -> Result<Results> {
     };
     let quality = map_quality(&input).context("judging the map against the world")?;
     let (map_yaml, map_png) = write_map_files(&map, out)?;
-    let verdict = verdict_image(&input).context("drawing where the map is right")?;
-    let verdict = verdict.scaled(verdict.fit_factor(crate::eval::VERDICT_MAX_SIDE_PX));
-    let png = deog_mapfile::encode_rgb_png(verdict.width, verdict.height, &verdict.rgb)?;
-    std::fs::write(out.join(VERDICT_PNG), png)
-        .with_context(|| format!("writing {}", out.join(VERDICT_PNG).display()))?;
+    crate::eval::write_verdict_png(&input, &out.join(VERDICT_PNG))?;
     let mut robots = Vec::with_capacity(plan.robots.len());
     for name in &plan.robots {
         // Judge from the first frame the localizer saw, not from the

@@ -5,7 +5,7 @@
 //! thesis's error table, convergence and kidnap recovery, and plots the
 //! paths (definitions in `deog_localizer::evaluation`).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
@@ -155,12 +155,18 @@ fn run_map(args: EvalMapArgs) -> Result<()> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     if let Some(path) = &args.png {
-        let image = verdict_image(&input)?;
-        let image = image.scaled(image.fit_factor(VERDICT_MAX_SIDE_PX));
-        let png = deog_mapfile::encode_rgb_png(image.width, image.height, &image.rgb)?;
-        std::fs::write(path, png).with_context(|| format!("writing {}", path.display()))?;
+        write_verdict_png(&input, path)?;
     }
     Ok(())
+}
+
+/// Draws where the map is right and wrong, scaled up to about
+/// [`VERDICT_MAX_SIDE_PX`], and writes it to `path` as a PNG.
+pub(crate) fn write_verdict_png(input: &QualityInput<'_>, path: &Path) -> Result<()> {
+    let image = verdict_image(input).context("drawing where the map is right and wrong")?;
+    let image = image.scaled(image.fit_factor(VERDICT_MAX_SIDE_PX));
+    let png = deog_mapfile::encode_rgb_png(image.width, image.height, &image.rgb)?;
+    std::fs::write(path, png).with_context(|| format!("writing {}", path.display()))
 }
 
 /// Every stored tile of `name`, as a tile map with the map's settings.

@@ -13,11 +13,16 @@
 //! a region I cell never gets `P(occupied) < 0.5` (it would be pushed towards
 //! empty), and a region II cell never gets `P(empty) < 0.5` (it would be
 //! pushed towards occupied) nor above `max_empty` (eq. 3.4 reaches 1 at the
-//! sensor, an infinite log-odds). Optionally, a region II cell whose
-//! `P(empty)` falls below `min_empty` is left alone, as unobserved: the far,
-//! off-axis part of a cone says almost nothing, and recording it would
-//! only mark cells observed that stay undecided. Each probability becomes the log-odds delta
-//! `ln(P(occ) / (1 − P(occ)))`, which the Bayes update of eq. 3.13 adds.
+//! sensor, an infinite log-odds). Each probability becomes the log-odds
+//! delta `ln(P(occ) / (1 − P(occ)))`, which the Bayes update of eq. 3.13
+//! adds.
+//!
+//! Optionally, beliefs too weak to matter are not recorded: a region II
+//! cell whose `P(empty)` falls below `min_empty`, or a region I cell whose
+//! `P(occupied)` falls below `min_occupied`, is left alone, as unobserved.
+//! The far, off-axis part of a cone says almost nothing, and recording it
+//! would only mark cells observed that stay undecided. At 0.5 (the
+//! default) every belief the equations give is recorded.
 //!
 //! A reading at or past `R` is no echo: nothing was hit within range. It adds
 //! no region I; its cone is marked empty out to `no_echo_free_range` only,
@@ -162,8 +167,8 @@ impl SonarModel {
     /// The model for validated parameters.
     pub fn new(params: SonarModelParams) -> Result<Self, GridError> {
         let params = params.validate()?;
-        // The tables leave out `min_empty`, a step that linear interpolation
-        // would smear: `delta_for_strength` applies it exactly.
+        // The tables leave out the floors, steps that linear interpolation
+        // would smear: `delta_for_strength` applies them exactly.
         let unfloored = SonarModelParams {
             min_occupied: 0.5,
             min_empty: 0.5,

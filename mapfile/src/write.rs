@@ -194,6 +194,23 @@ mod tests {
     }
 
     #[test]
+    fn rgb_pictures_decode_to_their_pixels_and_bad_sizes_are_refused() {
+        let rgb = [255, 0, 0, 0, 255, 0, 0, 0, 255, 1, 2, 3, 4, 5, 6, 7, 8, 9];
+        let png = encode_rgb_png(3, 2, &rgb).expect("encode");
+        let decoder = png::Decoder::new(std::io::Cursor::new(png));
+        let mut reader = decoder.read_info().expect("a PNG");
+        let mut out = vec![0; reader.output_buffer_size().expect("size")];
+        let frame = reader.next_frame(&mut out).expect("decodes");
+        assert_eq!(frame.color_type, png::ColorType::Rgb);
+        assert_eq!((frame.width, frame.height), (3, 2));
+        assert_eq!(&out[..frame.buffer_size()], &rgb);
+        for (w, h, len) in [(3, 2, 17), (0, 2, 0), (3, 0, 0)] {
+            let e = encode_rgb_png(w, h, &rgb[..len]).expect_err("refused");
+            assert!(matches!(e, MapFileError::SizeMismatch { .. }), "{e}");
+        }
+    }
+
+    #[test]
     fn odd_image_names_are_quoted() {
         let yaml = encode_yaml(&tiny(), "my \"map\" #1.pgm");
         assert!(
