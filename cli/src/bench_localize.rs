@@ -13,8 +13,8 @@ use std::time::Instant;
 use anyhow::{Context, Result, ensure};
 use clap::Args;
 use deog_grid::{
-    ClampLimits, OccupancyThresholds, Pose2, Resolution, SensorRing, SonarModelParams, TileMap,
-    TileSize, normalize_angle,
+    ClampLimits, OccupancyThresholds, Pose2, Resolution, SensorRing, TileMap, TileSize,
+    normalize_angle,
 };
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};
@@ -185,16 +185,12 @@ fn build_map(world: deog_simulator::World, config: &SimConfig, minutes: f64) -> 
     let mut state = sim.spawn("cartographer", None)?;
     let mut wanderer = Wanderer::new(WanderParams::default(), &SensorRing::scout(), 1000)?;
     // The sonar model `deog map` maps with.
-    let params = SonarModelParams {
+    let mut params = deog_mapping::mapping_sonar_model();
+    if !matches!(config.sonar.specular, Specular::Off) {
         // A specular sonar's no-echo readings are mostly lost echoes, not
         // free space: the cartographer is told to ignore them.
-        no_echo_free_range: if matches!(config.sonar.specular, Specular::Off) {
-            deog_mapping::mapping_sonar_model().no_echo_free_range
-        } else {
-            0.0
-        },
-        ..deog_mapping::mapping_sonar_model()
-    };
+        params.no_echo_free_range = 0.0;
+    }
     let mut cartographer = Cartographer::with_model(res, size, PoseChoice::True, params)?;
     let mut tiles = TileMap::new(res, size, ClampLimits::default());
     let mut deltas = Vec::new();

@@ -346,8 +346,7 @@ enum Class {
 /// resolution.
 pub fn map_quality(input: &QualityInput<'_>) -> Result<MapQuality, MappingError> {
     let map = input.map;
-    let (truth, grid) = judged_truth(input)?;
-    let seeds_used = grid.seeds_used;
+    let (truth, grid, seeds_used) = judged_truth(input)?;
     let class_at = |cell: CellIndex| map.get(cell).and_then(|b| map_class(b.raw()));
     let mut quality = MapQuality {
         resolution_m: map.resolution().metres(),
@@ -399,8 +398,9 @@ pub fn map_quality(input: &QualityInput<'_>) -> Result<MapQuality, MappingError>
 }
 
 /// Checks the input and builds the ground truth of the world's cells,
-/// with the reachable, visible and surface cells marked.
-fn judged_truth<'a>(input: &QualityInput<'a>) -> Result<(Truth<'a>, Grid), MappingError> {
+/// with the reachable, visible and surface cells marked; also returns how
+/// many seeds started the reachable fill.
+fn judged_truth<'a>(input: &QualityInput<'a>) -> Result<(Truth<'a>, Grid, u64), MappingError> {
     let radius = input.robot_radius_m;
     if !(radius.is_finite() && (0.0..=MAX_ROBOT_RADIUS_M).contains(&radius)) {
         return Err(MappingError::invalid(
@@ -424,9 +424,9 @@ fn judged_truth<'a>(input: &QualityInput<'a>) -> Result<(Truth<'a>, Grid), Mappi
     }
     let truth = Truth::new(input.world, input.map.resolution(), radius);
     let mut grid = truth.raster()?;
-    grid.seeds_used = grid.fill_reachable(input.seeds, input.map.resolution());
+    let seeds_used = grid.fill_reachable(input.seeds, input.map.resolution());
     grid.fill_visible();
-    Ok((truth, grid))
+    Ok((truth, grid, seeds_used))
 }
 
 /// Calls `visit` with the verdict of every observed cell of `map`.
@@ -562,7 +562,7 @@ impl VerdictImage {
 /// [`map_quality`]. Observed cells beyond the world's bounds (all wrong
 /// unless mapped occupied) are counted by [`map_quality`] but not drawn.
 pub fn verdict_image(input: &QualityInput<'_>) -> Result<VerdictImage, MappingError> {
-    let (truth, grid) = judged_truth(input)?;
+    let (truth, grid, _) = judged_truth(input)?;
     let (width, height) = (grid.width, grid.height);
     let mut rgb = Vec::with_capacity(3 * width * height);
     for row in (0..height).rev() {
@@ -713,7 +713,6 @@ impl<'a> Truth<'a> {
             width,
             height,
             flags,
-            seeds_used: 0,
         })
     }
 }
@@ -738,8 +737,6 @@ struct Grid {
     width: usize,
     height: usize,
     flags: Vec<u8>,
-    /// How many seeds started the reachable fill.
-    seeds_used: u64,
 }
 
 impl Grid {
