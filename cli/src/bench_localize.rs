@@ -67,6 +67,10 @@ pub struct LocalizeBenchArgs {
     /// The beam model's hit spread growth per metre.
     #[arg(long, default_value_t = deog_localizer::beam_model::BeamModelParams::default().hit_sigma_per_m)]
     pub hit_sigma_per_m: f64,
+    /// How far past the first occupied cell's near face echoes are
+    /// expected, metres (see `deog localize --surface-depth`).
+    #[arg(long, default_value_t = ConeGeometry::default().surface_depth)]
+    pub surface_depth: f64,
     /// Smoothing rate of the long-term likelihood average.
     #[arg(long, default_value_t = FilterSettings::default().alpha_slow)]
     pub alpha_slow: f64,
@@ -109,7 +113,7 @@ pub fn run(args: LocalizeBenchArgs) -> Result<()> {
         let started = Instant::now();
         let world = load_world(world_name)?;
         let config = sim_config(args.specular);
-        let mut map = build_map(world.clone(), &config, args.map_minutes)?;
+        let mut map = build_map(world.clone(), &config, args.map_minutes, args.surface_depth)?;
         println!(
             "{world_name}: map built in {:.1} s ({} tiles)",
             started.elapsed().as_secs_f64(),
@@ -178,7 +182,12 @@ fn sim_config(specular: bool) -> SimConfig {
 }
 
 /// The map a wandering robot's frames give, as the cartographer builds it.
-fn build_map(world: deog_simulator::World, config: &SimConfig, minutes: f64) -> Result<LocalMap> {
+fn build_map(
+    world: deog_simulator::World,
+    config: &SimConfig,
+    minutes: f64,
+    surface_depth: f64,
+) -> Result<LocalMap> {
     let res = Resolution::DEFAULT;
     let size = TileSize::new(64)?;
     let mut sim = Simulation::new(world, config.clone(), 1000)?;
@@ -230,6 +239,7 @@ fn build_map(world: deog_simulator::World, config: &SimConfig, minutes: f64) -> 
                     Some(max_incidence)
                 }
             },
+            surface_depth,
             ..ConeGeometry::default()
         },
         budget_bytes: 512 << 20,
@@ -275,6 +285,8 @@ fn run_once(
             let to = sim.random_free_pose(&mut kidnap_rng)?;
             sim.teleport("scout", to)?;
             kidnapped_at = Some(sim.time_s());
+            // The mirror sums compare the halves from the new pose on.
+            mirror_sums = (0.0, 0.0, 0, 0);
         }
         let (v, w) = wanderer.command(&state.ranges, state.bumper, period)?;
         sim.drive("scout", v, w)?;

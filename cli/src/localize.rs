@@ -61,6 +61,13 @@ pub struct LocalizeArgs {
     /// --specular lost --specular-angle`). Unset: every wall echoes.
     #[arg(long)]
     pub specular_angle: Option<f64>,
+    /// How far past the near face of the first occupied cell a sonar's
+    /// echo is expected, metres: 0.05 for maps the cartographer built
+    /// (their occupied cells stand about a cell in front of the walls);
+    /// about half a cell for maps whose walls lie inside their occupied
+    /// cells, as laser-built map_server maps.
+    #[arg(long, default_value_t = ConeGeometry::default().surface_depth)]
+    pub surface_depth: f64,
     /// Seed of the filter's random draws.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -95,6 +102,11 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             "--specular-angle must be in [0, 90] degrees, got {angle}"
         );
     }
+    ensure!(
+        args.surface_depth.is_finite() && (0.0..=1.0).contains(&args.surface_depth),
+        "--surface-depth must be in [0, 1] metres, got {}",
+        args.surface_depth
+    );
     ensure!(
         (16..=1 << 20).contains(&args.cache_mb),
         "--cache-mb must be in [16, 1048576] MiB, got {}",
@@ -131,6 +143,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             thresholds: OccupancyThresholds::default(),
             geometry: ConeGeometry {
                 specular_max_incidence: args.specular_angle.map(f64::to_radians),
+                surface_depth: args.surface_depth,
                 ..ConeGeometry::default()
             },
             budget_bytes: args.cache_mb << 20,

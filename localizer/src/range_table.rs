@@ -10,7 +10,8 @@
 //! is near, to the first occupied cell. A ray's range is the distance from
 //! the centre to the nearest point of that cell, as [`deog_grid::cast_cone`]
 //! measures it. A heading's expected range is the least range of the rays
-//! within the cone's half-angle of it: the nearest echo in the cone.
+//! within the cone's half-angle of it: the nearest echo in the cone,
+//! moved [`ConeGeometry::surface_depth`] on to where the surface likely is.
 //!
 //! Ranges are stored as whole millimetres in a `u16`: [`NO_ECHO`] when no
 //! occupied cell lies within the maximum range, 0 for a cell that is itself
@@ -45,11 +46,20 @@ pub struct ConeGeometry {
     /// ray of the cone may still). `None`: every wall echoes. The wall's
     /// normal is the distance field's gradient just before the hit.
     pub specular_max_incidence: Option<f64>,
+    /// Metres added to every echo's range: how far past the near face of
+    /// the first occupied cell a ray meets the surface that echoes. In the
+    /// sonar maps the cartographer builds that cell usually stands in
+    /// front of the surface: region I of the sonar model reaches its
+    /// tolerance (5 cm) short of the reading, so the free cell before a
+    /// wall is marked occupied too. 0 measures to the cell's near face.
+    pub surface_depth: f64,
 }
 
 impl Default for ConeGeometry {
     /// The Scout's sonar (15° half-angle, 10.668 m), headings every 3°,
-    /// rays every 1°.
+    /// rays every 1°, on a map the cartographer built (surfaces a cell,
+    /// 5 cm, behind the first occupied cell's near face: measured best,
+    /// BENCHMARKS.md, localization).
     fn default() -> Self {
         Self {
             half_angle: 15f64.to_radians(),
@@ -57,6 +67,7 @@ impl Default for ConeGeometry {
             headings: 120,
             rays_per_heading: 3,
             specular_max_incidence: None,
+            surface_depth: 0.05,
         }
     }
 }
@@ -66,6 +77,7 @@ impl ConeGeometry {
     pub fn validate(self) -> Result<Self, LocalizerError> {
         within("half_angle", self.half_angle, 1e-3, 1.4)?;
         within("max_range", self.max_range, 0.1, 60.0)?;
+        within("surface_depth", self.surface_depth, 0.0, 1.0)?;
         if let Some(angle) = self.specular_max_incidence {
             within(
                 "specular_max_incidence",
@@ -299,7 +311,10 @@ pub fn fill_table(
                 for j in centre - reach..=centre + reach {
                     nearest = nearest.min(ray_ranges[j.rem_euclid(rays as i64) as usize]);
                 }
-                *slot = to_millimetres(f64::from(nearest) * cell_m, geometry.max_range);
+                *slot = to_millimetres(
+                    f64::from(nearest) * cell_m + geometry.surface_depth,
+                    geometry.max_range,
+                );
             }
             if let (Some(last), Some(first)) = (wrap.first_mut(), headings.first()) {
                 *last = *first;
@@ -501,7 +516,7 @@ pub fn expected_range_by_marching(
             t += boundary(px, cx, dir.0).min(boundary(py, cy, dir.1)) + 1e-6;
         }
     }
-    let range = nearest * cell_m;
+    let range = nearest * cell_m + geometry.surface_depth;
     (range <= geometry.max_range).then_some(range)
 }
 
@@ -562,13 +577,58 @@ mod tests {
         }
     }
 
+    /// The default geometry measuring to the first occupied cell's near
+    /// face, as the exact figures below are worked out.
+    fn near_face() -> ConeGeometry {
+        ConeGeometry {
+            surface_depth: 0.0,
+            ..ConeGeometry::default()
+        }
+    }
+
+    #[test]
+    fn surface_depth_moves_echoes_only() {
+        // The wall of `wall_ahead_reads_its_distance`: with the default
+        // depth every echo reads 5 cm farther; no echo stays no echo, and
+        // a sensor inside the wall still reads 0.
+        let res = Resolution::DEFAULT;
+        let mut set: HashSet<CellIndex> = (-200..=200).map(|y| CellIndex::new(40, y)).collect();
+        set.insert(CellIndex::new(3, 3));
+        let cells = Cells(set);
+        let deep = ConeGeometry::default();
+        assert_abs_diff_eq!(deep.surface_depth, 0.05);
+        let margin = deep.margin_cells(res);
+        let raster = raster_of(&cells, cell_box(-margin, -margin, 3 + margin, 3 + margin));
+        let tile = cell_box(0, 0, 3, 3);
+        let near = build_table(&raster, tile, res, &near_face());
+        let far = build_table(&raster, tile, res, &deep);
+        for (a, b) in near.iter().zip(far.iter()) {
+            match *a {
+                NO_ECHO => assert_eq!(*b, NO_ECHO),
+                0 => assert_eq!(*b, 0),
+                a => assert!(b.abs_diff(a + 50) <= 1, "{a} mm became {b} mm"),
+            }
+        }
+        assert_eq!(far[0], 2025);
+        let reference = expected_range_by_marching(&cells, res, &deep, 0.025, 0.025, 0.0);
+        assert_abs_diff_eq!(reference.unwrap(), 2.025, epsilon = 1e-9);
+        assert!(
+            ConeGeometry {
+                surface_depth: -0.01,
+                ..deep
+            }
+            .validate()
+            .is_err()
+        );
+    }
+
     #[test]
     fn wall_ahead_reads_its_distance() {
         // A wall of cells at x = 40 (2.00 m to 2.05 m); a sensor in cell 0
         // (centre 0.025 m) facing +x reads 2.0 - 0.025 = 1.975 m.
         let res = Resolution::DEFAULT;
         let wall = Cells((-200..=200).map(|y| CellIndex::new(40, y)).collect());
-        let geometry = ConeGeometry::default();
+        let geometry = near_face();
         let margin = geometry.margin_cells(res);
         let tile = cell_box(0, 0, 3, 3);
         let raster = raster_of(&wall, cell_box(-margin, -margin, 3 + margin, 3 + margin));
@@ -594,7 +654,7 @@ mod tests {
         let wall = Cells((-400..=400).map(|y| CellIndex::new(40, y)).collect());
         let geometry = ConeGeometry {
             specular_max_incidence: Some(40f64.to_radians()),
-            ..ConeGeometry::default()
+            ..near_face()
         };
         let margin = geometry.margin_cells(res);
         let raster = raster_of(&wall, cell_box(-margin, -margin, margin, margin));
@@ -622,7 +682,7 @@ mod tests {
     fn occupied_cells_read_zero() {
         let res = Resolution::DEFAULT;
         let cells = Cells([CellIndex::new(1, 1)].into_iter().collect());
-        let geometry = ConeGeometry::default();
+        let geometry = near_face();
         let m = geometry.margin_cells(res);
         let raster = raster_of(&cells, cell_box(-m, -m, 3 + m, 3 + m));
         let table = build_table(&raster, cell_box(0, 0, 3, 3), res, &geometry);
