@@ -71,12 +71,23 @@ pub struct LocalizeBenchArgs {
     /// expected, metres (see `deog localize --surface-depth`).
     #[arg(long, default_value_t = ConeGeometry::default().surface_depth)]
     pub surface_depth: f64,
+    /// Scale of the motion model's four noise parameters (1: the filter's
+    /// defaults).
+    #[arg(long, default_value_t = 1.0)]
+    pub motion_noise_scale: f64,
     /// Smoothing rate of the long-term likelihood average.
     #[arg(long, default_value_t = FilterSettings::default().alpha_slow)]
     pub alpha_slow: f64,
     /// Smoothing rate of the short-term likelihood average.
     #[arg(long, default_value_t = FilterSettings::default().alpha_fast)]
     pub alpha_fast: f64,
+    /// A cluster holding at least this share of the weight keeps at least
+    /// `--cluster-min-particles` through a resampling.
+    #[arg(long, default_value_t = FilterSettings::default().cluster_keep_weight)]
+    pub cluster_keep_weight: f64,
+    /// The fewest particles a kept cluster gets at a resampling.
+    #[arg(long, default_value_t = FilterSettings::default().cluster_min_particles)]
+    pub cluster_min_particles: usize,
     /// Print every run's figures.
     #[arg(long)]
     pub verbose: bool,
@@ -270,7 +281,14 @@ fn run_once(
     settings.beam.hit_sigma_m = args.hit_sigma;
     settings.beam.hit_sigma_per_m = args.hit_sigma_per_m;
     settings.alpha_fast = args.alpha_fast;
+    let k = args.motion_noise_scale;
+    settings.motion.rot_per_rot *= k;
+    settings.motion.rot_per_trans *= k;
+    settings.motion.trans_per_trans *= k;
+    settings.motion.trans_per_rot *= k;
     settings.alpha_slow = args.alpha_slow;
+    settings.cluster_keep_weight = args.cluster_keep_weight;
+    settings.cluster_min_particles = args.cluster_min_particles;
     let mut mcl = Mcl::new(settings)?;
     mcl.start_global(map)?;
     let mut kidnap_rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6b69_646e_6170);
@@ -327,8 +345,18 @@ fn run_once(
             if args.trace_every > 0.0
                 && (state.time_s / args.trace_every).fract() < period / args.trace_every * 0.999
             {
+                // The particles within the convergence bounds of the truth.
+                let (mut near, mut near_weight) = (0usize, 0.0f64);
+                for (p, w) in mcl.particles().iter().zip(mcl.weights()) {
+                    if (p.x - t.x).hypot(p.y - t.y) <= CONVERGED_M
+                        && normalize_angle(p.theta - t.theta).abs() <= CONVERGED_RAD
+                    {
+                        near += 1;
+                        near_weight += w;
+                    }
+                }
                 println!(
-                    "    t {:6.1}  true ({:5.2}, {:5.2}, {:6.1}°)  estimate ({:5.2}, {:5.2}, {:6.1}°)  particles {:5}  weight {:.2}  converged {}  lost {:.2}",
+                    "    t {:6.1}  true ({:5.2}, {:5.2}, {:6.1}°)  estimate ({:5.2}, {:5.2}, {:6.1}°)  particles {:5}  weight {:.2}  converged {}  lost {:.2}  near the truth {near} weighing {near_weight:.1e}",
                     state.time_s,
                     t.x,
                     t.y,

@@ -66,15 +66,94 @@ pub struct ClusterEstimate {
     pub clusters: usize,
 }
 
+/// Particles grouped into clusters: occupied bins joined when they touch
+/// (including diagonally, and across the heading wrap).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Clusters {
+    /// Each particle's cluster, an index into [`Self::weights`].
+    pub of: Vec<u32>,
+    /// Each cluster's share of the total weight; they sum to 1.
+    pub weights: Vec<f64>,
+    /// Each cluster's number of particles.
+    pub counts: Vec<usize>,
+}
+
+impl Clusters {
+    /// The heaviest cluster (the first of equals).
+    pub fn heaviest(&self) -> Option<usize> {
+        let mut best: Option<usize> = None;
+        for (c, w) in self.weights.iter().enumerate() {
+            if best.is_none_or(|b| *w > self.weights[b]) {
+                best = Some(c);
+            }
+        }
+        best
+    }
+
+    /// The effective sample size within the clusters, summed:
+    /// `Σ_c (Σ_{i∈c} wᵢ)² / Σ_{i∈c} wᵢ²`. It equals the particle count when
+    /// the weights are equal within each cluster, whatever the clusters'
+    /// weights, so it measures how far the likelihoods have spread the
+    /// weights since the last resampling, not how unequal the clusters are.
+    pub fn effective_sample_size(&self, weights: &[f64]) -> f64 {
+        let mut sums = vec![(0.0, 0.0); self.weights.len()];
+        for (&c, &w) in self.of.iter().zip(weights) {
+            let s = &mut sums[c as usize];
+            s.0 += w;
+            s.1 += w * w;
+        }
+        sums.iter()
+            .filter(|s| s.1 > 0.0)
+            .map(|s| s.0 * s.0 / s.1)
+            .sum()
+    }
+
+    /// The weighted mean and covariance of cluster `c`.
+    pub fn summarize(&self, particles: &[Pose2], weights: &[f64], c: usize) -> ClusterEstimate {
+        let c = c as u32;
+        // Weighted means; the heading by its unit vectors.
+        let (mut sw, mut sx, mut sy, mut sc, mut ss) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for ((p, w), k) in particles.iter().zip(weights).zip(&self.of) {
+            if *k == c {
+                sw += w;
+                sx += w * p.x;
+                sy += w * p.y;
+                sc += w * p.theta.cos();
+                ss += w * p.theta.sin();
+            }
+        }
+        let mean = Pose2::new(sx / sw, sy / sw, ss.atan2(sc));
+        let mut cov = [0.0; 9];
+        for ((p, w), k) in particles.iter().zip(weights).zip(&self.of) {
+            if *k == c {
+                let d = [
+                    p.x - mean.x,
+                    p.y - mean.y,
+                    normalize_angle(p.theta - mean.theta),
+                ];
+                for r in 0..3 {
+                    for k in 0..3 {
+                        cov[r * 3 + k] += w * d[r] * d[k];
+                    }
+                }
+            }
+        }
+        for v in &mut cov {
+            *v /= sw;
+        }
+        ClusterEstimate {
+            pose: mean,
+            covariance: cov,
+            weight: self.weights[c as usize],
+            clusters: self.weights.len(),
+        }
+    }
+}
+
 /// Clusters `particles` (with `weights`, not necessarily normalised) by
-/// joining occupied bins that touch (including diagonally, and across the
-/// heading wrap), and summarises the heaviest. `None` if there are no
-/// particles or no weight.
-pub fn heaviest_cluster(
-    particles: &[Pose2],
-    weights: &[f64],
-    bins: BinSize,
-) -> Option<ClusterEstimate> {
+/// joining occupied bins that touch. `None` if there are no particles or
+/// no weight.
+pub fn cluster_particles(particles: &[Pose2], weights: &[f64], bins: BinSize) -> Option<Clusters> {
     let total: f64 = weights.iter().sum();
     if particles.is_empty() || particles.len() != weights.len() || total.is_nan() || total <= 0.0 {
         return None;
@@ -90,7 +169,7 @@ pub fn heaviest_cluster(
         });
         particle_bin.push(id);
     }
-    // Union-find over bins.
+    // Union-find over bins; a root is the smallest bin id of its cluster.
     let mut parent: Vec<usize> = (0..bin_list.len()).collect();
     fn root(parent: &mut [usize], mut i: usize) -> usize {
         while parent[i] != i {
@@ -115,51 +194,47 @@ pub fn heaviest_cluster(
             }
         }
     }
-    let mut cluster_weight: HashMap<usize, f64> = HashMap::new();
-    let mut cluster_of = Vec::with_capacity(particles.len());
-    for (i, w) in weights.iter().enumerate() {
-        let c = root(&mut parent, particle_bin[i]);
-        *cluster_weight.entry(c).or_insert(0.0) += w;
-        cluster_of.push(c);
-    }
-    let (&best, &best_weight) = cluster_weight
-        .iter()
-        .max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(a.0)))?;
-    // Weighted means; the heading by its unit vectors.
-    let (mut sx, mut sy, mut sc, mut ss) = (0.0, 0.0, 0.0, 0.0);
-    for ((p, w), c) in particles.iter().zip(weights).zip(&cluster_of) {
-        if *c == best {
-            sx += w * p.x;
-            sy += w * p.y;
-            sc += w * p.theta.cos();
-            ss += w * p.theta.sin();
+    // Clusters numbered in the order of their roots (a root comes before
+    // every other bin of its cluster).
+    let mut bin_cluster = vec![u32::MAX; bin_list.len()];
+    let mut clusters = 0u32;
+    for id in 0..bin_list.len() {
+        let r = root(&mut parent, id);
+        if r == id {
+            bin_cluster[id] = clusters;
+            clusters += 1;
+        } else {
+            bin_cluster[id] = bin_cluster[r];
         }
     }
-    let mean = Pose2::new(sx / best_weight, sy / best_weight, ss.atan2(sc));
-    let mut cov = [0.0; 9];
-    for ((p, w), c) in particles.iter().zip(weights).zip(&cluster_of) {
-        if *c == best {
-            let d = [
-                p.x - mean.x,
-                p.y - mean.y,
-                normalize_angle(p.theta - mean.theta),
-            ];
-            for r in 0..3 {
-                for k in 0..3 {
-                    cov[r * 3 + k] += w * d[r] * d[k];
-                }
-            }
-        }
+    let mut out = Clusters {
+        of: Vec::with_capacity(particles.len()),
+        weights: vec![0.0; clusters as usize],
+        counts: vec![0; clusters as usize],
+    };
+    for (b, w) in particle_bin.iter().zip(weights) {
+        let c = bin_cluster[*b];
+        out.of.push(c);
+        out.weights[c as usize] += w;
+        out.counts[c as usize] += 1;
     }
-    for v in &mut cov {
-        *v /= best_weight;
+    for w in &mut out.weights {
+        *w /= total;
     }
-    Some(ClusterEstimate {
-        pose: mean,
-        covariance: cov,
-        weight: best_weight / total,
-        clusters: cluster_weight.len(),
-    })
+    Some(out)
+}
+
+/// Clusters `particles` (with `weights`, not necessarily normalised) as
+/// [`cluster_particles`] does and summarises the heaviest. `None` if there
+/// are no particles or no weight.
+pub fn heaviest_cluster(
+    particles: &[Pose2],
+    weights: &[f64],
+    bins: BinSize,
+) -> Option<ClusterEstimate> {
+    let clusters = cluster_particles(particles, weights, bins)?;
+    let best = clusters.heaviest()?;
+    Some(clusters.summarize(particles, weights, best))
 }
 
 #[cfg(test)]
@@ -199,6 +274,39 @@ mod tests {
         assert_eq!(e.clusters, 1);
         assert_abs_diff_eq!(e.pose.theta.abs(), std::f64::consts::PI, epsilon = 1e-9);
         assert!(e.covariance[8] < 0.01);
+    }
+
+    #[test]
+    fn effective_sample_size_is_counted_within_clusters() {
+        // Two clouds far apart, equal weights within each but 0.9 / 0.1
+        // between them: every particle counts.
+        let mut particles = Vec::new();
+        let mut weights = Vec::new();
+        for i in 0..10 {
+            let d = f64::from(i) * 0.01;
+            particles.push(Pose2::new(1.0 + d, 1.0, 0.0));
+            weights.push(0.09);
+            particles.push(Pose2::new(6.0 + d, 3.0, 1.0));
+            weights.push(0.01);
+        }
+        let c = cluster_particles(&particles, &weights, BinSize::default()).unwrap();
+        assert_eq!(c.weights.len(), 2);
+        assert_eq!(c.counts, vec![10, 10]);
+        assert_abs_diff_eq!(c.weights[0] + c.weights[1], 1.0, epsilon = 1e-12);
+        assert_abs_diff_eq!(c.effective_sample_size(&weights), 20.0, epsilon = 1e-9);
+        // The plain 1 / Σw² would count far fewer.
+        let plain = 1.0 / weights.iter().map(|w| w * w).sum::<f64>();
+        assert!(plain < 13.0, "{plain}");
+        // One particle of the first cloud holding all of its weight: that
+        // cloud counts as one.
+        let mut skewed = weights.clone();
+        for (i, w) in skewed.iter_mut().enumerate() {
+            if i % 2 == 0 {
+                *w = if i == 0 { 0.9 } else { 0.0 };
+            }
+        }
+        assert_abs_diff_eq!(c.effective_sample_size(&skewed), 11.0, epsilon = 1e-9);
+        assert_eq!(c.heaviest(), Some(c.of[0] as usize));
     }
 
     #[test]

@@ -1,5 +1,7 @@
 //! The particle filter: augmented MCL (Probabilistic Robotics, table 8.3)
-//! with KLD-sampling (table 8.4) and selective, low-variance resampling.
+//! with KLD-sampling (table 8.4), selective, low-variance resampling, and
+//! clusters that keep their weight through resampling (in the spirit of
+//! Milstein et al.'s Cluster-MCL).
 //!
 //! Each frame: [`Mcl::predict`] moves the particles by the odometry since
 //! the last correction once the robot has moved far enough to be worth a
@@ -8,7 +10,8 @@
 //! sure the map holds the tiles [`Mcl::tiles_needed`] names, and
 //! [`Mcl::correct`] weighs every particle by its sonar frame:
 //! - weights multiply by the tempered beam likelihood (see
-//!   [`crate::beam_model`]);
+//!   [`crate::beam_model`]), so each cluster's weight multiplies by its
+//!   particles' mean likelihood;
 //! - the mean per-beam likelihood feeds a slow and a fast average; when the
 //!   fast falls below the slow (the scene no longer fits the map where the
 //!   particles are: kidnapping, or a wrong early convergence), a share
@@ -16,10 +19,22 @@
 //!   resampling come from the known-free cells of the map instead (of the
 //!   tiles nearest the estimate when the map is larger than the cache
 //!   can hold range tables for);
-//! - resampling happens only when the effective sample size `1 / Σ w²`
-//!   falls below a fraction of the particle count, or when particles are
-//!   to be injected; the new count comes from the KLD bound on the number
-//!   of bins the drawn particles occupy.
+//! - the particles are clustered (bins that touch, [`crate::cluster`]) and
+//!   the estimate is the heaviest cluster by weight;
+//! - resampling happens only when the effective sample size, counted
+//!   within each cluster and summed, falls below a fraction of the
+//!   particle count, or when particles are to be injected. The new count
+//!   comes from the KLD bound on the number of bins the drawn particles
+//!   occupy; then every cluster holding at least `cluster_keep_weight` of
+//!   the weight is topped up to `cluster_min_particles`, and each cluster
+//!   keeps its weight, shared evenly among its new particles. A nearly
+//!   symmetric room gives two modes whose weights swing for a long while
+//!   before the map tells them apart; with weights equal after each
+//!   resampling, the lighter mode's particle count would random-walk to
+//!   nothing once KLD-sampling shrank the set, however the frames went on
+//!   to favour it. A cluster is now lost only when its weight is
+//!   negligible (below `cluster_keep_weight`, where what it draws is left
+//!   to chance as before).
 //!
 //! Deterministic for a given seed: one ChaCha stream drives every draw.
 
@@ -30,7 +45,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::beam_model::{BeamModel, BeamModelParams, TABLE_SCALE};
-use crate::cluster::{BinSize, ClusterEstimate, heaviest_cluster};
+use crate::cluster::{BinSize, ClusterEstimate, Clusters, cluster_particles, heaviest_cluster};
 use crate::error::{LocalizerError, within};
 use crate::local_map::LocalMap;
 use crate::motion::{MotionNoise, OdometryMove};
@@ -74,6 +89,12 @@ pub struct FilterSettings {
     pub converged_spread_m: f64,
     /// … and a heading spread at most this, radians.
     pub converged_spread_rad: f64,
+    /// A cluster holding at least this share of the weight keeps at least
+    /// [`Self::cluster_min_particles`] particles through a resampling;
+    /// lighter ones get what their weight draws and may die out.
+    pub cluster_keep_weight: f64,
+    /// The fewest particles a cluster that is kept gets at a resampling.
+    pub cluster_min_particles: usize,
     /// Seed of every random draw.
     pub seed: u64,
 }
@@ -94,6 +115,8 @@ impl Default for FilterSettings {
             converged_weight: 0.6,
             converged_spread_m: 0.2,
             converged_spread_rad: 0.2,
+            cluster_keep_weight: 1e-6,
+            cluster_min_particles: 300,
             seed: 1,
         }
     }
@@ -121,6 +144,13 @@ impl FilterSettings {
         within("converged_weight", self.converged_weight, 0.0, 1.0)?;
         within("converged_spread_m", self.converged_spread_m, 0.0, 100.0)?;
         within("converged_spread_rad", self.converged_spread_rad, 0.0, 7.0)?;
+        within("cluster_keep_weight", self.cluster_keep_weight, 0.0, 1.0)?;
+        if self.cluster_min_particles > self.kld.max_particles {
+            return Err(LocalizerError::Invalid(format!(
+                "cluster_min_particles ({}) must be at most max_particles ({})",
+                self.cluster_min_particles, self.kld.max_particles
+            )));
+        }
         if self.ring.is_empty() {
             return Err(LocalizerError::Invalid(
                 "the sensor ring has no sonar".into(),
@@ -236,6 +266,7 @@ impl Mcl {
         let n = self.settings.kld.max_particles;
         let res = map.settings().resolution;
         self.particles.clear();
+        self.weights.clear();
         for _ in 0..n {
             let cell = free[self.rng.random_range(0..free.len())];
             self.particles
@@ -261,6 +292,7 @@ impl Mcl {
         within("initial std_theta", std_theta, 0.0, 10.0)?;
         let n = self.settings.kld.max_particles;
         self.particles.clear();
+        self.weights.clear();
         for _ in 0..n {
             let p = Pose2::new(
                 pose.x + crate::gaussian::normal(&mut self.rng, std_xy),
@@ -277,11 +309,26 @@ impl Mcl {
 
     /// Puts the particles in row-major order of their cells, so that
     /// scoring walks the range tables in memory order rather than jumping
-    /// about (the weights must be uniform: they are not permuted).
+    /// about. The weights go with their particles when there is one per
+    /// particle (a new set's weights are set afterwards).
     fn sort_particles(&mut self, res: deog_grid::Resolution) {
         let inv = 1.0 / res.metres();
-        self.particles
-            .sort_unstable_by_key(|p| ((p.y * inv).floor() as i64, (p.x * inv).floor() as i64));
+        let key = |p: &Pose2| ((p.y * inv).floor() as i64, (p.x * inv).floor() as i64);
+        if self.weights.len() != self.particles.len() {
+            self.particles.sort_unstable_by_key(key);
+            return;
+        }
+        let mut pairs: Vec<(Pose2, f64)> = self
+            .particles
+            .iter()
+            .copied()
+            .zip(self.weights.iter().copied())
+            .collect();
+        pairs.sort_unstable_by_key(|(p, _)| key(p));
+        for (i, (p, w)) in pairs.into_iter().enumerate() {
+            self.particles[i] = p;
+            self.weights[i] = w;
+        }
     }
 
     fn reset_weights(&mut self) {
@@ -506,19 +553,23 @@ impl Mcl {
             self.w_slow += self.settings.alpha_slow * (average - self.w_slow);
             self.w_fast += self.settings.alpha_fast * (average - self.w_fast);
         }
-        let ess = 1.0 / self.weights.iter().map(|w| w * w).sum::<f64>();
+        let clusters = cluster_particles(&self.particles, &self.weights, self.settings.bins)
+            .ok_or_else(|| LocalizerError::Invalid("the particles have no weight".into()))?;
+        let ess = clusters.effective_sample_size(&self.weights);
         let inject = self.injection_share();
         let mut report = CorrectionReport {
             effective_sample_size: ess,
             tables_built,
             ..CorrectionReport::default()
         };
-        // The estimate comes from the weighted set, before resampling: after
-        // it the weights are equal, and a crowd of freshly injected
-        // particles would form one large cluster that outweighs the right one.
-        self.cluster = heaviest_cluster(&self.particles, &self.weights, self.settings.bins);
+        // The estimate comes from the weighted set, before resampling: a
+        // crowd of freshly injected particles would otherwise count for
+        // the weight they are about to earn, not the weight they have.
+        self.cluster = clusters
+            .heaviest()
+            .map(|best| clusters.summarize(&self.particles, &self.weights, best));
         if ess < self.settings.resample_below * self.particles.len() as f64 || inject > 0.0 {
-            report.injected = self.resample(map, inject)?;
+            report.injected = self.resample(map, inject, &clusters)?;
             report.resampled = true;
         }
         Ok(report)
@@ -567,13 +618,32 @@ impl Mcl {
         }
     }
 
-    /// KLD-sampling as Fox describes it: particles are drawn one at a time
-    /// (from the old set, or from free space with probability `inject`)
-    /// until their number reaches the bound for the bins they fill. Draws
-    /// from the old set take a random order through a low-variance
-    /// (systematic) sample of the most particles allowed. Injected particles
-    /// open new bins, so a lost filter grows back towards the maximum.
-    fn resample(&mut self, map: &LocalMap, inject: f64) -> Result<usize, LocalizerError> {
+    /// KLD-sampling as Fox describes it, cluster by cluster in its
+    /// weights: particles are drawn one at a time (from the old set, or
+    /// from free space with probability `inject`) until their number
+    /// reaches the bound for the bins they fill. Draws from the old set
+    /// take a random order through a low-variance (systematic) sample of
+    /// the most particles allowed. Injected particles open new bins, so a
+    /// lost filter grows back towards the maximum.
+    ///
+    /// Then every cluster of `clusters` holding at least
+    /// `cluster_keep_weight` of the weight is topped up to
+    /// `cluster_min_particles` from its own particles, and the new weights
+    /// keep each cluster's weight (shared evenly among the particles drawn
+    /// from it): the particle counts no longer carry the clusters'
+    /// weights, so a mode the frames have favoured all along does not
+    /// random-walk to nothing when KLD-sampling shrinks the set, and the
+    /// estimate stays the cluster the frames favour, not the one that
+    /// happened to draw more particles (Milstein et al.'s Cluster-MCL).
+    /// Injected particles share the weight of the draws they took, as
+    /// every particle did when weights were reset to equal.
+    fn resample(
+        &mut self,
+        map: &LocalMap,
+        inject: f64,
+        clusters: &Clusters,
+    ) -> Result<usize, LocalizerError> {
+        const INJECTED: u32 = u32::MAX;
         let kld = self.settings.kld;
         let pool = kld.max_particles;
         systematic_resample(
@@ -602,35 +672,137 @@ impl Mcl {
         };
         let mut bins = HashSet::new();
         let mut next = Vec::with_capacity(self.particles.len());
+        // Where each new particle came from: its cluster, or INJECTED.
+        let mut source: Vec<u32> = Vec::with_capacity(self.particles.len());
+        let mut drawn = vec![0usize; clusters.weights.len()];
         let mut bound = kld.particles_for(0);
         let mut injected = 0;
         let mut taken = 0;
-        while next.len() < bound && taken < pool {
+        // Room kept for the clusters the top-up keeps: a recovery that
+        // draws the most particles allowed would otherwise leave none for
+        // them, and a light cluster on the true pose would be lost.
+        let reserved: usize = clusters
+            .weights
+            .iter()
+            .filter(|&&w| w >= self.settings.cluster_keep_weight && w > 0.0)
+            .count()
+            .saturating_mul(self.settings.cluster_min_particles);
+        // At most half the set, so a spread filter's many small clusters
+        // still leave the draw its share.
+        let most = pool - reserved.min(pool / 2);
+        while next.len() < bound.min(most) && taken < pool {
             let pose = if !free.is_empty() && self.rng.random_bool(inject) {
                 injected += 1;
+                source.push(INJECTED);
                 let cell = free[self.rng.random_range(0..free.len())];
                 random_pose_in(cell, res, &mut self.rng)
             } else {
                 let j = self.rng.random_range(taken..pool);
                 self.scratch_indices.swap(taken, j);
                 taken += 1;
-                self.particles[self.scratch_indices[taken - 1]]
+                let i = self.scratch_indices[taken - 1];
+                let c = clusters.of[i];
+                drawn[c as usize] += 1;
+                source.push(c);
+                self.particles[i]
             };
             if bins.insert(self.settings.bins.bin_of(&pose)) {
                 bound = kld.particles_for(bins.len());
             }
             next.push(pose);
         }
-        let n = next.len();
+        let draws = next.len();
+        self.top_up_clusters(clusters, &mut drawn, &mut next, &mut source)?;
+        // Each cluster drawn from keeps its share of the old set's weight,
+        // over the clusters drawn from; injected particles get the share
+        // of the draws they took.
+        let injected_share = injected as f64 / draws as f64;
+        let drawn_weight: f64 = drawn
+            .iter()
+            .zip(&clusters.weights)
+            .filter(|(n, _)| **n > 0)
+            .map(|(_, w)| w)
+            .sum();
+        self.weights = source
+            .iter()
+            .map(|&c| {
+                if c == INJECTED {
+                    injected_share / injected as f64
+                } else {
+                    let c = c as usize;
+                    (1.0 - injected_share) * clusters.weights[c] / drawn_weight / drawn[c] as f64
+                }
+            })
+            .collect();
+        let total: f64 = self.weights.iter().sum();
+        for w in &mut self.weights {
+            *w /= total;
+        }
         self.particles = next;
         self.sort_particles(res);
-        self.weights = vec![1.0 / n as f64; n];
         if injected > 0 {
             // The injected particles answer the drop; start the averages anew
             // so that one bad stretch does not keep injecting.
             self.w_fast = self.w_slow;
         }
         Ok(injected)
+    }
+
+    /// Draws more particles for each cluster of the old set that holds at
+    /// least `cluster_keep_weight` of the weight but got fewer than
+    /// `cluster_min_particles`, heaviest first while the set is below the
+    /// most particles allowed: a systematic sample of the cluster's own
+    /// particles by their weights.
+    fn top_up_clusters(
+        &mut self,
+        clusters: &Clusters,
+        drawn: &mut [usize],
+        next: &mut Vec<Pose2>,
+        source: &mut Vec<u32>,
+    ) -> Result<(), LocalizerError> {
+        let (keep, least) = (
+            self.settings.cluster_keep_weight,
+            self.settings.cluster_min_particles,
+        );
+        let mut short: Vec<usize> = (0..drawn.len())
+            .filter(|&c| {
+                clusters.weights[c] >= keep && clusters.weights[c] > 0.0 && drawn[c] < least
+            })
+            .collect();
+        if short.is_empty() {
+            return Ok(());
+        }
+        short.sort_by(|a, b| {
+            clusters.weights[*b]
+                .total_cmp(&clusters.weights[*a])
+                .then(a.cmp(b))
+        });
+        let mut members: HashMap<u32, Vec<usize>> =
+            short.iter().map(|&c| (c as u32, Vec::new())).collect();
+        for (i, c) in clusters.of.iter().enumerate() {
+            if let Some(m) = members.get_mut(c) {
+                m.push(i);
+            }
+        }
+        let mut weights = Vec::new();
+        let mut picks = Vec::new();
+        for c in short {
+            let room = self.settings.kld.max_particles.saturating_sub(next.len());
+            let need = (least - drawn[c]).min(room);
+            if need == 0 {
+                break;
+            }
+            let m = &members[&(c as u32)];
+            weights.clear();
+            weights.extend(m.iter().map(|&i| self.weights[i]));
+            systematic_resample(&weights, need, &mut self.rng, &mut picks)?;
+            for &j in &picks {
+                next.push(self.particles[m[j]]);
+                source.push(c as u32);
+            }
+            drawn[c] += need;
+        }
+        Ok(())
     }
 
     /// The estimate for a frame with odometry pose `odometry`: the heaviest
@@ -691,4 +863,149 @@ fn random_pose_in(cell: CellIndex, res: deog_grid::Resolution, rng: &mut impl Rn
         y0 + rng.random_range(0.0..m),
         rng.random_range(-std::f64::consts::PI..std::f64::consts::PI),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::local_map::MapSettings;
+    use crate::range_table::ConeGeometry;
+    use approx::assert_abs_diff_eq;
+    use deog_grid::{OccupancyThresholds, Resolution, TileSize};
+
+    fn empty_map() -> LocalMap {
+        LocalMap::new(MapSettings {
+            resolution: Resolution::DEFAULT,
+            tile_size: TileSize::new(64).unwrap(),
+            thresholds: OccupancyThresholds::default(),
+            geometry: ConeGeometry::default(),
+            budget_bytes: 1 << 20,
+        })
+        .unwrap()
+    }
+
+    /// A filter holding two tight modes: `light` particles about (2, 2, 0)
+    /// sharing `light_weight` of the weight, 2,000 about (7, 5, π) sharing
+    /// the rest.
+    fn two_modes(light: usize, light_weight: f64) -> Mcl {
+        let mut settings = FilterSettings {
+            seed: 7,
+            ..FilterSettings::default()
+        };
+        settings.kld.max_particles = 20_000;
+        let mut mcl = Mcl::new(settings).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut jitter = |scale: f64| rng.random_range(-scale..scale);
+        for _ in 0..light {
+            mcl.particles.push(Pose2::new(
+                2.0 + jitter(0.05),
+                2.0 + jitter(0.05),
+                jitter(0.03),
+            ));
+            mcl.weights.push(light_weight / light as f64);
+        }
+        for _ in 0..2_000 {
+            mcl.particles.push(Pose2::new(
+                7.0 + jitter(0.05),
+                5.0 + jitter(0.05),
+                std::f64::consts::PI - 0.05 + jitter(0.03),
+            ));
+            mcl.weights.push((1.0 - light_weight) / 2_000.0);
+        }
+        mcl
+    }
+
+    fn resample_once(mcl: &mut Mcl, map: &LocalMap) {
+        let clusters = cluster_particles(&mcl.particles, &mcl.weights, mcl.settings.bins).unwrap();
+        mcl.resample(map, 0.0, &clusters).unwrap();
+    }
+
+    /// The weight and particle count of the mode about (2, 2).
+    fn light_mode(mcl: &Mcl) -> (f64, usize) {
+        mcl.particles
+            .iter()
+            .zip(&mcl.weights)
+            .filter(|(p, _)| p.x < 4.5)
+            .fold((0.0, 0), |(w, n), (_, pw)| (w + pw, n + 1))
+    }
+
+    #[test]
+    fn a_light_mode_keeps_its_weight_and_particles_through_resampling() {
+        let map = empty_map();
+        let mut mcl = two_modes(40, 0.002);
+        for _ in 0..30 {
+            resample_once(&mut mcl, &map);
+            let (weight, count) = light_mode(&mcl);
+            assert_abs_diff_eq!(weight, 0.002, epsilon = 1e-9);
+            assert!(
+                count >= mcl.settings.cluster_min_particles,
+                "the light mode has {count} particles"
+            );
+        }
+        // KLD-sampling still shrinks the set to what two tight modes need.
+        assert!(mcl.particles.len() < 5_000, "{}", mcl.particles.len());
+        // The frames then favour the light mode (a likelihood ratio of
+        // 10⁴, about what seeing the one box that breaks a room's symmetry
+        // gives): it becomes the estimate.
+        for (p, w) in mcl.particles.iter().zip(&mut mcl.weights) {
+            if p.x < 4.5 {
+                *w *= 1e4;
+            }
+        }
+        let best = heaviest_cluster(&mcl.particles, &mcl.weights, mcl.settings.bins).unwrap();
+        assert_abs_diff_eq!(best.pose.x, 2.0, epsilon = 0.05);
+        assert!(best.weight > 0.9, "{best:?}");
+    }
+
+    #[test]
+    fn a_mode_with_more_weight_than_particles_stays_the_estimate() {
+        // 50 particles holding 70 % of the weight against 2,000 holding
+        // 30 %: resampling must not hand the estimate to the crowd.
+        let map = empty_map();
+        let mut mcl = two_modes(50, 0.7);
+        for _ in 0..5 {
+            resample_once(&mut mcl, &map);
+            let best = heaviest_cluster(&mcl.particles, &mcl.weights, mcl.settings.bins).unwrap();
+            assert_abs_diff_eq!(best.pose.x, 2.0, epsilon = 0.05);
+            assert_abs_diff_eq!(best.weight, 0.7, epsilon = 1e-9);
+        }
+    }
+
+    #[test]
+    fn a_light_mode_keeps_its_floor_when_recovery_fills_the_set() {
+        // Free space to inject into, away from both modes: half of each
+        // resampling comes from it, and KLD-sampling's bound for all the
+        // bins injected particles open is the most particles allowed.
+        let mut map = empty_map();
+        let size = TileSize::new(64).unwrap();
+        let key = TileKey::new(-1, -1);
+        let free = deog_grid::TileDelta::from_raw(key, size, vec![-2000; size.area()]).unwrap();
+        let mut tile = deog_grid::Tile::unknown(size);
+        tile.apply(&free, deog_grid::ClampLimits::default())
+            .unwrap();
+        map.insert_tile(key, 1, Some(&tile)).unwrap();
+        let mut mcl = two_modes(40, 0.002);
+        let clusters = cluster_particles(&mcl.particles, &mcl.weights, mcl.settings.bins).unwrap();
+        let injected = mcl.resample(&map, 0.5, &clusters).unwrap();
+        assert!(injected > 5_000, "{injected} injected");
+        let light = mcl
+            .particles
+            .iter()
+            .filter(|p| (p.x - 2.0).abs() < 0.5 && (p.y - 2.0).abs() < 0.5)
+            .count();
+        assert!(
+            light >= mcl.settings.cluster_min_particles,
+            "the light mode has {light} particles"
+        );
+        assert!(mcl.particles.len() <= mcl.settings.kld.max_particles);
+    }
+
+    #[test]
+    fn a_mode_below_the_keep_weight_gets_no_floor() {
+        let map = empty_map();
+        let mut mcl = two_modes(40, 1e-8);
+        resample_once(&mut mcl, &map);
+        let (_, count) = light_mode(&mcl);
+        assert!(count < 10, "the negligible mode kept {count} particles");
+    }
 }
