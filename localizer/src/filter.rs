@@ -25,7 +25,8 @@
 //!   within each cluster and summed, falls below a fraction of the
 //!   particle count, or when particles are to be injected. The new count
 //!   comes from the KLD bound on the number of bins the drawn particles
-//!   occupy; then every cluster holding at least `cluster_keep_weight` of
+//!   occupy (leaving room, up to half the set, for the clusters kept);
+//!   then every cluster holding at least `cluster_keep_weight` of
 //!   the weight is topped up to `cluster_min_particles`, and each cluster
 //!   keeps its weight, shared evenly among its new particles. A nearly
 //!   symmetric room gives two modes whose weights swing for a long while

@@ -22,10 +22,11 @@ async fn bad_options_and_unknown_maps_are_clear_errors() {
         args.extend_from_slice(extra);
         failure(&run_deog(&args, &env))
     };
-    let cases: [(&[&str], &str); 6] = [
+    let cases: [(&[&str], &str); 7] = [
         (&[], "does not exist"),
         (&["--cache-mb", "4"], "--cache-mb"),
         (&["--specular-angle", "120"], "--specular-angle"),
+        (&["--surface-depth", "2"], "--surface-depth"),
         (&["--tempering", "0"], "tempering"),
         (
             &["--max-particles", "10", "--min-particles", "20"],
