@@ -177,6 +177,21 @@ pub fn run(args: LocalizeBenchArgs) -> Result<()> {
     Ok(())
 }
 
+/// How many particles lie within the convergence bounds of `pose`, and
+/// their weight.
+fn particles_near(mcl: &Mcl, pose: &Pose2) -> (usize, f64) {
+    let (mut near, mut weight) = (0usize, 0.0f64);
+    for (p, w) in mcl.particles().iter().zip(mcl.weights()) {
+        if (p.x - pose.x).hypot(p.y - pose.y) <= CONVERGED_M
+            && normalize_angle(p.theta - pose.theta).abs() <= CONVERGED_RAD
+        {
+            near += 1;
+            weight += w;
+        }
+    }
+    (near, weight)
+}
+
 fn fmt_opt(v: Option<f64>) -> String {
     v.map_or("-".to_string(), |v| format!("{v:.1}"))
 }
@@ -298,6 +313,8 @@ fn run_once(
     // (time, position error, heading error) per frame.
     let mut errors: Vec<(f64, f64, f64)> = Vec::new();
     let mut mirror_sums = (0.0, 0.0, 0u64, 0u64);
+    // Particles injected since the last trace line.
+    let mut injected_since_trace = 0usize;
     while sim.time_s() < args.seconds {
         if args.kidnap_at > 0.0 && kidnapped_at.is_none() && sim.time_s() >= args.kidnap_at {
             let to = sim.random_free_pose(&mut kidnap_rng)?;
@@ -338,7 +355,8 @@ fn run_once(
             }
         }
         if mcl.predict(&state.odometry)? {
-            mcl.correct(map, &state.ranges)?;
+            let report = mcl.correct(map, &state.ranges)?;
+            injected_since_trace += report.injected;
         }
         if let Some(e) = mcl.estimate(&state.odometry) {
             let t = state.true_pose;
@@ -346,17 +364,25 @@ fn run_once(
                 && (state.time_s / args.trace_every).fract() < period / args.trace_every * 0.999
             {
                 // The particles within the convergence bounds of the truth.
-                let (mut near, mut near_weight) = (0usize, 0.0f64);
-                for (p, w) in mcl.particles().iter().zip(mcl.weights()) {
-                    if (p.x - t.x).hypot(p.y - t.y) <= CONVERGED_M
-                        && normalize_angle(p.theta - t.theta).abs() <= CONVERGED_RAD
-                    {
-                        near += 1;
-                        near_weight += w;
+                let (near, near_weight) = particles_near(&mcl, &t);
+                // And near the truth's image, when a centre is given.
+                let image = match &args.mirror_about {
+                    Some(c) if c.len() == 2 => {
+                        let image = Pose2::new(
+                            2.0 * c[0] - t.x,
+                            2.0 * c[1] - t.y,
+                            t.theta + std::f64::consts::PI,
+                        );
+                        let (n, w) = particles_near(&mcl, &image);
+                        format!(
+                            "  near the image {n} weighing {w:.1e}  Σ log-likelihood true {:.1} image {:.1}",
+                            mirror_sums.0, mirror_sums.1
+                        )
                     }
-                }
+                    _ => String::new(),
+                };
                 println!(
-                    "    t {:6.1}  true ({:5.2}, {:5.2}, {:6.1}°)  estimate ({:5.2}, {:5.2}, {:6.1}°)  particles {:5}  weight {:.2}  converged {}  lost {:.2}  near the truth {near} weighing {near_weight:.1e}",
+                    "    t {:6.1}  true ({:5.2}, {:5.2}, {:6.1}°)  estimate ({:5.2}, {:5.2}, {:6.1}°)  particles {:5}  weight {:.2}  converged {}  lost {:.2}  near the truth {near} weighing {near_weight:.1e}{image}  injected {injected_since_trace}",
                     state.time_s,
                     t.x,
                     t.y,
@@ -369,6 +395,7 @@ fn run_once(
                     e.converged,
                     e.lost_score
                 );
+                injected_since_trace = 0;
             }
             errors.push((
                 state.time_s,

@@ -48,6 +48,13 @@ impl MotionNoise {
     }
 }
 
+/// Below this translation, metres, the direction of travel between two
+/// odometry poses is wheel jitter rather than a heading the robot took: a
+/// Scout turning on the spot drifts a millimetre or two per frame in any
+/// direction, and counting that direction as a turn (up to a half turn
+/// each way) would spread every particle as if the robot had spun round.
+const SHORT_MOVE_M: f64 = 0.01;
+
 /// A move between two odometry poses, decomposed once and applied to many
 /// particles.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -57,6 +64,10 @@ pub struct OdometryMove {
     rot2: f64,
     /// Driving backwards: the translation runs against the heading.
     backwards: bool,
+    /// The turns the noise scales with: `|rot1|` and `|rot2|`, except for
+    /// a short move, which counts as all turn (`0` and `|rot1 + rot2|`).
+    noisy_rot1: f64,
+    noisy_rot2: f64,
 }
 
 impl OdometryMove {
@@ -65,27 +76,30 @@ impl OdometryMove {
         let (dx, dy) = (to.x - from.x, to.y - from.y);
         let trans = dx.hypot(dy);
         let turn = normalize_angle(to.theta - from.theta);
-        // Below a millimetre the direction of travel is noise: all turn.
-        if trans < 1e-3 {
-            return Self {
-                rot1: 0.0,
-                trans,
-                rot2: turn,
-                backwards: false,
-            };
-        }
-        let mut rot1 = normalize_angle(dy.atan2(dx) - from.theta);
+        let mut rot1 = if trans > 0.0 {
+            normalize_angle(dy.atan2(dx) - from.theta)
+        } else {
+            0.0
+        };
         // A Scout reversing is not turning round twice: decompose it as a
         // backward translation with small rotations.
         let backwards = rot1.abs() > std::f64::consts::FRAC_PI_2;
         if backwards {
             rot1 = normalize_angle(rot1 + std::f64::consts::PI);
         }
+        let rot2 = normalize_angle(turn - rot1);
+        let (noisy_rot1, noisy_rot2) = if trans < SHORT_MOVE_M {
+            (0.0, turn.abs())
+        } else {
+            (rot1.abs(), rot2.abs())
+        };
         Self {
             rot1,
             trans,
-            rot2: normalize_angle(turn - rot1),
+            rot2,
             backwards,
+            noisy_rot1,
+            noisy_rot2,
         }
     }
 
@@ -94,17 +108,18 @@ impl OdometryMove {
         self.trans
     }
 
-    /// The total rotation, radians (both turns, absolute).
+    /// The total rotation, radians (both turns, absolute; a short move's
+    /// direction of travel is not counted as turning).
     pub fn rotation(&self) -> f64 {
-        self.rot1.abs() + self.rot2.abs()
+        self.noisy_rot1 + self.noisy_rot2
     }
 
     /// `pose` moved by this move with noise drawn from `noise`.
     pub fn sample(&self, pose: &Pose2, noise: &MotionNoise, rng: &mut impl Rng) -> Pose2 {
-        let rot_std1 = noise.rot_per_rot * self.rot1.abs() + noise.rot_per_trans * self.trans;
-        let rot_std2 = noise.rot_per_rot * self.rot2.abs() + noise.rot_per_trans * self.trans;
+        let rot_std1 = noise.rot_per_rot * self.noisy_rot1 + noise.rot_per_trans * self.trans;
+        let rot_std2 = noise.rot_per_rot * self.noisy_rot2 + noise.rot_per_trans * self.trans;
         let trans_std = noise.trans_per_trans * self.trans
-            + noise.trans_per_rot * (self.rot1.abs() + self.rot2.abs());
+            + noise.trans_per_rot * (self.noisy_rot1 + self.noisy_rot2);
         let rot1 = self.rot1 + normal(rng, rot_std1);
         let trans = self.trans + normal(rng, trans_std);
         let rot2 = self.rot2 + normal(rng, rot_std2);
@@ -209,6 +224,34 @@ mod tests {
             &mut rng,
         );
         close(&p, &Pose2::new(3.0, 4.0, 0.5));
+    }
+
+    #[test]
+    fn turning_on_the_spot_spreads_as_a_turn_whatever_the_jitter() {
+        // A tenth of a radian turned with 2 mm of sideways jitter: the
+        // direction of that jitter is 90° off the heading, and taken as a
+        // turn it would add π/2 each way to the rotation noise.
+        let from = Pose2::new(1.0, 1.0, 0.3);
+        let to = Pose2::new(1.0 - 0.002 * 0.3f64.sin(), 1.0 + 0.002 * 0.3f64.cos(), 0.4);
+        let step = OdometryMove::between(&from, &to);
+        close(&step.apply(&from), &to);
+        assert_abs_diff_eq!(step.rotation(), 0.1, epsilon = 1e-12);
+        let noise = MotionNoise::default();
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let n = 20_000;
+        let moved: Vec<Pose2> = (0..n)
+            .map(|_| step.sample(&from, &noise, &mut rng))
+            .collect();
+        let spread = |f: &dyn Fn(&Pose2) -> f64| {
+            let mean = moved.iter().map(f).sum::<f64>() / n as f64;
+            (moved.iter().map(|p| (f(p) - mean).powi(2)).sum::<f64>() / n as f64).sqrt()
+        };
+        // σ_rot2 = α1 · 0.1 rad = 0.01 rad, plus α2 · 2 mm.
+        let heading = spread(&|p: &Pose2| normalize_angle(p.theta - to.theta));
+        assert_abs_diff_eq!(heading, 0.0101, epsilon = 0.001);
+        // σ_trans = α3 · 2 mm + α4 · 0.1 rad = 2.2 mm.
+        let position = spread(&|p: &Pose2| (p.x - from.x).hypot(p.y - from.y));
+        assert!(position < 0.003, "position spread {position} m");
     }
 
     #[test]
