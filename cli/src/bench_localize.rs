@@ -16,6 +16,7 @@ use deog_grid::{
     ClampLimits, OccupancyThresholds, Pose2, Resolution, SensorRing, TileMap, TileSize,
     normalize_angle,
 };
+use deog_localizer::beam_model::table_len;
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::range_table::ConeGeometry;
@@ -55,6 +56,11 @@ pub struct LocalizeBenchArgs {
     /// dropouts on in the simulator.
     #[arg(long)]
     pub specular: bool,
+    /// With `--specular`, build the map from the default sonar all the same
+    /// (as a map drawn from a laser scan would be): the runs' specular
+    /// readings then meet a map without the holes such readings leave in it.
+    #[arg(long)]
+    pub clean_map: bool,
     /// Fewest particles.
     #[arg(long, default_value_t = FilterSettings::default().kld.min_particles)]
     pub min_particles: usize,
@@ -91,6 +97,11 @@ pub struct LocalizeBenchArgs {
     /// Print every run's figures.
     #[arg(long)]
     pub verbose: bool,
+    /// Print, for every frame between these simulated seconds ("from,to"),
+    /// each beam's measured range beside the one the map predicts at the
+    /// true pose: where the sensor model and the world disagree.
+    #[arg(long, value_delimiter = ',')]
+    pub beams_between: Option<Vec<f64>>,
     /// Also score each frame at the true pose and at its image turned 180°
     /// about this point ("x,y"), and print the sums: how much the map tells
     /// a symmetric world's two halves apart.
@@ -120,11 +131,28 @@ struct RunFigures {
 pub fn run(args: LocalizeBenchArgs) -> Result<()> {
     ensure!(args.runs > 0, "--runs must be at least 1");
     ensure!(args.seconds > 0.0, "--seconds must be positive");
+    if let Some(window) = &args.beams_between {
+        ensure!(
+            window.len() == 2 && window[0] <= window[1],
+            "--beams-between takes two times in seconds, \"from,to\", from no later than to"
+        );
+    }
+    ensure!(
+        !args.clean_map || args.specular,
+        "--clean-map only means something with --specular"
+    );
     for world_name in &args.worlds {
         let started = Instant::now();
         let world = load_world(world_name)?;
         let config = sim_config(args.specular);
-        let mut map = build_map(world.clone(), &config, args.map_minutes, args.surface_depth)?;
+        let map_config = sim_config(args.specular && !args.clean_map);
+        let mut map = build_map(
+            world.clone(),
+            &map_config,
+            &config,
+            args.map_minutes,
+            args.surface_depth,
+        )?;
         println!(
             "{world_name}: map built in {:.1} s ({} tiles)",
             started.elapsed().as_secs_f64(),
@@ -177,6 +205,47 @@ pub fn run(args: LocalizeBenchArgs) -> Result<()> {
     Ok(())
 }
 
+/// One line: each beam's measured range and, after a slash, the range the
+/// map's tables predict at `pose` (centimetres; `-` for no echo).
+fn print_beams(map: &mut LocalMap, pose: &Pose2, ranges: &[f64], time_s: f64) -> Result<()> {
+    let ring = SensorRing::scout();
+    let res = map.settings().resolution;
+    let mut keys: Vec<_> = ring
+        .sensor_poses(pose)
+        .filter_map(|s| res.cell_of(s.x, s.y).ok())
+        .map(|c| map.tile_of(c))
+        .collect();
+    keys.sort();
+    keys.dedup();
+    map.ensure_tables(keys.iter().copied())?;
+    let max_range = map.settings().geometry.max_range;
+    let no_echo = table_len(max_range) - 1;
+    let window = map.window(&keys);
+    let mut line = format!(
+        "    beams t {time_s:6.1} ({:5.2}, {:5.2}, {:6.1}°)",
+        pose.x,
+        pose.y,
+        pose.theta.to_degrees()
+    );
+    for (sensor, z) in ring.sensor_poses(pose).zip(ranges) {
+        let (sin, cos) = sensor.theta.sin_cos();
+        let slot = window.expected_slot(sensor.x, sensor.y, sensor.theta, (cos, sin), no_echo);
+        let measured = if z.is_finite() && *z < max_range {
+            format!("{:.0}", z * 100.0)
+        } else {
+            "-".into()
+        };
+        let expected = if slot == no_echo {
+            "-".into()
+        } else {
+            slot.to_string()
+        };
+        line.push_str(&format!(" {measured}/{expected}"));
+    }
+    println!("{line}");
+    Ok(())
+}
+
 /// How many particles lie within the convergence bounds of `pose`, and
 /// their weight.
 fn particles_near(mcl: &Mcl, pose: &Pose2) -> (usize, f64) {
@@ -207,10 +276,13 @@ fn sim_config(specular: bool) -> SimConfig {
     config
 }
 
-/// The map a wandering robot's frames give, as the cartographer builds it.
+/// The map a wandering robot's frames give, as the cartographer builds it
+/// from the sonar of `config`, with range tables for the sonar of
+/// `localize_config`.
 fn build_map(
     world: deog_simulator::World,
     config: &SimConfig,
+    localize_config: &SimConfig,
     minutes: f64,
     surface_depth: f64,
 ) -> Result<LocalMap> {
@@ -259,7 +331,7 @@ fn build_map(
         thresholds: OccupancyThresholds::default(),
         // The localizer knows its sonar: specular past the same angle.
         geometry: ConeGeometry {
-            specular_max_incidence: match config.sonar.specular {
+            specular_max_incidence: match localize_config.sonar.specular {
                 Specular::Off => None,
                 Specular::Lost { max_incidence } | Specular::Long { max_incidence, .. } => {
                     Some(max_incidence)
@@ -353,6 +425,11 @@ fn run_once(
                     state.time_s, mirror_sums.0, mirror_sums.1, mirror_sums.2, mirror_sums.3
                 );
             }
+        }
+        if let Some(window) = &args.beams_between
+            && (window[0]..=window[1]).contains(&state.time_s)
+        {
+            print_beams(map, &state.true_pose, &state.ranges, state.time_s)?;
         }
         if mcl.predict(&state.odometry)? {
             let report = mcl.correct(map, &state.ranges)?;
