@@ -209,15 +209,7 @@ pub fn run(args: LocalizeBenchArgs) -> Result<()> {
 /// map's tables predict at `pose` (centimetres; `-` for no echo).
 fn print_beams(map: &mut LocalMap, pose: &Pose2, ranges: &[f64], time_s: f64) -> Result<()> {
     let ring = SensorRing::scout();
-    let res = map.settings().resolution;
-    let mut keys: Vec<_> = ring
-        .sensor_poses(pose)
-        .filter_map(|s| res.cell_of(s.x, s.y).ok())
-        .map(|c| map.tile_of(c))
-        .collect();
-    keys.sort();
-    keys.dedup();
-    map.ensure_tables(keys.iter().copied())?;
+    let keys = map.tables_under(&ring, pose)?;
     let max_range = map.settings().geometry.max_range;
     let no_echo = table_len(max_range) - 1;
     let window = map.window(&keys);

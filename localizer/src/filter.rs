@@ -587,17 +587,7 @@ impl Mcl {
         self.check_frame(ranges)?;
         let pose = &pose.validate("pose")?;
         self.prepare_beams(ranges);
-        let res = map.settings().resolution;
-        let mut keys: Vec<TileKey> = self
-            .settings
-            .ring
-            .sensor_poses(pose)
-            .filter_map(|s| res.cell_of(s.x, s.y).ok())
-            .map(|c| map.tile_of(c))
-            .collect();
-        keys.sort();
-        keys.dedup();
-        map.ensure_tables(keys.iter().copied())?;
+        let keys = map.tables_under(&self.settings.ring, pose)?;
         let window = map.window(&keys);
         let no_echo = self.model.no_echo_slot();
         let mut total = 0i32;

@@ -23,8 +23,8 @@
 use std::collections::{HashMap, HashSet};
 
 use deog_grid::{
-    CellBox, CellIndex, LogOdds, Occupancy, OccupancyThresholds, OccupancyView, Resolution, Tile,
-    TileKey, TileSize,
+    CellBox, CellIndex, LogOdds, Occupancy, OccupancyThresholds, OccupancyView, Pose2, Resolution,
+    SensorRing, Tile, TileKey, TileSize,
 };
 use rand::Rng;
 
@@ -306,6 +306,26 @@ impl LocalMap {
         let mut missing: Vec<TileKey> = missing.into_iter().collect();
         missing.sort();
         missing
+    }
+
+    /// The tiles under the sensors of `ring` on a robot at `pose`, sorted,
+    /// each with its range table built: the window that pose's beams are
+    /// looked up in.
+    pub fn tables_under(
+        &mut self,
+        ring: &SensorRing,
+        pose: &Pose2,
+    ) -> Result<Vec<TileKey>, LocalizerError> {
+        let res = self.settings.resolution;
+        let mut keys: Vec<TileKey> = ring
+            .sensor_poses(pose)
+            .filter_map(|s| res.cell_of(s.x, s.y).ok())
+            .map(|c| self.tile_of(c))
+            .collect();
+        keys.sort();
+        keys.dedup();
+        self.ensure_tables(keys.iter().copied())?;
+        Ok(keys)
     }
 
     /// Builds the range tables `keys` lack, from the tiles held (tiles not
