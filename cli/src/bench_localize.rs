@@ -137,6 +137,12 @@ pub fn run(args: LocalizeBenchArgs) -> Result<()> {
             "--beams-between takes two times in seconds, \"from,to\", from no later than to"
         );
     }
+    if let Some(centre) = &args.mirror_about {
+        ensure!(
+            centre.len() == 2 && centre.iter().all(|v| v.is_finite()),
+            "--mirror-about takes a point in metres, \"x,y\""
+        );
+    }
     ensure!(
         !args.clean_map || args.specular,
         "--clean-map only means something with --specular"
@@ -394,9 +400,7 @@ fn run_once(
             sim.advance(period, &mut fired)?;
         }
         state = fired.pop().context("a firing")?;
-        if let Some(centre) = &args.mirror_about
-            && centre.len() == 2
-        {
+        if let Some(centre) = &args.mirror_about {
             let t = state.true_pose;
             let image = Pose2::new(
                 2.0 * centre[0] - t.x,
@@ -436,7 +440,7 @@ fn run_once(
                 let (near, near_weight) = particles_near(&mcl, &t);
                 // And near the truth's image, when a centre is given.
                 let image = match &args.mirror_about {
-                    Some(c) if c.len() == 2 => {
+                    Some(c) => {
                         let image = Pose2::new(
                             2.0 * c[0] - t.x,
                             2.0 * c[1] - t.y,
@@ -448,7 +452,7 @@ fn run_once(
                             mirror_sums.0, mirror_sums.1
                         )
                     }
-                    _ => String::new(),
+                    None => String::new(),
                 };
                 println!(
                     "    t {:6.1}  true ({:5.2}, {:5.2}, {:6.1}°)  estimate ({:5.2}, {:5.2}, {:6.1}°)  particles {:5}  weight {:.2}  converged {}  lost {:.2}  near the truth {near} weighing {near_weight:.1e}{image}  injected {injected_since_trace}",
