@@ -244,6 +244,15 @@ fn print_beams(map: &mut LocalMap, pose: &Pose2, ranges: &[f64], time_s: f64) ->
     Ok(())
 }
 
+/// `pose` turned 180° about `centre` ("x,y", as `--mirror-about` gives it).
+fn image_of(pose: &Pose2, centre: &[f64]) -> Pose2 {
+    Pose2::new(
+        2.0 * centre[0] - pose.x,
+        2.0 * centre[1] - pose.y,
+        pose.theta + std::f64::consts::PI,
+    )
+}
+
 /// How many particles lie within the convergence bounds of `pose`, and
 /// their weight.
 fn particles_near(mcl: &Mcl, pose: &Pose2) -> (usize, f64) {
@@ -402,11 +411,7 @@ fn run_once(
         state = fired.pop().context("a firing")?;
         if let Some(centre) = &args.mirror_about {
             let t = state.true_pose;
-            let image = Pose2::new(
-                2.0 * centre[0] - t.x,
-                2.0 * centre[1] - t.y,
-                t.theta + std::f64::consts::PI,
-            );
+            let image = image_of(&t, centre);
             let here = mcl.score_pose(map, &t, &state.ranges)?;
             let there = mcl.score_pose(map, &image, &state.ranges)?;
             mirror_sums.0 += here;
@@ -441,12 +446,7 @@ fn run_once(
                 // And near the truth's image, when a centre is given.
                 let image = match &args.mirror_about {
                     Some(c) => {
-                        let image = Pose2::new(
-                            2.0 * c[0] - t.x,
-                            2.0 * c[1] - t.y,
-                            t.theta + std::f64::consts::PI,
-                        );
-                        let (n, w) = particles_near(&mcl, &image);
+                        let (n, w) = particles_near(&mcl, &image_of(&t, c));
                         format!(
                             "  near the image {n} weighing {w:.1e}  Σ log-likelihood true {:.1} image {:.1}",
                             mirror_sums.0, mirror_sums.1

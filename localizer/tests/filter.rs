@@ -459,3 +459,23 @@ fn a_changed_tile_keeps_the_tables_while_its_walls_stay_put() {
     assert_eq!(map.stale_tiles().len(), 20);
     assert_eq!(map.ensure_tables([here]).unwrap(), 1);
 }
+
+#[test]
+fn tables_under_a_pose_are_the_tiles_under_its_sensors_built_once() {
+    let mut map = room();
+    let ring = SensorRing::scout();
+    // On the corner of four tiles (64 cells of 5 cm: 3.2 m), so the
+    // sensors stand on more than one of them.
+    let pose = Pose2::new(3.2, 3.2, 0.3);
+    let keys = map.tables_under(&ring, &pose).unwrap();
+    let expected: HashSet<TileKey> = ring
+        .sensor_poses(&pose)
+        .map(|s| map.tile_at(s.x, s.y).unwrap())
+        .collect();
+    assert!(expected.len() > 1, "the pose straddles tiles");
+    assert_eq!(keys.iter().copied().collect::<HashSet<_>>(), expected);
+    assert!(keys.windows(2).all(|w| w[0] < w[1]), "sorted, no repeats");
+    // Every table is already built: asking again builds none.
+    assert_eq!(map.ensure_tables(keys.iter().copied()).unwrap(), 0);
+    assert_eq!(map.tables_under(&ring, &pose).unwrap(), keys);
+}
