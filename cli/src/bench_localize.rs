@@ -8,7 +8,7 @@
 //! (uniform over the map's free cells), the wanderer drives, and half-way
 //! the robot is kidnapped to another random pose.
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, ensure};
 use clap::Args;
@@ -20,6 +20,7 @@ use deog_localizer::beam_model::table_len;
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::range_table::ConeGeometry;
+use deog_localizer::step::{Localizer, TileSource};
 use deog_mapping::{Cartographer, FrameInput, PoseChoice};
 use deog_simulator::simulation::{SimConfig, Simulation};
 use deog_simulator::{Specular, WanderParams, Wanderer};
@@ -152,7 +153,7 @@ pub fn run(args: LocalizeBenchArgs) -> Result<()> {
         let world = load_world(world_name)?;
         let config = sim_config(args.specular);
         let map_config = sim_config(args.specular && !args.clean_map);
-        let mut map = build_map(
+        let (mut tiles, mut map) = build_map(
             world.clone(),
             &map_config,
             &config,
@@ -167,7 +168,8 @@ pub fn run(args: LocalizeBenchArgs) -> Result<()> {
         let mut all = Vec::new();
         for seed in args.seed..args.seed + args.runs {
             let t0 = Instant::now();
-            let figures = run_once(world.clone(), &config, &mut map, seed, &args)?;
+            let (figures, held) = run_once(world.clone(), &config, map, &mut tiles, seed, &args)?;
+            map = held;
             if args.verbose {
                 println!(
                     "  seed {seed}: converge {} s, recover {} s, mean error {:.3} m {:.2}°, {} samples, {:.1} s",
@@ -292,7 +294,7 @@ fn build_map(
     localize_config: &SimConfig,
     minutes: f64,
     surface_depth: f64,
-) -> Result<LocalMap> {
+) -> Result<(TileMap, LocalMap)> {
     let res = Resolution::DEFAULT;
     let size = TileSize::new(64)?;
     let mut sim = Simulation::new(world, config.clone(), 1000)?;
@@ -352,16 +354,19 @@ fn build_map(
     for (key, tile) in tiles.tiles() {
         map.insert_tile(*key, 1, Some(tile))?;
     }
-    Ok(map)
+    Ok((tiles, map))
 }
 
+/// One seeded run on `map` (its tiles from `tiles`); returns its figures
+/// and the map, with the tables it built, for the next run.
 fn run_once(
     world: deog_simulator::World,
     config: &SimConfig,
-    map: &mut LocalMap,
+    map: LocalMap,
+    tiles: &mut TileMap,
     seed: u64,
     args: &LocalizeBenchArgs,
-) -> Result<RunFigures> {
+) -> Result<(RunFigures, LocalMap)> {
     let mut sim = Simulation::new(world, config.clone(), seed)?;
     let mut state = sim.spawn("scout", None)?;
     let mut wanderer = Wanderer::new(WanderParams::default(), &SensorRing::scout(), seed)?;
@@ -383,8 +388,13 @@ fn run_once(
     settings.alpha_slow = args.alpha_slow;
     settings.cluster_keep_weight = args.cluster_keep_weight;
     settings.cluster_min_particles = args.cluster_min_particles;
-    let mut mcl = Mcl::new(settings)?;
-    mcl.start_global(map)?;
+    let mcl = Mcl::new(settings)?;
+    // No change is ever reported: the map in memory is the whole map.
+    let mut localizer = Localizer::new(mcl, map, Duration::MAX, Instant::now());
+    let whole = tiles
+        .fetch(&tiles.tiles().map(|(k, _)| *k).collect::<Vec<_>>())
+        .map_err(|e| anyhow::anyhow!(e))?;
+    localizer.start_global(whole)?;
     let mut kidnap_rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6b69_646e_6170);
     let mut kidnapped_at = None;
     let mut fired = Vec::new();
@@ -412,6 +422,7 @@ fn run_once(
         if let Some(centre) = &args.mirror_about {
             let t = state.true_pose;
             let image = image_of(&t, centre);
+            let (mcl, map) = localizer.parts_mut();
             let here = mcl.score_pose(map, &t, &state.ranges)?;
             let there = mcl.score_pose(map, &image, &state.ranges)?;
             mirror_sums.0 += here;
@@ -430,23 +441,29 @@ fn run_once(
         if let Some(window) = &args.beams_between
             && (window[0]..=window[1]).contains(&state.time_s)
         {
-            print_beams(map, &state.true_pose, &state.ranges, state.time_s)?;
+            print_beams(
+                localizer.parts_mut().1,
+                &state.true_pose,
+                &state.ranges,
+                state.time_s,
+            )?;
         }
-        if mcl.predict(&state.odometry)? {
-            let report = mcl.correct(map, &state.ranges)?;
-            injected_since_trace += report.injected;
+        let report = localizer.step(&state.odometry, &state.ranges, Instant::now(), tiles)?;
+        if let Some(correction) = report.correction {
+            injected_since_trace += correction.injected;
         }
-        if let Some(e) = mcl.estimate(&state.odometry) {
+        if let Some(e) = report.estimate {
+            let mcl = localizer.mcl();
             let t = state.true_pose;
             if args.trace_every > 0.0
                 && (state.time_s / args.trace_every).fract() < period / args.trace_every * 0.999
             {
                 // The particles within the convergence bounds of the truth.
-                let (near, near_weight) = particles_near(&mcl, &t);
+                let (near, near_weight) = particles_near(mcl, &t);
                 // And near the truth's image, when a centre is given.
                 let image = match &args.mirror_about {
                     Some(c) => {
-                        let (n, w) = particles_near(&mcl, &image_of(&t, c));
+                        let (n, w) = particles_near(mcl, &image_of(&t, c));
                         format!(
                             "  near the image {n} weighing {w:.1e}  Σ log-likelihood true {:.1} image {:.1}",
                             mirror_sums.0, mirror_sums.1
@@ -514,5 +531,5 @@ fn run_once(
         figures.mean_heading_deg = (h / n as f64).to_degrees();
     }
     figures.samples = n;
-    Ok(figures)
+    Ok((figures, localizer.into_map()))
 }

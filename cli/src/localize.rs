@@ -3,8 +3,7 @@
 //! particles need (keeping them current through the watch stream, within a
 //! memory budget), and publishes an estimate per frame.
 
-use std::collections::HashSet;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail, ensure};
 use clap::Args;
@@ -12,6 +11,7 @@ use deog_grid::{OccupancyThresholds, Pose2, Resolution, TileKey, TileSize};
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::range_table::ConeGeometry;
+use deog_localizer::step::{FetchedTile, Localizer, TileSource};
 use deog_proto::v1 as pb;
 use deog_robot_client::{MapClient, decode_tile};
 
@@ -122,270 +122,243 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     let mut mcl = Mcl::new(settings).context("the filter's settings")?;
     // One thread: the filter is sequential, and its allocations then come
     // from one arena of the allocator, not one per worker thread each
-    // holding memory the others freed.
+    // holding memory the others freed. The loop is synchronous and waits
+    // on the runtime only for I/O; the frame and watch streams wait while
+    // the filter works (the server keeps their backlog: frames are re-read
+    // from storage, a watcher that falls behind gets a resync).
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .context("starting the async runtime")?;
-    runtime.block_on(async move {
-        let client = MapClient::connect(args.connection.client_config()?)
-            .await
-            .with_context(|| format!("connecting to the map server at {}", args.connection.server))?;
-        let info = client
-            .map_info(&args.map)
-            .await
-            .with_context(|| format!("opening map {}", args.map))?;
-        let resolution = Resolution::new(info.resolution_m)?;
-        let tile_size = TileSize::new(info.tile_size)?;
-        let mut map = LocalMap::new(MapSettings {
-            resolution,
-            tile_size,
-            thresholds: OccupancyThresholds::default(),
-            geometry: ConeGeometry {
-                specular_max_incidence: args.specular_angle.map(f64::to_radians),
-                surface_depth: args.surface_depth,
-                ..ConeGeometry::default()
-            },
-            budget_bytes: args.cache_mb << 20,
-        })?;
-        // Watch first, so no change between the first read and the stream is missed.
-        let watch = client
-            .raw()
-            .watch_tiles(pb::WatchTilesRequest {
-                map: args.map.clone(),
-                // The whole plane: the map may grow anywhere.
-                region: Some(pb::CellBox {
-                    min_x: i32::MIN,
-                    min_y: i32::MIN,
-                    max_x: i32::MAX,
-                    max_y: i32::MAX,
-                }),
-                include_cells: false,
-            })
-            .await
-            .context("watching the map's tiles")?
-            .into_inner();
-        let (mut changes, watcher) = spawn_watcher(watch);
-        match &args.initial_pose {
-            Some(pose) => {
-                mcl.start_at(*pose, args.initial_std_xy, args.initial_std_theta)
-                    .context("--initial-pose")?;
-                tracing::info!(x = pose.x, y = pose.y, theta = pose.theta, "tracking from the given pose");
+    let _context = runtime.enter();
+    let client = runtime
+        .block_on(MapClient::connect(args.connection.client_config()?))
+        .with_context(|| format!("connecting to the map server at {}", args.connection.server))?;
+    let info = runtime
+        .block_on(client.map_info(&args.map))
+        .with_context(|| format!("opening map {}", args.map))?;
+    let resolution = Resolution::new(info.resolution_m)?;
+    let tile_size = TileSize::new(info.tile_size)?;
+    let map = LocalMap::new(MapSettings {
+        resolution,
+        tile_size,
+        thresholds: OccupancyThresholds::default(),
+        geometry: ConeGeometry {
+            specular_max_incidence: args.specular_angle.map(f64::to_radians),
+            surface_depth: args.surface_depth,
+            ..ConeGeometry::default()
+        },
+        budget_bytes: args.cache_mb << 20,
+    })?;
+    // Watch first, so no change between the first read and the stream is missed.
+    let watch = runtime
+        .block_on(client.raw().watch_tiles(pb::WatchTilesRequest {
+            map: args.map.clone(),
+            // The whole plane: the map may grow anywhere.
+            region: Some(pb::CellBox {
+                min_x: i32::MIN,
+                min_y: i32::MIN,
+                max_x: i32::MAX,
+                max_y: i32::MAX,
+            }),
+            include_cells: false,
+        }))
+        .context("watching the map's tiles")?
+        .into_inner();
+    let (mut changes, watcher) = spawn_watcher(watch);
+    let mut tiles = ServerTiles {
+        runtime: &runtime,
+        client: &client,
+        map: &args.map,
+        tile_size,
+    };
+    let refresh = Duration::from_secs_f64(args.refresh_s);
+    let mut localizer = match &args.initial_pose {
+        Some(pose) => {
+            mcl.start_at(*pose, args.initial_std_xy, args.initial_std_theta)
+                .context("--initial-pose")?;
+            tracing::info!(
+                x = pose.x,
+                y = pose.y,
+                theta = pose.theta,
+                "tracking from the given pose"
+            );
+            Localizer::new(mcl, map, refresh, Instant::now())
+        }
+        None => {
+            let Some(region) = info.bounds_cells else {
+                bail!(
+                    "map {} has no observed cell yet: nothing to localize on",
+                    args.map
+                );
+            };
+            let wire = runtime
+                .block_on(client.tiles(pb::TileQuery {
+                    map: args.map.clone(),
+                    selection: Some(pb::tile_query::Selection::Region(region)),
+                    newer_than_version: 0,
+                }))
+                .context("reading the map")?;
+            let whole = decode_all(&wire, tile_size)?;
+            let mut localizer = Localizer::new(mcl, map, refresh, Instant::now());
+            localizer
+                .start_global(whole)
+                .context("spreading particles over the map")?;
+            tracing::info!(
+                tiles = localizer.map().tile_count(),
+                free_cells = localizer.map().free_cell_count(),
+                particles = localizer.mcl().particles().len(),
+                "global localization: particles spread over every known-free cell"
+            );
+            localizer
+        }
+    };
+    let frames = runtime
+        .block_on(client.raw().subscribe_frames(pb::SubscribeFramesRequest {
+            robot: args.robot.clone(),
+            from_sequence: args.from,
+        }))
+        .context("following the robot's frames")?
+        .into_inner();
+    let mut queue = FrameQueue::spawn(frames, args.idle_exit);
+    let mut shutdown = Box::pin(crate::signal::shutdown());
+    let (mut processed, mut corrections, mut last_sequence) = (0u64, 0u64, 0u64);
+    loop {
+        let next = runtime.block_on(async {
+            tokio::select! {
+                () = &mut shutdown => Ok(None),
+                frame = queue.next() => frame,
             }
-            None => {
-                let Some(region) = info.bounds_cells else {
-                    bail!("map {} has no observed cell yet: nothing to localize on", args.map);
-                };
-                let tiles = client
-                    .tiles(pb::TileQuery {
-                        map: args.map.clone(),
-                        selection: Some(pb::tile_query::Selection::Region(region)),
-                        newer_than_version: 0,
-                    })
-                    .await
-                    .context("reading the map")?;
-                for tile in tiles {
-                    let (key, version, cells) = decode_tile(&tile, tile_size)?;
-                    map.insert_tile(key, version, Some(&cells))?;
-                }
-                mcl.start_global(&map).context("spreading particles over the map")?;
+        });
+        let Some(frame) = next? else { break };
+        if frame.sequence <= last_sequence {
+            continue;
+        }
+        if args.to > 0 && frame.sequence > args.to {
+            break;
+        }
+        last_sequence = frame.sequence;
+        while let Ok(change) = changes.try_recv() {
+            match change {
+                Change::Tile(key) => localizer.tile_changed(key),
+                Change::All => localizer.all_changed(),
+            }
+        }
+        let odometry = frame
+            .odometry
+            .map(|p| Pose2::new(p.x, p.y, p.theta))
+            .with_context(|| format!("frame {} has no odometry pose", frame.sequence))?;
+        let report = localizer
+            .step(&odometry, &frame.ranges, Instant::now(), &mut tiles)
+            .with_context(|| format!("frame {}", frame.sequence))?;
+        if report.correction.is_some() {
+            corrections += 1;
+        }
+        processed += 1;
+        if let Some(estimate) = report.estimate {
+            runtime
+                .block_on(client.publish_pose(pb::PoseEstimate {
+                    robot: args.robot.clone(),
+                    map: args.map.clone(),
+                    frame_sequence: frame.sequence,
+                    time_s: frame.time_s,
+                    pose: Some(pb::Pose2 {
+                        x: estimate.pose.x,
+                        y: estimate.pose.y,
+                        theta: estimate.pose.theta,
+                    }),
+                    covariance: estimate.covariance.to_vec(),
+                    particle_count: estimate.particle_count as u32,
+                    converged: estimate.converged,
+                    lost_score: estimate.lost_score,
+                }))
+                .with_context(|| format!("publishing the estimate of frame {}", frame.sequence))?;
+            if let Some(truth) = &frame.true_pose {
+                tracing::debug!(
+                    frame = frame.sequence,
+                    x = format!("{:.3}", estimate.pose.x),
+                    y = format!("{:.3}", estimate.pose.y),
+                    theta = format!("{:.3}", estimate.pose.theta),
+                    true_x = format!("{:.3}", truth.x),
+                    true_y = format!("{:.3}", truth.y),
+                    true_theta = format!("{:.3}", truth.theta),
+                    particles = estimate.particle_count,
+                    converged = estimate.converged,
+                    lost = format!("{:.2}", estimate.lost_score),
+                    "estimate beside the simulator's true pose"
+                );
+            }
+            if processed % 100 == 0 {
                 tracing::info!(
-                    tiles = map.tile_count(),
-                    free_cells = map.free_cell_count(),
-                    particles = mcl.particles().len(),
-                    "global localization: particles spread over every known-free cell"
+                    frame = frame.sequence,
+                    x = format!("{:.3}", estimate.pose.x),
+                    y = format!("{:.3}", estimate.pose.y),
+                    theta = format!("{:.3}", estimate.pose.theta),
+                    particles = estimate.particle_count,
+                    converged = estimate.converged,
+                    lost = format!("{:.2}", estimate.lost_score),
+                    cache_mb =
+                        format!("{:.1}", localizer.map().bytes() as f64 / f64::from(1 << 20)),
+                    "estimate"
                 );
             }
         }
-        let frames = client
-            .raw()
-            .subscribe_frames(pb::SubscribeFramesRequest {
-                robot: args.robot.clone(),
-                from_sequence: args.from,
-            })
-            .await
-            .context("following the robot's frames")?
-            .into_inner();
-        let mut queue = FrameQueue::spawn(frames, args.idle_exit);
-        let shutdown = crate::signal::shutdown();
-        tokio::pin!(shutdown);
-        let refresh = Duration::from_secs_f64(args.refresh_s);
-        let mut stale: HashSet<TileKey> = HashSet::new();
-        let mut resync = false;
-        let mut last_refresh = tokio::time::Instant::now();
-        let mut last_rebuild = Duration::ZERO;
-        let (mut processed, mut corrections, mut last_sequence) = (0u64, 0u64, 0u64);
-        loop {
-            let frame = tokio::select! {
-                () = &mut shutdown => break,
-                frame = queue.next() => match frame? {
-                    Some(frame) => frame,
-                    None => break,
-                },
-            };
-            if frame.sequence <= last_sequence {
-                continue;
-            }
-            if args.to > 0 && frame.sequence > args.to {
-                break;
-            }
-            last_sequence = frame.sequence;
-            // Changes the server reported, applied at most every --refresh-s.
-            while let Ok(change) = changes.try_recv() {
-                match change {
-                    Change::Tile(key) => {
-                        stale.insert(key);
-                    }
-                    Change::All => resync = true,
-                }
-            }
-            // Rebuilding tables after a refresh may take a fifth of the
-            // time: with particles spread over the whole map (global
-            // localization, a kidnap) a rebuild covers every tile, and a map
-            // still being built would otherwise keep the filter rebuilding.
-            // Never longer than four refresh periods, so the map stays fresh.
-            let interval = refresh.max((last_rebuild * 4).min(refresh * 4));
-            if (resync || !stale.is_empty()) && last_refresh.elapsed() >= interval {
-                if resync {
-                    map.all_changed();
-                } else {
-                    for key in stale.drain() {
-                        map.tile_changed(key);
-                    }
-                }
-                stale.clear();
-                resync = false;
-                last_refresh = tokio::time::Instant::now();
-                // Held tiles are fetched again now; a tile whose occupied
-                // cells did not change keeps the range tables.
-                let refetch = map.stale_tiles();
-                if !refetch.is_empty() {
-                    fetch_tiles(&client, &args.map, tile_size, &refetch, &mut map).await?;
-                }
-            }
-            let odometry = frame
-                .odometry
-                .map(|p| Pose2::new(p.x, p.y, p.theta))
-                .with_context(|| format!("frame {} has no odometry pose", frame.sequence))?;
-            if mcl.predict(&odometry)? {
-                let needed = mcl.tiles_needed(&map);
-                let missing = map.missing_tiles(needed.iter().copied());
-                if !missing.is_empty() {
-                    fetch_tiles(&client, &args.map, tile_size, &missing, &mut map).await?;
-                }
-                let started = std::time::Instant::now();
-                // The frame and watch streams wait meanwhile: the server
-                // keeps their backlog (frames are re-read from storage, a
-                // watcher that falls behind gets a resync).
-                let report = mcl
-                    .correct(&mut map, &frame.ranges)
-                    .with_context(|| format!("frame {}", frame.sequence))?;
-                if report.tables_built > 0 {
-                    last_rebuild = started.elapsed();
-                }
-                map.evict_to_budget(&needed.into_iter().collect());
-                corrections += 1;
-            }
-            processed += 1;
-            if let Some(estimate) = mcl.estimate(&odometry) {
-                client
-                    .publish_pose(pb::PoseEstimate {
-                        robot: args.robot.clone(),
-                        map: args.map.clone(),
-                        frame_sequence: frame.sequence,
-                        time_s: frame.time_s,
-                        pose: Some(pb::Pose2 {
-                            x: estimate.pose.x,
-                            y: estimate.pose.y,
-                            theta: estimate.pose.theta,
-                        }),
-                        covariance: estimate.covariance.to_vec(),
-                        particle_count: estimate.particle_count as u32,
-                        converged: estimate.converged,
-                        lost_score: estimate.lost_score,
-                    })
-                    .await
-                    .with_context(|| format!("publishing the estimate of frame {}", frame.sequence))?;
-                if let Some(truth) = &frame.true_pose {
-                    tracing::debug!(
-                        frame = frame.sequence,
-                        x = format!("{:.3}", estimate.pose.x),
-                        y = format!("{:.3}", estimate.pose.y),
-                        theta = format!("{:.3}", estimate.pose.theta),
-                        true_x = format!("{:.3}", truth.x),
-                        true_y = format!("{:.3}", truth.y),
-                        true_theta = format!("{:.3}", truth.theta),
-                        particles = estimate.particle_count,
-                        converged = estimate.converged,
-                        lost = format!("{:.2}", estimate.lost_score),
-                        "estimate beside the simulator's true pose"
-                    );
-                }
-                if processed % 100 == 0 {
-                    tracing::info!(
-                        frame = frame.sequence,
-                        x = format!("{:.3}", estimate.pose.x),
-                        y = format!("{:.3}", estimate.pose.y),
-                        theta = format!("{:.3}", estimate.pose.theta),
-                        particles = estimate.particle_count,
-                        converged = estimate.converged,
-                        lost = format!("{:.2}", estimate.lost_score),
-                        cache_mb = format!("{:.1}", map.bytes() as f64 / f64::from(1 << 20)),
-                        "estimate"
-                    );
-                }
-            }
-            if args.to > 0 && frame.sequence >= args.to {
-                break;
-            }
+        if args.to > 0 && frame.sequence >= args.to {
+            break;
         }
-        watcher.abort();
-        let stats = map.stats();
-        println!(
-            "{} on {}: {processed} frames, {corrections} sensor updates, {} range tables built, cache {:.1} MiB",
-            args.robot,
-            args.map,
-            stats.tables_built,
-            map.bytes() as f64 / f64::from(1 << 20)
-        );
-        Ok(())
-    })
+    }
+    watcher.abort();
+    let map = localizer.map();
+    println!(
+        "{} on {}: {processed} frames, {corrections} sensor updates, {} range tables built, cache {:.1} MiB",
+        args.robot,
+        args.map,
+        map.stats().tables_built,
+        map.bytes() as f64 / f64::from(1 << 20)
+    );
+    Ok(())
 }
 
-/// Fetches `keys` into the cache; keys the server has no tile for are
-/// stored as all unknown.
-async fn fetch_tiles(
-    client: &MapClient,
-    map_name: &str,
+/// The map server as the localizer's tile source: each fetch waits on the
+/// runtime for one `GetTiles` by key.
+struct ServerTiles<'a> {
+    runtime: &'a tokio::runtime::Runtime,
+    client: &'a MapClient,
+    map: &'a str,
+    tile_size: TileSize,
+}
+
+impl TileSource for ServerTiles<'_> {
+    fn fetch(
+        &mut self,
+        keys: &[TileKey],
+    ) -> Result<Vec<FetchedTile>, Box<dyn std::error::Error + Send + Sync>> {
+        let wire = self.runtime.block_on(
+            self.client.tiles(pb::TileQuery {
+                map: self.map.to_string(),
+                selection: Some(pb::tile_query::Selection::Keys(pb::TileKeys {
+                    keys: keys
+                        .iter()
+                        .map(|k| pb::TileKey { x: k.x, y: k.y })
+                        .collect(),
+                })),
+                newer_than_version: 0,
+            }),
+        )?;
+        Ok(decode_all(&wire, self.tile_size)?)
+    }
+}
+
+fn decode_all(
+    wire: &[pb::Tile],
     size: TileSize,
-    keys: &[TileKey],
-    map: &mut LocalMap,
-) -> Result<()> {
-    let tiles = client
-        .tiles(pb::TileQuery {
-            map: map_name.to_string(),
-            selection: Some(pb::tile_query::Selection::Keys(pb::TileKeys {
-                keys: keys
-                    .iter()
-                    .map(|k| pb::TileKey { x: k.x, y: k.y })
-                    .collect(),
-            })),
-            newer_than_version: 0,
+) -> Result<Vec<FetchedTile>, deog_robot_client::ClientError> {
+    wire.iter()
+        .map(|t| {
+            let (key, version, tile) = decode_tile(t, size)?;
+            Ok(FetchedTile { key, version, tile })
         })
-        .await
-        .context("fetching tiles")?;
-    let mut found = HashSet::new();
-    for tile in &tiles {
-        let (key, version, cells) = decode_tile(tile, size)?;
-        map.insert_tile(key, version, Some(&cells))?;
-        found.insert(key);
-    }
-    for key in keys {
-        if !found.contains(key) {
-            map.insert_tile(*key, 0, None)?;
-        }
-    }
-    Ok(())
+        .collect()
 }
 
 /// What the watch stream reports.

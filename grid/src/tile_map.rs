@@ -82,6 +82,11 @@ impl TileMap {
         self.tiles.get(&key).and_then(|t| t.get(offset))
     }
 
+    /// The tile `key`, if any cell of it was observed.
+    pub fn tile(&self, key: TileKey) -> Option<&Tile> {
+        self.tiles.get(&key)
+    }
+
     /// The tiles.
     pub fn tiles(&self) -> impl Iterator<Item = (&TileKey, &Tile)> {
         self.tiles.iter()

@@ -36,6 +36,9 @@ pub enum LocalizerError {
         /// Range tables the budget holds.
         capacity: usize,
     },
+    /// The map's tiles could not be fetched.
+    #[error("fetching tiles")]
+    Fetch(#[source] Box<dyn std::error::Error + Send + Sync>),
     /// A grid operation failed.
     #[error(transparent)]
     Grid(#[from] deog_grid::GridError),

@@ -45,12 +45,13 @@ use deog_grid::{CellIndex, Pose2, SensorRing, TileKey, normalize_angle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::beam_model::{BeamModel, BeamModelParams, TABLE_SCALE};
+use crate::beam_model::BeamModelParams;
 use crate::cluster::{BinSize, ClusterEstimate, Clusters, cluster_particles, heaviest_cluster};
 use crate::error::{LocalizerError, within};
 use crate::local_map::LocalMap;
 use crate::motion::{MotionNoise, OdometryMove};
 use crate::sampling::{KldSettings, systematic_resample};
+use crate::sensors::{SensorModel, SonarCone};
 
 /// Up to this many tiles, a correction reads every tile of the particles'
 /// bounding box rather than finding the tiles under each particle. A
@@ -64,13 +65,13 @@ const BOUNDING_BOX_TILES: i64 = 4;
 pub struct FilterSettings {
     /// The odometry motion model's noise.
     pub motion: MotionNoise,
-    /// The sonar beam model.
+    /// The sonar beam model ([`Mcl::new`]'s sensor).
     pub beam: BeamModelParams,
     /// KLD-sampling bounds and limits.
     pub kld: KldSettings,
     /// Histogram bins for KLD-sampling and clustering.
     pub bins: BinSize,
-    /// The sonars' mounts on the robot.
+    /// The sonars' mounts on the robot ([`Mcl::new`]'s sensor).
     pub ring: SensorRing,
     /// Metres driven before the next sensor update.
     pub update_min_distance: f64,
@@ -197,7 +198,7 @@ pub struct CorrectionReport {
 #[derive(Debug)]
 pub struct Mcl {
     settings: FilterSettings,
-    model: BeamModel,
+    sensor: Box<dyn SensorModel>,
     rng: ChaCha8Rng,
     particles: Vec<Pose2>,
     weights: Vec<f64>,
@@ -206,8 +207,6 @@ pub struct Mcl {
     w_slow: f64,
     w_fast: f64,
     cluster: Option<ClusterEstimate>,
-    /// The current frame's measured-range slot per beam.
-    beam_slots: Vec<usize>,
     scratch_log: Vec<f64>,
     scratch_indices: Vec<usize>,
 }
@@ -217,10 +216,20 @@ impl Mcl {
     /// or [`Self::start_at`].
     pub fn new(settings: FilterSettings) -> Result<Self, LocalizerError> {
         let settings = settings.validate()?;
+        let sonar = SonarCone::new(settings.ring.clone(), settings.beam)?;
+        Self::with_sensor(settings, Box::new(sonar))
+    }
+
+    /// A filter that scores its particles with `sensor` rather than the
+    /// sonar ring and beam model the settings name.
+    pub fn with_sensor(
+        settings: FilterSettings,
+        sensor: Box<dyn SensorModel>,
+    ) -> Result<Self, LocalizerError> {
+        let settings = settings.validate()?;
         Ok(Self {
-            model: BeamModel::new(settings.beam)?,
+            sensor,
             rng: ChaCha8Rng::seed_from_u64(settings.seed),
-            beam_slots: Vec::with_capacity(settings.ring.len()),
             settings,
             particles: Vec::new(),
             weights: Vec::new(),
@@ -367,13 +376,7 @@ impl Mcl {
     /// every particle's sonars, or the [`LocalMap::table_capacity`] of them
     /// under the most.
     pub fn tiles_needed(&self, map: &LocalMap) -> Vec<TileKey> {
-        let reach = self
-            .settings
-            .ring
-            .mounts()
-            .iter()
-            .map(|m| m.x.hypot(m.y))
-            .fold(0.0, f64::max);
+        let reach = self.sensor.reach();
         let res = map.settings().resolution;
         // Usually the particles' bounding box is small: take its tiles.
         let (mut lo_x, mut lo_y, mut hi_x, mut hi_y) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
@@ -437,80 +440,16 @@ impl Mcl {
     /// returned by [`Self::scores`]). Returns how many range tables it
     /// built. Public so that benchmarks can time it alone.
     pub fn score(&mut self, map: &mut LocalMap, ranges: &[f64]) -> Result<usize, LocalizerError> {
-        self.check_frame(ranges)?;
+        self.sensor.check_frame(ranges)?;
         if self.particles.is_empty() {
             return Err(LocalizerError::Invalid(
                 "the filter has no particles: start it first".into(),
             ));
         }
-        self.prepare_beams(ranges);
         let keys = self.tiles_needed(map);
-        let tables_built = map.ensure_tables(keys.iter().copied())?;
-        let window = map.window(&keys);
-        let no_echo = self.model.no_echo_slot();
-        // Each mount's offset, the sine and cosine of its heading, and its
-        // heading as a position among the table's stored headings.
-        let headings = window.headings() as f64;
-        let mounts: Vec<(f64, f64, f64, f64, f64)> = self
-            .settings
-            .ring
-            .mounts()
-            .iter()
-            .map(|m| {
-                let (s, c) = m.theta.sin_cos();
-                (m.x, m.y, c, s, window.heading_position(m.theta))
-            })
-            .collect();
-        let to_nats = self.settings.beam.tempering / TABLE_SCALE;
-        let tables = beam_tables(&self.model, &self.beam_slots)?;
         self.scratch_log.clear();
-        for p in &self.particles {
-            let (sin, cos) = p.theta.sin_cos();
-            let base = window.heading_position(p.theta);
-            let mut log_likelihood = 0i32;
-            for (&(mx, my, mc, ms, mp), table) in mounts.iter().zip(&tables) {
-                let sx = p.x + cos * mx - sin * my;
-                let sy = p.y + sin * mx + cos * my;
-                let beam_cos = cos * mc - sin * ms;
-                let beam_sin = sin * mc + cos * ms;
-                let mut position = base + mp;
-                if position >= headings {
-                    position -= headings;
-                }
-                let slot = window.expected_slot_at(sx, sy, position, (beam_cos, beam_sin), no_echo);
-                log_likelihood += i32::from(table[slot]);
-            }
-            self.scratch_log.push(f64::from(log_likelihood) * to_nats);
-        }
-        Ok(tables_built)
-    }
-
-    /// One range per sonar, none NaN or negative (infinite is no echo).
-    fn check_frame(&self, ranges: &[f64]) -> Result<(), LocalizerError> {
-        if ranges.len() != self.settings.ring.len() {
-            return Err(LocalizerError::Invalid(format!(
-                "the frame has {} ranges, the sensor ring {} sonars",
-                ranges.len(),
-                self.settings.ring.len()
-            )));
-        }
-        match ranges.iter().position(|r| r.is_nan() || *r < 0.0) {
-            Some(i) => Err(LocalizerError::Invalid(format!(
-                "ranges[{i}] is {}, not a range",
-                ranges[i]
-            ))),
-            None => Ok(()),
-        }
-    }
-
-    /// Each beam's slot of the measured range, and its table built.
-    fn prepare_beams(&mut self, ranges: &[f64]) {
-        self.beam_slots.clear();
-        for &z in ranges {
-            let slot = self.model.measured_slot(z);
-            self.model.cached_table(slot);
-            self.beam_slots.push(slot);
-        }
+        self.sensor
+            .score_particles(map, &keys, &self.particles, ranges, &mut self.scratch_log)
     }
 
     /// The log-likelihoods [`Self::score`] last computed, one per particle.
@@ -543,10 +482,9 @@ impl Mcl {
             *w /= total;
         }
         // Σ old·likelihood = e^best · total: the average likelihood, taken
-        // per beam (the τ-th root undone, then the geometric mean over beams)
-        // so that its scale does not depend on the ring.
-        let beams = self.settings.ring.len() as f64 * self.settings.beam.tempering;
-        let average = ((best + total.ln()) / beams).exp();
+        // per observation (the tempering undone, then the geometric mean
+        // over readings) so that its scale does not depend on the sensor.
+        let average = ((best + total.ln()) / self.sensor.observations()).exp();
         if self.w_slow == 0.0 {
             self.w_slow = average;
             self.w_fast = average;
@@ -584,20 +522,7 @@ impl Mcl {
         pose: &Pose2,
         ranges: &[f64],
     ) -> Result<f64, LocalizerError> {
-        self.check_frame(ranges)?;
-        let pose = &pose.validate("pose")?;
-        self.prepare_beams(ranges);
-        let keys = map.tables_under(&self.settings.ring, pose)?;
-        let window = map.window(&keys);
-        let no_echo = self.model.no_echo_slot();
-        let mut total = 0i32;
-        let tables = beam_tables(&self.model, &self.beam_slots)?;
-        for (sensor, table) in self.settings.ring.sensor_poses(pose).zip(&tables) {
-            let (sin, cos) = sensor.theta.sin_cos();
-            let slot = window.expected_slot(sensor.x, sensor.y, sensor.theta, (cos, sin), no_echo);
-            total += i32::from(table[slot]);
-        }
-        Ok(f64::from(total) * self.settings.beam.tempering / TABLE_SCALE)
+        self.sensor.score_pose(map, pose, ranges)
     }
 
     /// The share of particles the next resampling draws from free space.
@@ -817,21 +742,6 @@ impl Mcl {
             lost_score: self.injection_share(),
         })
     }
-}
-
-/// The tables `Mcl::prepare_beams` made ready, one per beam.
-fn beam_tables<'a>(
-    model: &'a BeamModel,
-    slots: &[usize],
-) -> Result<Vec<&'a [i16]>, LocalizerError> {
-    slots
-        .iter()
-        .map(|&slot| {
-            model.built_table(slot).ok_or_else(|| {
-                LocalizerError::Invalid(format!("no beam table for range slot {slot}"))
-            })
-        })
-        .collect()
 }
 
 /// The corners of the square of half-side `reach` about a particle: every

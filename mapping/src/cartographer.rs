@@ -2,12 +2,10 @@
 //! from the pose the user chose (the thesis maps from the simulator's true
 //! pose; a real robot has only its odometry).
 
-use deog_grid::{
-    FrameIntegrator, Pose2, Resolution, SensorRing, SonarModel, SonarModelParams, TileDelta,
-    TileSize,
-};
+use deog_grid::{Pose2, Resolution, SensorRing, SonarModelParams, TileDelta, TileSize};
 
 use crate::error::MappingError;
+use crate::sensors::{InverseSensorModel, SonarCone};
 
 /// The sonar model `deog map` builds maps with unless told otherwise: the
 /// thesis's equations with the figures that measured the best maps
@@ -58,7 +56,7 @@ pub struct FrameInput<'a> {
 /// Turns frames into tile deltas for one map.
 #[derive(Debug)]
 pub struct Cartographer {
-    integrator: FrameIntegrator,
+    sensor: Box<dyn InverseSensorModel>,
     pose: PoseChoice,
 }
 
@@ -80,11 +78,13 @@ impl Cartographer {
         pose: PoseChoice,
         params: SonarModelParams,
     ) -> Result<Self, MappingError> {
-        let model = SonarModel::new(params)?;
-        Ok(Self {
-            integrator: FrameIntegrator::new(model, SensorRing::scout(), resolution, tile_size),
-            pose,
-        })
+        let sonar = SonarCone::new(SensorRing::scout(), params, resolution, tile_size)?;
+        Ok(Self::with_sensor(pose, Box::new(sonar)))
+    }
+
+    /// A cartographer that maps with `sensor` rather than the Scout's sonars.
+    pub fn with_sensor(pose: PoseChoice, sensor: Box<dyn InverseSensorModel>) -> Self {
+        Self { sensor, pose }
     }
 
     /// The pose the map is built from.
@@ -109,13 +109,9 @@ impl Cartographer {
             })?,
             PoseChoice::Odometry => frame.odometry,
         };
-        let stats = self
-            .integrator
+        self.sensor
             .integrate(&pose, frame.ranges, out)
-            .map_err(|e| {
-                MappingError::invalid(format!("frame {}", frame.sequence), e.to_string())
-            })?;
-        Ok(stats.cells)
+            .map_err(|e| MappingError::invalid(format!("frame {}", frame.sequence), e.to_string()))
     }
 }
 
@@ -168,5 +164,65 @@ mod tests {
         };
         assert!(c.integrate(&bad, &mut out).is_err());
         assert!(out.is_empty());
+    }
+
+    /// A sensor the cartographer knows nothing of: one reading, the
+    /// robot's own cell marked occupied when it is positive.
+    #[derive(Debug)]
+    struct Bumper;
+
+    impl InverseSensorModel for Bumper {
+        fn readings(&self) -> usize {
+            1
+        }
+
+        fn integrate(
+            &mut self,
+            robot: &Pose2,
+            readings: &[f64],
+            out: &mut Vec<TileDelta>,
+        ) -> Result<usize, deog_grid::GridError> {
+            if readings.len() != 1 {
+                return Err(deog_grid::GridError::WrongReadingCount {
+                    expected: 1,
+                    got: readings.len(),
+                });
+            }
+            if readings[0] <= 0.0 {
+                return Ok(0);
+            }
+            let size = TileSize::DEFAULT;
+            let cell = Resolution::DEFAULT.cell_of(robot.x, robot.y)?;
+            let (key, offset) = size.split(cell);
+            let mut delta = TileDelta::zero(key, size);
+            delta.raw_mut()[offset.index(size)] = 500;
+            out.push(delta);
+            Ok(1)
+        }
+    }
+
+    #[test]
+    fn a_new_sensor_maps_through_the_cartographer_unchanged() {
+        let mut c = Cartographer::with_sensor(PoseChoice::Odometry, Box::new(Bumper));
+        let mut out = Vec::new();
+        let frame = FrameInput {
+            sequence: 3,
+            true_pose: None,
+            odometry: Pose2::new(1.0, -1.0, 0.0),
+            ranges: &[1.0],
+        };
+        assert_eq!(c.integrate(&frame, &mut out).expect("one cell"), 1);
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0].key, deog_grid::TileKey::new(0, -1));
+        // The count of readings is the sensor's to check, and the error
+        // still names the frame.
+        let sixteen = FrameInput {
+            ranges: &[1.0; 16],
+            ..frame
+        };
+        let error = c
+            .integrate(&sixteen, &mut out)
+            .expect_err("sixteen readings");
+        assert!(error.to_string().contains("frame 3"), "{error}");
     }
 }

@@ -5,6 +5,9 @@
 //! # Layout
 //! - [`cartographer`]: [`Cartographer`], one frame to per-tile deltas from
 //!   the chosen pose ([`PoseChoice`]).
+//! - [`sensors`]: the inverse sensor models behind
+//!   [`sensors::InverseSensorModel`]; the sonar ring's cones
+//!   ([`sensors::SonarCone`]) are one.
 //! - [`map_export`]: [`export_map`], a map's tiles to a trinary map_server
 //!   image covering its observed cells ([`MapExport`]).
 //! - [`map_import`]: [`import_map`], a map_server image to tile deltas at
@@ -19,6 +22,7 @@ pub mod error;
 pub mod map_export;
 pub mod map_import;
 pub mod quality;
+pub mod sensors;
 
 pub use cartographer::{Cartographer, FrameInput, PoseChoice, mapping_sonar_model};
 pub use error::MappingError;

@@ -1,0 +1,33 @@
+//! The cartographer's sensor side: an inverse sensor model turns one frame
+//! of readings, taken at a known pose, into log-odds evidence per cell.
+//! The cartographer ([`crate::Cartographer`]) only picks the pose and
+//! names the frame in errors; a new kind of sensor (a laser's rays) is a
+//! new file here implementing [`InverseSensorModel`], handed to
+//! [`crate::Cartographer::with_sensor`].
+//!
+//! # Layout
+//! - [`sonar_cone`]: [`SonarCone`], the thesis's analytical sonar model
+//!   (eqs. 3.1 to 3.4) over each sonar's cone.
+
+pub mod sonar_cone;
+
+pub use sonar_cone::SonarCone;
+
+use deog_grid::{GridError, Pose2, TileDelta};
+
+/// One frame of readings at a pose to per-tile log-odds deltas.
+pub trait InverseSensorModel: std::fmt::Debug + Send {
+    /// Readings in one frame, in the order the sensor reports them.
+    fn readings(&self) -> usize;
+
+    /// Appends the frame's deltas to `out`, one per touched tile, for the
+    /// robot at `robot` (world frame); returns how many cells they touch.
+    /// Fails, appending nothing, on bad input (a wrong count of readings,
+    /// numbers that are not ranges).
+    fn integrate(
+        &mut self,
+        robot: &Pose2,
+        readings: &[f64],
+        out: &mut Vec<TileDelta>,
+    ) -> Result<usize, GridError>;
+}
