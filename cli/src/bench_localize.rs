@@ -12,6 +12,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, ensure};
 use clap::Args;
+use deog_evaluation::localization::{
+    DEFAULT_CONVERGE_M, DEFAULT_CONVERGE_RAD, EstimateSample, EvalInput, TruthSample, evaluate,
+};
+use deog_evaluation::runs::{RunFigures, summarize};
 use deog_grid::{
     ClampLimits, OccupancyThresholds, Pose2, Resolution, SensorRing, TileMap, TileSize,
     normalize_angle,
@@ -114,19 +118,9 @@ pub struct LocalizeBenchArgs {
     pub trace_every: f64,
 }
 
-/// Position and heading error bounds of convergence.
-const CONVERGED_M: f64 = 0.25;
-const CONVERGED_RAD: f64 = 0.25;
-
-/// One run's figures.
-#[derive(Debug, Clone, Default)]
-struct RunFigures {
-    converge_s: Option<f64>,
-    recover_s: Option<f64>,
-    mean_position_m: f64,
-    mean_heading_deg: f64,
-    samples: usize,
-}
+/// Convergence and recovery count when they come within this many
+/// seconds.
+const CONVERGE_LIMIT_S: f64 = 60.0;
 
 /// Runs `deog bench localize`.
 pub fn run(args: LocalizeBenchArgs) -> Result<()> {
@@ -175,38 +169,25 @@ pub fn run(args: LocalizeBenchArgs) -> Result<()> {
                     "  seed {seed}: converge {} s, recover {} s, mean error {:.3} m {:.2}°, {} samples, {:.1} s",
                     fmt_opt(figures.converge_s),
                     fmt_opt(figures.recover_s),
-                    figures.mean_position_m,
-                    figures.mean_heading_deg,
+                    figures.mean_position_m.unwrap_or(0.0),
+                    figures.mean_heading_deg.unwrap_or(0.0),
                     figures.samples,
                     t0.elapsed().as_secs_f64()
                 );
             }
             all.push(figures);
         }
-        let n = all.len() as f64;
-        let converged = all
-            .iter()
-            .filter(|f| f.converge_s.is_some_and(|t| t <= 60.0))
-            .count();
-        let recovered = all
-            .iter()
-            .filter(|f| f.recover_s.is_some_and(|t| t <= 60.0))
-            .count();
-        let with = all.iter().filter(|f| f.samples > 0);
-        let (mut pos, mut head, mut k) = (0.0f64, 0.0f64, 0.0f64);
-        for f in with {
-            pos += f.mean_position_m;
-            head += f.mean_heading_deg;
-            k += 1.0;
-        }
+        let summary = summarize(&all, CONVERGE_LIMIT_S);
         println!(
-            "{world_name}: converged within 60 s {converged}/{} ({:.0} %), recovered within 60 s {recovered}/{} ({:.0} %), mean error after convergence {:.3} m, {:.2}°; {:.1} s",
-            all.len(),
-            100.0 * converged as f64 / n,
-            all.len(),
-            100.0 * recovered as f64 / n,
-            pos / k.max(1.0),
-            head / k.max(1.0),
+            "{world_name}: converged within 60 s {}/{} ({:.0} %), recovered within 60 s {}/{} ({:.0} %), mean error after convergence {:.3} m, {:.2}°; {:.1} s",
+            summary.converged,
+            summary.runs,
+            summary.converged_percent(),
+            summary.recovered,
+            summary.runs,
+            summary.recovered_percent(),
+            summary.mean_position_m.unwrap_or(0.0),
+            summary.mean_heading_deg.unwrap_or(0.0),
             started.elapsed().as_secs_f64()
         );
     }
@@ -260,8 +241,8 @@ fn image_of(pose: &Pose2, centre: &[f64]) -> Pose2 {
 fn particles_near(mcl: &Mcl, pose: &Pose2) -> (usize, f64) {
     let (mut near, mut weight) = (0usize, 0.0f64);
     for (p, w) in mcl.particles().iter().zip(mcl.weights()) {
-        if (p.x - pose.x).hypot(p.y - pose.y) <= CONVERGED_M
-            && normalize_angle(p.theta - pose.theta).abs() <= CONVERGED_RAD
+        if (p.x - pose.x).hypot(p.y - pose.y) <= DEFAULT_CONVERGE_M
+            && normalize_angle(p.theta - pose.theta).abs() <= DEFAULT_CONVERGE_RAD
         {
             near += 1;
             weight += w;
@@ -397,10 +378,12 @@ fn run_once(
     localizer.start_global(whole)?;
     let mut kidnap_rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6b69_646e_6170);
     let mut kidnapped_at = None;
+    // The first frame after the kidnap.
+    let mut kidnap_frame = None;
     let mut fired = Vec::new();
     let period = sim.config().sonar_period_s;
-    // (time, position error, heading error) per frame.
-    let mut errors: Vec<(f64, f64, f64)> = Vec::new();
+    let mut truth = Vec::new();
+    let mut estimates = Vec::new();
     let mut mirror_sums = (0.0, 0.0, 0u64, 0u64);
     // Particles injected since the last trace line.
     let mut injected_since_trace = 0usize;
@@ -419,6 +402,9 @@ fn run_once(
             sim.advance(period, &mut fired)?;
         }
         state = fired.pop().context("a firing")?;
+        if kidnapped_at.is_some() && kidnap_frame.is_none() {
+            kidnap_frame = Some(state.sequence);
+        }
         if let Some(centre) = &args.mirror_about {
             let t = state.true_pose;
             let image = image_of(&t, centre);
@@ -487,49 +473,24 @@ fn run_once(
                 );
                 injected_since_trace = 0;
             }
-            errors.push((
-                state.time_s,
-                (e.pose.x - t.x).hypot(e.pose.y - t.y),
-                normalize_angle(e.pose.theta - t.theta).abs(),
-            ));
+            estimates.push(EstimateSample {
+                sequence: state.sequence,
+                pose: e.pose,
+                filter_converged: e.converged,
+            });
         }
+        truth.push(TruthSample::new(
+            state.sequence,
+            state.time_s,
+            state.true_pose,
+        ));
     }
-    let end_first = kidnapped_at.unwrap_or(f64::INFINITY);
-    let settle = |from: f64, until: f64| -> Option<f64> {
-        // The first time from which every error until `until` is within bounds.
-        let mut candidate = None;
-        for &(t, p, h) in errors.iter().filter(|e| e.0 >= from && e.0 < until) {
-            if p <= CONVERGED_M && h <= CONVERGED_RAD {
-                candidate.get_or_insert(t);
-            } else {
-                candidate = None;
-            }
-        }
-        candidate.map(|t| t - from)
-    };
-    let converge_s = settle(0.0, end_first);
-    let recover_s = kidnapped_at.and_then(|k| settle(k, f64::INFINITY));
-    let mut figures = RunFigures {
-        converge_s,
-        recover_s,
-        ..RunFigures::default()
-    };
-    let after = |t: f64| {
-        converge_s.is_some_and(|c| t >= c && t < end_first)
-            || kidnapped_at.is_some_and(|k| recover_s.is_some_and(|r| t >= k + r))
-    };
-    let (mut p, mut h, mut n) = (0.0, 0.0, 0usize);
-    for &(t, pe, he) in &errors {
-        if after(t) {
-            p += pe;
-            h += he;
-            n += 1;
-        }
-    }
-    if n > 0 {
-        figures.mean_position_m = p / n as f64;
-        figures.mean_heading_deg = (h / n as f64).to_degrees();
-    }
-    figures.samples = n;
+    let known: Vec<u64> = kidnap_frame.into_iter().collect();
+    let report = evaluate(&EvalInput {
+        known_kidnaps: &known,
+        ..EvalInput::new("scout", &truth, &estimates)
+    })
+    .with_context(|| format!("judging seed {seed}"))?;
+    let figures = RunFigures::from(&report);
     Ok((figures, localizer.into_map()))
 }

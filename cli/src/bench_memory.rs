@@ -29,10 +29,11 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail, ensure};
 use clap::Args;
-use deog_grid::{Pose2, Resolution, TileKey, TileSize, normalize_angle};
-use deog_localizer::evaluation::{
-    self, EstimateSample, EvalInput, EvalParams, LocalizationReport, TruthSample,
+use deog_evaluation::localization::{
+    self as evaluation, EvalInput, EvalParams, LocalizationReport, TruthSample,
 };
+use deog_evaluation::tracking::{LostStretch, Tracking, track};
+use deog_grid::{Pose2, Resolution, TileKey, TileSize};
 use deog_localizer::range_table::ConeGeometry;
 use deog_mapfile::{MapImage, Mode, write_map};
 use deog_proto::v1 as pb;
@@ -830,9 +831,10 @@ async fn bench(args: &LocalizeMemoryArgs, plan: &Plan, work: &Path) -> Result<Fi
         truth: &samples.truth,
         estimates: &samples.estimates,
         params: EvalParams::default(),
+        known_kidnaps: &[],
     })
     .context("judging the localizer's estimates")?;
-    let tracking = tracking(&samples.truth, &samples.estimates, &EvalParams::default());
+    let tracking = track(&samples.truth, &samples.estimates, &EvalParams::default());
     let (tiles_crossed, distance_m) = path_tiles(&samples.truth, info.tile_size)?;
     let estimated_part = samples
         .truth
@@ -1014,68 +1016,6 @@ fn path_tiles(truth: &[TruthSample], tile_size: u32) -> Result<(usize, f64)> {
         }
     }
     Ok((tiles.len(), distance))
-}
-
-/// How the estimates followed the true poses, estimate by estimate.
-#[derive(Debug, Default)]
-struct Tracking {
-    /// Estimates with a true pose of the same frame.
-    paired: u64,
-    /// Of those, within the evaluation's bounds (0.25 m and 0.25 rad).
-    within: u64,
-    /// Mean and largest position error, metres.
-    mean_m: f64,
-    max_m: f64,
-    /// Runs of consecutive estimates outside the bounds.
-    lost_stretches: u64,
-    /// The longest run: (simulated time it began, seconds, estimates).
-    longest_lost: Option<(f64, f64, u64)>,
-    /// Whether the last estimate was within the bounds.
-    last_within: bool,
-}
-
-/// Pairs each estimate with its frame's true pose and sums up the errors.
-/// The evaluation's figures hold only after convergence, which a lapse
-/// late in the run moves to the end; these cover the whole run.
-fn tracking(truth: &[TruthSample], estimates: &[EstimateSample], params: &EvalParams) -> Tracking {
-    let mut t = Tracking::default();
-    let mut sum = 0.0;
-    // The current run outside the bounds: (start time, last time, count).
-    let mut lost: Option<(f64, f64, u64)> = None;
-    let close = |lost: &mut Option<(f64, f64, u64)>, t: &mut Tracking| {
-        if let Some((from, to, n)) = lost.take() {
-            t.lost_stretches += 1;
-            if t.longest_lost.is_none_or(|(_, _, longest)| n > longest) {
-                t.longest_lost = Some((from, to - from, n));
-            }
-        }
-    };
-    for estimate in estimates {
-        let Ok(i) = truth.binary_search_by_key(&estimate.sequence, |s| s.sequence) else {
-            continue;
-        };
-        let (truth, pose) = (&truth[i], estimate.pose);
-        let position = (pose.x - truth.pose.x).hypot(pose.y - truth.pose.y);
-        let heading = normalize_angle(pose.theta - truth.pose.theta).abs();
-        let within = position <= params.converge_m && heading <= params.converge_rad;
-        t.paired += 1;
-        sum += position;
-        t.max_m = t.max_m.max(position);
-        if within {
-            t.within += 1;
-            close(&mut lost, &mut t);
-        } else {
-            let run = lost.get_or_insert((truth.time_s, truth.time_s, 0));
-            run.1 = truth.time_s;
-            run.2 += 1;
-        }
-        t.last_within = within;
-    }
-    close(&mut lost, &mut t);
-    if t.paired > 0 {
-        t.mean_m = sum / t.paired as f64;
-    }
-    t
 }
 
 /// The localizer's last line: "R on M: N frames, U sensor updates, T range
@@ -1370,7 +1310,11 @@ impl Figures {
             t.paired
         );
         match t.longest_lost {
-            Some((from, seconds, n)) => {
+            Some(LostStretch {
+                from_s: from,
+                duration_s: seconds,
+                estimates: n,
+            }) => {
                 let _ = writeln!(
                     out,
                     "| outside those bounds | {} stretches, the longest {n} estimates ({seconds:.1} s) from {from:.1} s; last estimate {} |",
@@ -1506,7 +1450,7 @@ impl Figures {
                 "mean_position_error_m": self.tracking.mean_m,
                 "max_position_error_m": self.tracking.max_m,
                 "stretches_outside_bounds": self.tracking.lost_stretches,
-                "longest_outside": self.tracking.longest_lost.map(|(from, seconds, n)| serde_json::json!({"from_s": from, "seconds": seconds, "estimates": n})),
+                "longest_outside": self.tracking.longest_lost.map(|l| serde_json::json!({"from_s": l.from_s, "seconds": l.duration_s, "estimates": l.estimates})),
                 "last_estimate_within_bounds": self.tracking.last_within,
                 "converge_s": r.converge_s(),
                 "after_convergence": stats,

@@ -17,10 +17,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use deog_grid::{Pose2, TileMap};
-use deog_localizer::evaluation::{
-    self, EvalInput, EvalParams, LocalizationReport, PlotInput, RobotPath,
+use deog_evaluation::localization::{
+    self as evaluation, EvalInput, EvalParams, LocalizationReport, PlotInput, RobotPath,
 };
+use deog_grid::{Pose2, TileMap};
 use deog_mapfile::{to_png, write_map};
 use deog_mapping::quality::{DEFAULT_ROBOT_RADIUS_M, MapQuality};
 use deog_mapping::{QualityInput, export_map, map_quality};
@@ -591,6 +591,7 @@ async fn judge(client: &MapClient, plan: &Plan, out: &Path) -> Result<Results> {
             truth: &samples.truth,
             estimates: &samples.estimates,
             params: EvalParams::default(),
+            known_kidnaps: &[],
         })
         .with_context(|| format!("judging the estimates of {name}"))?;
         let plot = format!("{name}.png");

@@ -3,17 +3,17 @@
 //! (definitions in `deog_mapping::quality`); `deog eval localize` judges a
 //! localizer's pose estimates against the robot's true poses, with the
 //! thesis's error table, convergence and kidnap recovery, and plots the
-//! paths (definitions in `deog_localizer::evaluation`).
+//! paths (definitions in `deog_evaluation::localization`).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
-use deog_grid::{Pose2, TileMap};
-use deog_localizer::evaluation::{
-    self, DEFAULT_CONVERGE_M, DEFAULT_CONVERGE_RAD, DEFAULT_KIDNAP_JUMP_M, EstimateSample,
-    EvalInput, EvalParams, LocalizationReport, PlotInput, RobotPath, TruthSample,
+use deog_evaluation::localization::{
+    self as evaluation, DEFAULT_CONVERGE_M, DEFAULT_CONVERGE_RAD, DEFAULT_KIDNAP_JUMP_M,
+    EstimateSample, EvalInput, EvalParams, LocalizationReport, PlotInput, RobotPath, TruthSample,
 };
+use deog_grid::{Pose2, TileMap};
 use deog_mapping::quality::DEFAULT_ROBOT_RADIUS_M;
 use deog_mapping::{QualityInput, map_quality, verdict_image};
 use deog_proto::v1 as pb;
@@ -256,6 +256,7 @@ fn run_localize(args: EvalLocalizeArgs) -> Result<()> {
             truth: &robot.truth,
             estimates: &robot.estimates,
             params,
+            known_kidnaps: &[],
         };
         let report = evaluation::evaluate(&input)
             .with_context(|| format!("judging the pose estimates of robot {}", robot.name))?;

@@ -1,5 +1,4 @@
-//! Monte Carlo Localization of a sonar robot on a deog map, and the
-//! measures that judge it.
+//! Monte Carlo Localization of a sonar robot on a deog map.
 //!
 //! Everything here is pure and synchronous: the `deog localize` process
 //! fetches tiles and frames over the network and feeds them in.
@@ -21,14 +20,12 @@
 //!   expected one.
 //! - [`sampling`], [`cluster`], [`gaussian`]: resampling and the KLD
 //!   bound, particle clusters and the estimate, normal draws.
-//! - [`evaluation`]: localization accuracy from true poses and estimates
-//!   (the thesis's Tables 7.3 to 7.7, convergence, kidnap recovery) and the
-//!   path plot.
+//!
+//! How well it localizes is judged in `deog-evaluation`.
 
 pub mod beam_model;
 pub mod cluster;
 pub mod error;
-pub mod evaluation;
 pub mod filter;
 pub mod gaussian;
 pub mod local_map;

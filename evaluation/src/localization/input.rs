@@ -137,6 +137,10 @@ pub struct EvalInput<'a> {
     pub estimates: &'a [EstimateSample],
     /// Bounds and limits.
     pub params: EvalParams,
+    /// Kidnaps the caller made and so knows of, each as the sequence of
+    /// the first frame after it: they start segments even when the jump
+    /// is too short to tell from driving.
+    pub known_kidnaps: &'a [u64],
 }
 
 impl<'a> EvalInput<'a> {
@@ -149,6 +153,7 @@ impl<'a> EvalInput<'a> {
             truth,
             estimates,
             params: EvalParams::default(),
+            known_kidnaps: &[],
         }
     }
 }

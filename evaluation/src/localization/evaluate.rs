@@ -90,6 +90,8 @@ pub struct ErrorStats {
     pub y_m: AxisStats,
     /// Heading error, radians.
     pub theta_rad: AxisStats,
+    /// Mean position error (`hypot(x, y)`), metres.
+    pub mean_position_m: f64,
     /// Root mean square of the position error, metres.
     pub rms_position_m: f64,
     /// Largest position error, metres.
@@ -242,10 +244,14 @@ pub fn evaluate(input: &EvalInput<'_>) -> Result<LocalizationReport, EvaluationE
         let turn = normalize_angle(b.pose.theta - a.pose.theta).abs();
         let teleported = jump > params.kidnap_jump_m + params.max_speed_mps * dt
             || turn > params.kidnap_turn_rad + params.max_turn_rate_rad_s * dt;
-        if teleported {
+        let known = input
+            .known_kidnaps
+            .iter()
+            .any(|&k| a.sequence < k && k <= b.sequence);
+        if teleported || known {
             kidnap_starts.push(i + 1);
         }
-        driven.push(driven[i] + if teleported { 0.0 } else { jump });
+        driven.push(driven[i] + if teleported || known { 0.0 } else { jump });
     }
 
     // Each segment's paired estimates (contiguous: both lists are sorted by
@@ -334,6 +340,7 @@ fn error_stats(used: &[&Paired]) -> Option<ErrorStats> {
         x_m: AxisStats::of(&xs)?,
         y_m: AxisStats::of(&ys)?,
         theta_rad: AxisStats::of(&thetas)?,
+        mean_position_m: used.iter().map(|p| p.position()).sum::<f64>() / n,
         rms_position_m: (square_sum / n).sqrt(),
         max_position_m: used.iter().map(|p| p.position()).fold(0.0, f64::max),
     })

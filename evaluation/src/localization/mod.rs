@@ -9,7 +9,8 @@
 //!   [`EvalParams`], [`EvalInput`], and their checks;
 //! - `evaluate`: [`evaluate`] and the [`LocalizationReport`] it returns;
 //! - `report`: the report as a markdown table ([`LocalizationReport::table`])
-//!   and as JSON ([`LocalizationReport::to_json`], [`reports_to_json`]);
+//!   and as JSON ([`LocalizationRecord`], [`LocalizationReport::to_json`],
+//!   [`reports_to_json`]);
 //! - [`plot`]: the true path against the estimated one, as a PNG.
 //!
 //! # Inputs
@@ -38,8 +39,9 @@
 //!   more than `kidnap_jump_m + max_speed_mps · dt`, or the heading change
 //!   (normalised) is more than `kidnap_turn_rad + max_turn_rate_rad_s · dt`
 //!   (defaults 0.5 m, 45°, and the simulated Scout's limits, 1 m/s and
-//!   π/2 rad/s). The kidnap happens at `b`: its sequence and time are
-//!   `b`'s.
+//!   π/2 rad/s); or a kidnap the caller knows of
+//!   ([`EvalInput::known_kidnaps`]) falls after `a` and by `b`. The kidnap
+//!   happens at `b`: its sequence and time are `b`'s.
 //! - **Segments**: the kidnaps cut the run in segments: the first from the
 //!   first truth sample, each further one from a kidnap's `b` up to the
 //!   next kidnap or the end. An estimate belongs to its frame's segment.
@@ -70,8 +72,9 @@
 //!   "mean error"), the standard deviation of the signed error (population
 //!   form, `sqrt(Σ(e - ē)² / n)`, 0 for one estimate) and the mean signed
 //!   error `ē` (the bias); in metres and inches (0.0254 m), radians and
-//!   degrees. `rms_position_m = sqrt(Σ(x² + y²) / n)`; `max_position_m`
-//!   the largest position error. Used theta errors lie within
+//!   degrees. `mean_position_m = Σ hypot(x, y) / n`,
+//!   `rms_position_m = sqrt(Σ(x² + y²) / n)`; `max_position_m` the
+//!   largest position error. Used theta errors lie within
 //!   ±`converge_rad` ≤ π, so their plain mean is meaningful. No used
 //!   estimate: no figures.
 //! - **Per robot**: `kidnapped` when there is at least one kidnap;
@@ -93,7 +96,7 @@
 //! A robot driving along x, an estimate 0.1 m ahead of it at every frame:
 //! ```
 //! use deog_grid::Pose2;
-//! use deog_localizer::evaluation::{EstimateSample, EvalInput, TruthSample, evaluate};
+//! use deog_evaluation::localization::{EstimateSample, EvalInput, TruthSample, evaluate};
 //!
 //! let truth: Vec<TruthSample> = (1..=10)
 //!     .map(|s| TruthSample::new(s, s as f64 * 0.1, Pose2::new(s as f64 * 0.05, 0.0, 0.0)))
@@ -106,7 +109,7 @@
 //! assert_eq!(report.converge_s(), Some(0.0));
 //! let stats = report.stats.expect("figures");
 //! assert!((stats.x_m.mean_abs - 0.1).abs() < 1e-12 && stats.x_m.std_dev < 1e-12);
-//! # Ok::<(), deog_localizer::evaluation::EvaluationError>(())
+//! # Ok::<(), deog_evaluation::localization::EvaluationError>(())
 //! ```
 
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
@@ -121,7 +124,9 @@ mod report;
 pub use evaluate::{AxisStats, ErrorStats, Kidnap, LocalizationReport, Settling, evaluate};
 pub use input::{EstimateSample, EvalInput, EvalParams, TruthSample};
 pub use plot::{PlotInput, Raster, RobotPath, render_plot};
-pub use report::reports_to_json;
+pub use report::{
+    BoundsRecord, KidnapRecord, LocalizationRecord, PoseRecord, XyRecord, reports_to_json,
+};
 
 /// Metres in an inch, for the thesis's units.
 pub const METRES_PER_INCH: f64 = 0.0254;

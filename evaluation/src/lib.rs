@@ -1,0 +1,16 @@
+//! How well deog did, judged in one place for `deog eval`, `deog demo`
+//! and every benchmark. Pure: callers read the true poses, the estimates
+//! and the maps, and hand them in.
+//!
+//! # Layout
+//! - [`localization`]: a localizer's estimates against the true poses, as
+//!   the thesis's Tables 7.3 to 7.7, with convergence and kidnap recovery
+//!   ([`localization::evaluate`]), as a table, as JSON, and the path plot.
+//! - [`tracking`]: the same pairing over a whole run, lapses included
+//!   ([`tracking::track`]): what a tracking benchmark reports.
+//! - [`runs`]: many seeded runs summed up: how many converged and
+//!   recovered within a time limit, and the mean errors.
+
+pub mod localization;
+pub mod runs;
+pub mod tracking;
