@@ -287,7 +287,7 @@ fn sim_config(specular: bool) -> SimConfig {
 /// from the sonar of `config`, with range tables for the sonar of
 /// `localize_config`.
 fn build_map(
-    world: deog_simulator::World,
+    world: deog_world::World,
     config: &SimConfig,
     localize_config: &SimConfig,
     minutes: f64,
@@ -356,7 +356,7 @@ fn build_map(
 }
 
 fn run_once(
-    world: deog_simulator::World,
+    world: deog_world::World,
     config: &SimConfig,
     map: &mut LocalMap,
     seed: u64,

@@ -26,8 +26,8 @@ use deog_mapping::quality::{DEFAULT_ROBOT_RADIUS_M, MapQuality};
 use deog_mapping::{QualityInput, export_map, map_quality};
 use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient, SimClient};
-use deog_simulator::World;
 use deog_simulator::simulation::{SimConfig, Simulation};
+use deog_world::World;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 

@@ -18,7 +18,7 @@ use deog_mapping::quality::DEFAULT_ROBOT_RADIUS_M;
 use deog_mapping::{QualityInput, map_quality, verdict_image};
 use deog_proto::v1 as pb;
 use deog_robot_client::MapClient;
-use deog_simulator::Point2;
+use deog_world::Point2;
 
 use crate::connection::ConnectionArgs;
 

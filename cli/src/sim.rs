@@ -5,7 +5,7 @@ use clap::{Args, ValueEnum};
 use deog_simulator::serve::{SimServeConfig, serve_sim};
 use deog_simulator::simulation::{SimConfig, Simulation};
 use deog_simulator::sonar::Specular;
-use deog_simulator::{World, world_file};
+use deog_world::{World, world_file};
 use std::net::SocketAddr;
 use std::path::Path;
 
