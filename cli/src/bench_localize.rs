@@ -23,10 +23,9 @@ use deog_localizer::range_table::ConeGeometry;
 use deog_mapping::{Cartographer, FrameInput, PoseChoice};
 use deog_simulator::simulation::{SimConfig, Simulation};
 use deog_simulator::{Specular, WanderParams, Wanderer};
+use deog_world::load_world_spec;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-
-use crate::sim::load_world;
 
 /// Options of `deog bench localize`.
 #[derive(Debug, Args)]
@@ -149,7 +148,7 @@ pub fn run(args: LocalizeBenchArgs) -> Result<()> {
     );
     for world_name in &args.worlds {
         let started = Instant::now();
-        let world = load_world(world_name)?;
+        let world = load_world_spec(world_name)?;
         let config = sim_config(args.specular);
         let map_config = sim_config(args.specular && !args.clean_map);
         let mut map = build_map(

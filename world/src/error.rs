@@ -34,6 +34,36 @@ pub enum WorldError {
     /// the file, and for the YAML the line and key.
     #[error(transparent)]
     MapFile(#[from] deog_mapfile::MapFileError),
+    /// A world was asked for by a name that is neither an existing file
+    /// nor a built-in world.
+    #[error(
+        "no world {spec:?}: give a file (.toml world or .yaml map_server map) or one of {}",
+        .known.join(", ")
+    )]
+    UnknownWorld {
+        /// What the user gave.
+        spec: String,
+        /// The built-in worlds' names.
+        known: Vec<String>,
+    },
+    /// The world file a user named could not be loaded; the source says why.
+    #[error("loading world {file}")]
+    LoadFile {
+        /// The file, as the user named it.
+        file: String,
+        /// What went wrong reading or parsing it.
+        #[source]
+        source: Box<WorldError>,
+    },
+    /// A built-in world could not be parsed; the source says why.
+    #[error("loading built-in world {name}")]
+    LoadBuiltIn {
+        /// The built-in world's name.
+        name: String,
+        /// What is wrong with its text.
+        #[source]
+        source: Box<WorldError>,
+    },
     /// A value given to the world crate is out of range or malformed.
     #[error("{field}: {reason}")]
     Invalid {

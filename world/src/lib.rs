@@ -8,6 +8,9 @@
 //! - [`world_file`]: the TOML world file format: [`load_world`],
 //!   [`parse_world`], and [`load_world_any`] for either kind of world.
 //! - [`world_image`]: a ROS map_server map (YAML + PGM) as a [`World`].
+//! - [`builtin`]: [`BUILT_IN_WORLDS`], the `worlds/` files compiled in, and
+//!   [`load_world_spec`], a world from what a user typed: a built-in name, a
+//!   world file or a map_server map.
 //! - [`segment_index`]: [`SegmentIndex`], walls bucketed on a grid for
 //!   nearest-wall and sonar queries.
 //! - [`error`]: the crate's one error type, [`WorldError`].
@@ -24,6 +27,7 @@
 //! # Ok::<(), deog_world::WorldError>(())
 //! ```
 
+pub mod builtin;
 pub mod error;
 pub mod geometry;
 pub mod segment_index;
@@ -31,6 +35,7 @@ pub mod world;
 pub mod world_file;
 pub mod world_image;
 
+pub use builtin::{BUILT_IN_WORLDS, load_world_spec};
 pub use error::WorldError;
 pub use geometry::{Point2, Polygon, Segment};
 pub use segment_index::SegmentIndex;
