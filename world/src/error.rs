@@ -64,6 +64,12 @@ pub enum WorldError {
         #[source]
         source: Box<WorldError>,
     },
+    /// A generated city too small for a single block.
+    #[error("a city {side_px} cells a side has no room for a block")]
+    CityTooSmall {
+        /// The city's side, cells.
+        side_px: u32,
+    },
     /// A value given to the world crate is out of range or malformed.
     #[error("{field}: {reason}")]
     Invalid {

@@ -1,6 +1,7 @@
 //! The ground truth of deog: worlds of polygon obstacles that robots drive
 //! and sense in, read from TOML world files or ROS map_server images, and
-//! indexed for nearest-wall and sonar queries. Pure: no async, no network.
+//! indexed for nearest-wall and sonar queries; and a generated city, for
+//! maps far larger than any world file. Pure: no async, no network.
 //!
 //! # Layout
 //! - [`geometry`]: points, wall segments and polygons.
@@ -11,6 +12,8 @@
 //! - [`builtin`]: [`BUILT_IN_WORLDS`], the `worlds/` files compiled in, and
 //!   [`load_world_spec`], a world from what a user typed: a built-in name, a
 //!   world file or a map_server map.
+//! - [`city`](mod@city): [`City`], a generated city of blocks and streets
+//!   as a map_server image, seeded ([`city()`]).
 //! - [`segment_index`]: [`SegmentIndex`], walls bucketed on a grid for
 //!   nearest-wall and sonar queries.
 //! - [`error`]: the crate's one error type, [`WorldError`].
@@ -28,6 +31,7 @@
 //! ```
 
 pub mod builtin;
+pub mod city;
 pub mod error;
 pub mod geometry;
 pub mod segment_index;
@@ -36,6 +40,7 @@ pub mod world_file;
 pub mod world_image;
 
 pub use builtin::{BUILT_IN_WORLDS, load_world_spec};
+pub use city::{City, city};
 pub use error::WorldError;
 pub use geometry::{Point2, Polygon, Segment};
 pub use segment_index::SegmentIndex;
