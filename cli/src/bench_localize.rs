@@ -28,10 +28,9 @@ use deog_localizer::step::{Localizer, TileSource};
 use deog_mapping::{Cartographer, FrameInput, PoseChoice};
 use deog_simulator::simulation::{SimConfig, Simulation};
 use deog_simulator::{Specular, WanderParams, Wanderer};
+use deog_world::load_world_spec;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-
-use crate::sim::load_world;
 
 /// Options of `deog bench localize`.
 #[derive(Debug, Args)]
@@ -144,7 +143,7 @@ pub fn run(args: LocalizeBenchArgs) -> Result<()> {
     );
     for world_name in &args.worlds {
         let started = Instant::now();
-        let world = load_world(world_name)?;
+        let world = load_world_spec(world_name)?;
         let config = sim_config(args.specular);
         let map_config = sim_config(args.specular && !args.clean_map);
         let (mut tiles, mut map) = build_map(
@@ -270,7 +269,7 @@ fn sim_config(specular: bool) -> SimConfig {
 /// from the sonar of `config`, with range tables for the sonar of
 /// `localize_config`.
 fn build_map(
-    world: deog_simulator::World,
+    world: deog_world::World,
     config: &SimConfig,
     localize_config: &SimConfig,
     minutes: f64,
@@ -341,7 +340,7 @@ fn build_map(
 /// One seeded run on `map` (its tiles from `tiles`); returns its figures
 /// and the map, with the tables it built, for the next run.
 fn run_once(
-    world: deog_simulator::World,
+    world: deog_world::World,
     config: &SimConfig,
     map: LocalMap,
     tiles: &mut TileMap,

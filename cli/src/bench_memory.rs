@@ -3,9 +3,10 @@
 //!
 //! Every part is a real process of this binary, as in `deog demo`: a map
 //! server on a fresh data folder, `deog import` putting a generated city
-//! (solid blocks 6 to 12 m a side between streets 2.5 to 3 m wide, inside
-//! an outer wall) on it, the simulator running the same city, one wanderer driving a
-//! robot from a street crossing near the middle, and `deog localize`
+//! (`deog_world::city`: solid blocks 6 to 12 m a side between streets 2.5
+//! to 3 m wide, inside an outer wall) on it, the simulator running the
+//! same city, one wanderer driving a robot from a street crossing near
+//! the middle, and `deog localize`
 //! tracking that robot from its known start pose with a small
 //! `--cache-mb`. The map is sized so that holding all of it in the
 //! localizer (each tile's cells and its expected-range table, ~1 MB a
@@ -35,11 +36,11 @@ use deog_evaluation::localization::{
 use deog_evaluation::tracking::{LostStretch, Tracking, track};
 use deog_grid::{Pose2, Resolution, TileKey, TileSize};
 use deog_localizer::range_table::ConeGeometry;
-use deog_mapfile::{MapImage, Mode, write_map};
+use deog_mapfile::write_map;
 use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient, SimClient};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use deog_world::city;
+use deog_world::city::{MIN_SIDE_M, RESOLUTION_M};
 
 use crate::bench::proc_status_kb;
 use crate::supervisor::{Role, Supervisor, connect, free_loopback_addr, log_tail, os};
@@ -48,23 +49,11 @@ use crate::supervisor::{Role, Supervisor, connect, free_loopback_addr, log_tail,
 const MAP: &str = "bench";
 /// The one robot.
 const ROBOT: &str = "scout-1";
-/// Cell size of the city map, metres.
-const RESOLUTION_M: f64 = 0.05;
 /// Cells per tile side: the server's default, which `deog import` uses.
 const TILE_SIDE: u32 = 64;
-/// Thickness of the outer wall, metres.
-const WALL_M: f64 = 0.3;
-/// Side of a block, metres: drawn from this range per row and column.
-const BLOCK_M: (f64, f64) = (6.0, 12.0);
-/// Width of a street, metres: drawn from this range per street. Wide
-/// enough that the wanderer cruises down the middle without slowing for
-/// the walls beside it.
-const STREET_M: (f64, f64) = (2.5, 3.0);
 /// Largest map side, metres: the image and the server's import must fit
 /// comfortably in memory.
 const MAX_SIDE_M: f64 = 500.0;
-/// Smallest map side, metres: room for a few blocks.
-const MIN_SIDE_M: f64 = 30.0;
 /// A localizer or wanderer ends once no frame came for this long.
 const IDLE_EXIT_S: &str = "3";
 /// How often the localizer's memory is read.
@@ -296,119 +285,6 @@ fn prepare_out(out: &Path) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// The generated city.
-struct City {
-    image: MapImage,
-    /// Where the robot starts: a street crossing near the middle, facing +x.
-    start: Pose2,
-    /// Blocks in the city.
-    blocks: usize,
-}
-
-/// A square city `side_px` cells a side at 5 cm: rows and columns of
-/// blocks of random sizes between streets of random widths, inside a wall.
-/// The origin is (0, 0), so pixel (column, row from the bottom) is cell
-/// (column, row) and the tiles line up with the image.
-fn city(side_px: u32, seed: u64) -> Result<City> {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6369_7479);
-    let columns = block_spans(side_px, &mut rng);
-    let rows = block_spans(side_px, &mut rng);
-    ensure!(
-        !columns.is_empty() && !rows.is_empty(),
-        "a city {side_px} cells a side has no room for a block"
-    );
-    let n = side_px as usize;
-    let wall = px(WALL_M) as usize;
-    const FREE: u8 = 254;
-    const OCCUPIED: u8 = 0;
-    let mut pixels = vec![FREE; n * n];
-    // `row` counts from the bottom; the image's first row is the top.
-    let mut set = |col: usize, row: usize| pixels[(n - 1 - row) * n + col] = OCCUPIED;
-    for row in 0..n {
-        for col in 0..n {
-            if col < wall || row < wall || col >= n - wall || row >= n - wall {
-                set(col, row);
-            }
-        }
-    }
-    for &(y0, y1) in &rows {
-        for &(x0, x1) in &columns {
-            for row in y0..y1 {
-                for col in x0..x1 {
-                    set(col as usize, row as usize);
-                }
-            }
-        }
-    }
-    // The street centres between (and around) the blocks; the one nearest
-    // the middle on each axis gives the start.
-    let middle = |spans: &[(u32, u32)]| -> f64 {
-        let mut edges = vec![px(WALL_M)];
-        for &(a, b) in spans {
-            edges.push(a);
-            edges.push(b);
-        }
-        edges.push(side_px - px(WALL_M));
-        edges
-            .chunks(2)
-            .map(|street| f64::from(street[0] + street[1]) / 2.0)
-            .min_by(|a, b| {
-                let half = f64::from(side_px) / 2.0;
-                (a - half).abs().total_cmp(&(b - half).abs())
-            })
-            .unwrap_or(f64::from(side_px) / 2.0)
-    };
-    let start = Pose2::new(
-        middle(&columns) * RESOLUTION_M,
-        middle(&rows) * RESOLUTION_M,
-        0.0,
-    );
-    Ok(City {
-        image: MapImage {
-            width: side_px,
-            height: side_px,
-            resolution: RESOLUTION_M,
-            origin: (0.0, 0.0, 0.0),
-            negate: false,
-            occupied_thresh: 0.65,
-            free_thresh: 0.196,
-            mode: Mode::Trinary,
-            pixels,
-        },
-        start,
-        blocks: columns.len() * rows.len(),
-    })
-}
-
-/// Metres to whole cells.
-fn px(metres: f64) -> u32 {
-    (metres / RESOLUTION_M).round() as u32
-}
-
-/// The blocks along one axis, `[start, end)` in cells: a street, a block,
-/// a street, ... up to the wall; the last block takes up what would be too
-/// little for another, so no street is wider than the widest drawn.
-fn block_spans(side_px: u32, rng: &mut impl Rng) -> Vec<(u32, u32)> {
-    let (block_min, block_max) = (px(BLOCK_M.0), px(BLOCK_M.1));
-    let (street_min, street_max) = (px(STREET_M.0), px(STREET_M.1));
-    let end = side_px.saturating_sub(px(WALL_M));
-    let mut spans = Vec::new();
-    let mut pos = px(WALL_M) + rng.random_range(street_min..=street_max);
-    while end.saturating_sub(pos) >= block_min + street_min {
-        let left = end - pos;
-        let street = rng
-            .random_range(street_min..=street_max)
-            .min(left - block_min);
-        let mut block = rng.random_range(block_min..=block_max);
-        if left < block + street + block_min + street_min {
-            block = left - street;
-        }
-        spans.push((pos, pos + block));
-        pos += block + street;
-    }
-    spans
 }
 
 /// The localizer's memory, read from `/proc` as it runs.
@@ -1509,44 +1385,6 @@ mod tests {
                 err.as_deref().is_some_and(|e| e.starts_with(flag)),
                 "{flag}: {err:?}"
             );
-        }
-    }
-
-    #[test]
-    fn streets_are_as_wide_as_drawn_and_blocks_fill_the_rest() {
-        let mut rng = ChaCha8Rng::seed_from_u64(7);
-        for side in [px(MIN_SIDE_M), 2688, 5000] {
-            let spans = block_spans(side, &mut rng);
-            assert!(!spans.is_empty());
-            let mut edge = px(WALL_M);
-            for &(a, b) in &spans {
-                let street = a - edge;
-                assert!(
-                    (px(STREET_M.0)..=px(STREET_M.1)).contains(&street),
-                    "{street}"
-                );
-                assert!(b - a >= px(BLOCK_M.0));
-                edge = b;
-            }
-            let last = side - px(WALL_M) - edge;
-            assert!((px(STREET_M.0)..=px(STREET_M.1)).contains(&last), "{last}");
-        }
-    }
-
-    #[test]
-    fn the_start_is_on_a_street() {
-        let city = city(1280, 3).unwrap();
-        let (col, row) = (
-            (city.start.x / RESOLUTION_M) as usize,
-            (city.start.y / RESOLUTION_M) as usize,
-        );
-        let n = city.image.width as usize;
-        // A robot radius around it is free.
-        for dy in -4i64..=4 {
-            for dx in -4i64..=4 {
-                let (c, r) = ((col as i64 + dx) as usize, (row as i64 + dy) as usize);
-                assert_eq!(city.image.pixels[(n - 1 - r) * n + c], 254);
-            }
         }
     }
 

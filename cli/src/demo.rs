@@ -26,8 +26,8 @@ use deog_mapping::quality::{DEFAULT_ROBOT_RADIUS_M, MapQuality};
 use deog_mapping::{QualityInput, export_map, map_quality};
 use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient, SimClient};
-use deog_simulator::World;
 use deog_simulator::simulation::{SimConfig, Simulation};
+use deog_world::{World, load_world_spec};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -123,7 +123,7 @@ impl Plan {
             (false, Some(t)) => Some(t),
             (false, None) => Some(duration / 2.0),
         };
-        let world = crate::sim::load_world(&args.world)?;
+        let world = load_world_spec(&args.world)?;
         Ok(Self {
             world,
             robots: (1..=args.robots).map(|i| format!("scout-{i}")).collect(),

@@ -18,7 +18,7 @@ use deog_mapping::quality::DEFAULT_ROBOT_RADIUS_M;
 use deog_mapping::{QualityInput, map_quality, verdict_image};
 use deog_proto::v1 as pb;
 use deog_robot_client::MapClient;
-use deog_simulator::Point2;
+use deog_world::{Point2, load_world_spec};
 
 use crate::connection::ConnectionArgs;
 
@@ -128,7 +128,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
 /// table and writes the JSON.
 fn run_map(args: EvalMapArgs) -> Result<()> {
     // The world first: a misspelt world name fails before any network call.
-    let world = crate::sim::load_world(&args.world)?;
+    let world = load_world_spec(&args.world)?;
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     let (map, seeds) = runtime.block_on(async {
         let client = MapClient::connect(args.connection.client_config()?)

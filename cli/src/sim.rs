@@ -5,17 +5,8 @@ use clap::{Args, ValueEnum};
 use deog_simulator::serve::{SimServeConfig, serve_sim};
 use deog_simulator::simulation::{SimConfig, Simulation};
 use deog_simulator::sonar::Specular;
-use deog_simulator::{World, world_file};
+use deog_world::load_world_spec;
 use std::net::SocketAddr;
-use std::path::Path;
-
-/// The worlds built into the binary, by name: `--world map2` works from any
-/// directory.
-const BUILT_IN_WORLDS: [(&str, &str); 3] = [
-    ("map1", include_str!("../../worlds/map1.toml")),
-    ("map2", include_str!("../../worlds/map2.toml")),
-    ("office", include_str!("../../worlds/office.toml")),
-];
 
 /// What a wall struck past the specular angle does.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -71,24 +62,6 @@ pub struct SimArgs {
     pub max_message_bytes: usize,
 }
 
-/// Loads a world by built-in name or path.
-pub fn load_world(spec: &str) -> Result<World> {
-    let path = Path::new(spec);
-    if path.exists() {
-        return world_file::load_world_any(path)
-            .with_context(|| format!("loading world {}", path.display()));
-    }
-    if let Some((name, text)) = BUILT_IN_WORLDS.iter().find(|(name, _)| *name == spec) {
-        return world_file::parse_world(text, &format!("worlds/{name}.toml"))
-            .with_context(|| format!("loading built-in world {name}"));
-    }
-    let names: Vec<&str> = BUILT_IN_WORLDS.iter().map(|(n, _)| *n).collect();
-    bail!(
-        "no world {spec:?}: give a file (.toml world or .yaml map_server map) or one of {}",
-        names.join(", ")
-    )
-}
-
 /// The simulation's figures from the options.
 pub fn sim_config(args: &SimArgs) -> Result<SimConfig> {
     let mut config = SimConfig::default();
@@ -119,7 +92,7 @@ pub fn sim_config(args: &SimArgs) -> Result<SimConfig> {
 
 /// Runs the simulator until ctrl-c or SIGTERM.
 pub fn run(args: SimArgs) -> Result<()> {
-    let world = load_world(&args.world)?;
+    let world = load_world_spec(&args.world)?;
     let config = sim_config(&args)?;
     let mut sim = Simulation::new(world, config, args.seed).context("setting up the simulation")?;
     for i in 1..=args.robots {

@@ -51,7 +51,7 @@ use std::f64::consts::FRAC_1_SQRT_2;
 use std::fmt::Write as _;
 
 use deog_grid::{CellIndex, LogOdds, Resolution, SCOUT_BODY_RADIUS_M, TileMap};
-use deog_simulator::{Point2, SegmentIndex, World};
+use deog_world::{Point2, SegmentIndex, World};
 
 use crate::error::MappingError;
 
@@ -878,7 +878,7 @@ mod tests {
     use std::collections::HashMap;
 
     use deog_grid::{ClampLimits, Tile, TileKey, TileSize};
-    use deog_simulator::Polygon;
+    use deog_world::Polygon;
 
     use super::*;
 
@@ -1267,11 +1267,9 @@ mod tests {
 
     #[test]
     fn the_truth_uses_the_worlds_own_free_space() {
-        let office = deog_simulator::world_file::parse_world(
-            include_str!("../../worlds/office.toml"),
-            "office.toml",
-        )
-        .unwrap();
+        let office =
+            deog_world::parse_world(include_str!("../../worlds/office.toml"), "office.toml")
+                .unwrap();
         for world in [room(), two_rooms(), office] {
             let truth = Truth::new(&world, res(), 0.2);
             let (min, max) = world.bounds();

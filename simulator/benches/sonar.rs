@@ -11,7 +11,8 @@ use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use deog_grid::{Pose2, SensorRing};
-use deog_simulator::{Point2, Robot, Segment, SegmentIndex, SonarParams, SonarRing, load_world};
+use deog_simulator::{Robot, SonarParams, SonarRing};
+use deog_world::{Point2, Segment, SegmentIndex, load_world};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

@@ -5,9 +5,6 @@ use thiserror::Error;
 /// What can go wrong building or running a simulation.
 #[derive(Debug, Error)]
 pub enum SimError {
-    /// A world with neither a boundary nor an obstacle has no extent.
-    #[error("world {0:?} has neither a boundary nor obstacles")]
-    EmptyWorld(String),
     /// No robot of that name is in the world.
     #[error("no robot named {0:?} in the world")]
     UnknownRobot(String),
@@ -33,32 +30,6 @@ pub enum SimError {
     /// The gRPC server failed.
     #[error("serving failed: {0}")]
     Serve(String),
-    /// A world file (TOML) is malformed: bad syntax, an unknown key, or a
-    /// value out of range.
-    #[error("{file}:{line}: {field}: {reason}")]
-    WorldFile {
-        /// The file, as named to the parser.
-        file: String,
-        /// 1-based line number.
-        line: usize,
-        /// The key, with its place: `name`, `boundary`, `obstacle[1].points`.
-        field: String,
-        /// What is wrong with it.
-        reason: String,
-    },
-    /// A world file could not be read.
-    #[error("{file}: {source}")]
-    ReadWorld {
-        /// The file, as named.
-        file: String,
-        /// What the operating system said.
-        #[source]
-        source: std::io::Error,
-    },
-    /// A ROS map_server map (YAML + PGM) could not be read; the error names
-    /// the file, and for the YAML the line and key.
-    #[error(transparent)]
-    MapFile(#[from] deog_mapfile::MapFileError),
     /// A request was larger than the simulator accepts.
     #[error("{field}: {reason}")]
     TooLarge {

@@ -19,12 +19,10 @@
 use std::f64::consts::{FRAC_PI_2, TAU};
 
 use deog_grid::{Pose2, SCOUT_BODY_RADIUS_M, normalize_angle};
+use deog_world::{Point2, SegmentIndex, World};
 use rand::Rng;
 
 use crate::error::SimError;
-use crate::geometry::Point2;
-use crate::segment_index::SegmentIndex;
-use crate::world::World;
 
 /// The longest time one [`Robot::step`] may cover, seconds.
 pub const MAX_STEP_S: f64 = 10.0;
@@ -414,7 +412,7 @@ fn standard_normal<R: Rng + ?Sized>(rng: &mut R) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::Polygon;
+    use deog_world::Polygon;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 

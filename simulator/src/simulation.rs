@@ -9,15 +9,13 @@
 use std::collections::BTreeMap;
 
 use deog_grid::{Pose2, SensorRing};
+use deog_world::{Point2, SegmentIndex, World};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::error::SimError;
-use crate::geometry::Point2;
 use crate::robot::{OdometryNoise, Robot, ScoutParams};
-use crate::segment_index::SegmentIndex;
 use crate::sonar::{SonarParams, SonarRing};
-use crate::world::World;
 
 /// Figures of a simulation.
 #[derive(Debug, Clone, PartialEq)]
@@ -359,7 +357,7 @@ fn check_pose(field: &str, pose: &Pose2) -> Result<(), SimError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::Polygon;
+    use deog_world::Polygon;
 
     fn room() -> World {
         World::new(

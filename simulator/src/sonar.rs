@@ -24,11 +24,11 @@
 use std::ops::ControlFlow;
 
 use deog_grid::{Pose2, SensorRing, SonarModelParams};
+use deog_world::segment_index::{Visit, distance2};
+use deog_world::{Point2, Segment, SegmentIndex};
 use rand::Rng;
 
 use crate::error::SimError;
-use crate::geometry::{Point2, Segment};
-use crate::segment_index::{SegmentIndex, Visit, distance2};
 
 /// The most sonars a [`SonarRing`] may have: a frame keeps its per-sonar
 /// state on the stack and its unsettled sonars in one `u64` mask.
@@ -196,7 +196,8 @@ impl SonarRing {
     ///
     /// ```
     /// use deog_grid::{Pose2, SensorRing};
-    /// use deog_simulator::{Point2, Segment, SegmentIndex, SonarParams, SonarRing};
+    /// use deog_simulator::{SonarParams, SonarRing};
+    /// use deog_world::{Point2, Segment, SegmentIndex};
     /// use rand::SeedableRng;
     ///
     /// // A wall 3 m ahead of the robot's centre, across its path.

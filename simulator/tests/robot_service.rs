@@ -6,10 +6,9 @@ use std::time::Duration;
 
 use deog_proto::v1 as pb;
 use deog_proto::v1::robot_service_client::RobotServiceClient;
-use deog_simulator::World;
-use deog_simulator::geometry::{Point2, Polygon};
 use deog_simulator::serve::{SimServeConfig, serve_sim};
 use deog_simulator::simulation::{SimConfig, Simulation};
+use deog_world::{Point2, Polygon, World};
 use tokio::sync::oneshot;
 use tonic::Code;
 use tonic::transport::Channel;

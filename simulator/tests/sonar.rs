@@ -9,10 +9,8 @@ use std::f64::consts::FRAC_PI_2;
 
 use approx::assert_abs_diff_eq;
 use deog_grid::{Pose2, SCOUT_RING_RADIUS_M, SensorRing};
-use deog_simulator::{
-    OdometryNoise, Point2, Polygon, Robot, ScoutParams, Segment, SegmentIndex, SonarParams,
-    SonarRing, Specular, World,
-};
+use deog_simulator::{OdometryNoise, Robot, ScoutParams, SonarParams, SonarRing, Specular};
+use deog_world::{Point2, Polygon, Segment, SegmentIndex, World};
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

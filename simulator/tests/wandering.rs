@@ -3,11 +3,11 @@
 
 use deog_grid::SensorRing;
 use deog_simulator::simulation::{SimConfig, Simulation};
-use deog_simulator::world_file::load_world;
 use deog_simulator::{WanderParams, Wanderer};
+use deog_world::load_world;
 use std::collections::HashSet;
 
-fn world(name: &str) -> deog_simulator::World {
+fn world(name: &str) -> deog_world::World {
     let path = format!("{}/../worlds/{name}.toml", env!("CARGO_MANIFEST_DIR"));
     load_world(std::path::Path::new(&path)).expect("world loads")
 }

@@ -254,7 +254,7 @@ pub fn wander_frames(robot: &str, seed: u64, count: usize) -> Vec<deog_proto::v1
     use deog_simulator::simulation::{SimConfig, Simulation};
     use deog_simulator::{WanderParams, Wanderer};
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/map2.toml");
-    let world = deog_simulator::world_file::load_world(&path).expect("map2 loads");
+    let world = deog_world::load_world(&path).expect("map2 loads");
     let mut sim = Simulation::new(world, SimConfig::default(), seed).expect("simulation");
     let mut state = sim.spawn(robot, None).expect("spawn");
     let mut wanderer = Wanderer::new(

@@ -9,9 +9,8 @@ use std::process::Command;
 use deog_grid::{CellIndex, LogOdds, Resolution, TileDelta, TileKey, TileSize};
 use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient, UpdateSenderConfig};
-use deog_simulator::world_file::load_world;
-use deog_simulator::{Point2, SegmentIndex, World};
 use deog_tests::{ServerProcess, deog_binary, json_field};
+use deog_world::{Point2, SegmentIndex, World, load_world};
 
 const RESOLUTION_M: f64 = 0.05;
 /// The patch written: cells covering [-0.1, 5.0) x [-0.1, 4.0) m, the

@@ -49,7 +49,7 @@ use std::path::Path;
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::error::SimError;
+use crate::error::WorldError;
 use crate::geometry::{Point2, Polygon};
 use crate::world::World;
 use crate::world_image::{ImageWorldOptions, load_map_world};
@@ -59,10 +59,10 @@ use crate::world_image::{ImageWorldOptions, load_map_world};
 pub const MAX_WORLD_FILE_BYTES: u64 = 16 * 1024 * 1024;
 
 /// Reads a world file (TOML); errors name `path` as given.
-pub fn load_world(path: impl AsRef<Path>) -> Result<World, SimError> {
+pub fn load_world(path: impl AsRef<Path>) -> Result<World, WorldError> {
     let path = path.as_ref();
     let file = path.display().to_string();
-    let read_err = |source| SimError::ReadWorld {
+    let read_err = |source| WorldError::ReadWorld {
         file: file.clone(),
         source,
     };
@@ -79,7 +79,7 @@ pub fn load_world(path: impl AsRef<Path>) -> Result<World, SimError> {
 /// Reads a world from a `.toml` world file or a `.yaml` map_server map (an
 /// image world with the default [`ImageWorldOptions`]: unknown pixels are
 /// obstacles).
-pub fn load_world_any(path: impl AsRef<Path>) -> Result<World, SimError> {
+pub fn load_world_any(path: impl AsRef<Path>) -> Result<World, WorldError> {
     let path = path.as_ref();
     let ext = path
         .extension()
@@ -87,7 +87,7 @@ pub fn load_world_any(path: impl AsRef<Path>) -> Result<World, SimError> {
     match ext.as_deref() {
         Some("toml") => load_world(path),
         Some("yaml" | "yml") => load_map_world(path, &ImageWorldOptions::default()),
-        _ => Err(SimError::invalid(
+        _ => Err(WorldError::invalid(
             "world",
             format!(
                 "{}: expected a .toml world file or a .yaml map_server map",
@@ -99,7 +99,7 @@ pub fn load_world_any(path: impl AsRef<Path>) -> Result<World, SimError> {
 
 /// Parses a world file's text; `origin_name` names it in errors (usually
 /// its path).
-pub fn parse_world(text: &str, origin_name: &str) -> Result<World, SimError> {
+pub fn parse_world(text: &str, origin_name: &str) -> Result<World, WorldError> {
     let ctx = Ctx {
         text,
         file: origin_name,
@@ -122,7 +122,7 @@ pub fn parse_world(text: &str, origin_name: &str) -> Result<World, SimError> {
     }
 
     World::new(name.get_ref().clone(), boundary, obstacles).map_err(|e| match e {
-        SimError::EmptyWorld(_) => ctx.err(
+        WorldError::EmptyWorld(_) => ctx.err(
             0..0,
             "boundary",
             "a world needs a boundary or at least one obstacle".into(),
@@ -187,8 +187,8 @@ impl Ctx<'_> {
             + 1
     }
 
-    fn err(&self, span: Range<usize>, field: &str, reason: String) -> SimError {
-        SimError::WorldFile {
+    fn err(&self, span: Range<usize>, field: &str, reason: String) -> WorldError {
+        WorldError::WorldFile {
             file: self.file.to_owned(),
             line: self.line(span.start),
             field: field.to_owned(),
@@ -198,7 +198,7 @@ impl Ctx<'_> {
 
     /// A TOML syntax or type error, with the field guessed from the text
     /// around it: toml reports a span and a message, not a key path.
-    fn toml_error(&self, e: &toml::de::Error) -> SimError {
+    fn toml_error(&self, e: &toml::de::Error) -> WorldError {
         let span = e.span().unwrap_or(0..0);
         let reason = e.message().trim().to_owned();
         self.err(span.clone(), &self.field_at(span.start), reason)
@@ -262,7 +262,7 @@ impl Ctx<'_> {
 
     /// Names: 1 to 128 of `A-Z a-z 0-9 _ . -`, so they are safe in file
     /// names, logs and URLs.
-    fn check_name(&self, name: &Spanned<String>, field: &str) -> Result<(), SimError> {
+    fn check_name(&self, name: &Spanned<String>, field: &str) -> Result<(), WorldError> {
         let n = name.get_ref();
         let ok = (1..=128).contains(&n.chars().count())
             && n.chars()
@@ -279,7 +279,7 @@ impl Ctx<'_> {
     }
 
     /// A point: exactly two finite numbers.
-    fn point(&self, p: &Spanned<Vec<f64>>, field: &str) -> Result<Point2, SimError> {
+    fn point(&self, p: &Spanned<Vec<f64>>, field: &str) -> Result<Point2, WorldError> {
         match p.get_ref().as_slice() {
             &[x, y] if x.is_finite() && y.is_finite() => Ok(Point2::new(x, y)),
             &[x, y] => Err(self.err(
@@ -300,7 +300,7 @@ impl Ctx<'_> {
         &self,
         points: &Spanned<Vec<Spanned<Vec<f64>>>>,
         field: &str,
-    ) -> Result<Polygon, SimError> {
+    ) -> Result<Polygon, WorldError> {
         let list = points.get_ref();
         if list.len() < 3 {
             return Err(self.err(
@@ -341,7 +341,7 @@ impl Ctx<'_> {
             .ok_or_else(|| self.err(points.span(), field, "is not a valid polygon".into()))
     }
 
-    fn obstacle(&self, o: &Spanned<ObstacleDoc>, field: &str) -> Result<Polygon, SimError> {
+    fn obstacle(&self, o: &Spanned<ObstacleDoc>, field: &str) -> Result<Polygon, WorldError> {
         let doc = o.get_ref();
         if let Some(name) = &doc.name {
             self.check_name(name, &format!("{field}.name"))?;
@@ -392,7 +392,7 @@ impl Ctx<'_> {
         Err(self.err(o.span(), field, "has no shape".into()))
     }
 
-    fn circle(&self, c: &CircleDoc, field: &str) -> Result<Polygon, SimError> {
+    fn circle(&self, c: &CircleDoc, field: &str) -> Result<Polygon, WorldError> {
         let center = self.point(&c.center, &format!("{field}.center"))?;
         let r = *c.radius.get_ref();
         if !(r.is_finite() && r > 0.0) {

@@ -1,6 +1,6 @@
 //! A world: polygon obstacles inside an optional boundary, in metres.
 
-use crate::error::SimError;
+use crate::error::WorldError;
 use crate::geometry::{Point2, Polygon, Segment};
 
 /// The ground truth robots move and sense in. Free space is inside the
@@ -20,11 +20,11 @@ impl World {
         name: impl Into<String>,
         boundary: Option<Polygon>,
         obstacles: Vec<Polygon>,
-    ) -> Result<Self, SimError> {
+    ) -> Result<Self, WorldError> {
         let name = name.into();
         let mut boxes = boundary.iter().chain(obstacles.iter()).map(Polygon::bounds);
         let Some(first) = boxes.next() else {
-            return Err(SimError::EmptyWorld(name));
+            return Err(WorldError::EmptyWorld(name));
         };
         let bounds = boxes.fold(first, |(min, max), (a, b)| {
             (

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use deog_mapfile::{Cell, MapImage};
-use deog_simulator::{ImageWorldOptions, Point2, World, load_map_world, load_world_any};
+use deog_world::{ImageWorldOptions, Point2, World, load_map_world, load_world_any};
 
 fn data(rel: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -5,7 +5,7 @@
 use std::collections::VecDeque;
 use std::path::PathBuf;
 
-use deog_simulator::{Point2, World, load_world, load_world_any};
+use deog_world::{Point2, World, load_world, load_world_any};
 
 fn world(name: &str) -> World {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -212,7 +212,7 @@ fn the_fill_notices_a_sealed_room() {
         "{text}\n[[obstacle]]\nrect = {{ min = [2.9, 12.94], max = [4.3, 13.06] }}\n\
          [[obstacle]]\nrect = {{ min = [8.94, 4.9], max = [9.06, 6.3] }}\n"
     );
-    let w = deog_simulator::parse_world(&closed, "office-closed.toml").expect("world");
+    let w = deog_world::parse_world(&closed, "office-closed.toml").expect("world");
     assert_eq!(sealed_rooms(&Raster::new(&w)), vec!["A"]);
 }
 

@@ -13,7 +13,7 @@ use std::path::Path;
 
 use deog_mapfile::{Cell, MapImage};
 
-use crate::error::SimError;
+use crate::error::WorldError;
 use crate::geometry::{Point2, Polygon};
 use crate::world::World;
 
@@ -30,7 +30,7 @@ pub struct ImageWorldOptions {
 pub fn load_map_world(
     yaml_path: impl AsRef<Path>,
     options: &ImageWorldOptions,
-) -> Result<World, SimError> {
+) -> Result<World, WorldError> {
     let yaml_path = yaml_path.as_ref();
     let map = MapImage::load_axis_aligned(yaml_path)?;
     let name = yaml_path
@@ -46,11 +46,11 @@ pub fn world_from_map(
     name: impl Into<String>,
     map: &MapImage,
     options: &ImageWorldOptions,
-) -> Result<World, SimError> {
+) -> Result<World, WorldError> {
     let ((x0, y0), (x1, y1)) = map.world_bounds()?;
     let res = map.resolution;
     if !(res.is_finite() && res > 0.0 && x0.is_finite() && y0.is_finite()) {
-        return Err(SimError::invalid(
+        return Err(WorldError::invalid(
             "map",
             format!("resolution {res} and origin ({x0}, {y0}) must be finite, resolution > 0"),
         ));

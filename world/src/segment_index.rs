@@ -12,7 +12,7 @@
 
 use std::ops::ControlFlow;
 
-use crate::error::SimError;
+use crate::error::WorldError;
 use crate::geometry::{Point2, Segment};
 
 /// The default bucket size, metres: about a Scout's diameter times two, so
@@ -91,9 +91,9 @@ impl SegmentIndex {
     /// Indexes `walls` with buckets of about `cell_size` metres (more if the
     /// world would need over 4 M buckets), leaving out non-finite walls.
     /// Errors on a cell size that is not finite or under 1 mm.
-    pub fn with_cell_size(walls: Vec<Segment>, cell_size: f64) -> Result<Self, SimError> {
+    pub fn with_cell_size(walls: Vec<Segment>, cell_size: f64) -> Result<Self, WorldError> {
         if !(cell_size.is_finite() && cell_size >= 1e-3) {
-            return Err(SimError::invalid(
+            return Err(WorldError::invalid(
                 "cell_size",
                 format!("must be a finite number of metres >= 0.001, got {cell_size}"),
             ));
@@ -387,7 +387,7 @@ fn designated(r: CellRect, cx: i64, cy: i64) -> (i64, i64) {
 
 /// The squared distance from `p` to the wall `w`.
 #[inline]
-pub(crate) fn distance2(w: &Segment, p: Point2) -> f64 {
+pub fn distance2(w: &Segment, p: Point2) -> f64 {
     let (dx, dy) = (w.b.x - w.a.x, w.b.y - w.a.y);
     let (px, py) = (p.x - w.a.x, p.y - w.a.y);
     let len2 = dx * dx + dy * dy;
