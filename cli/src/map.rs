@@ -9,6 +9,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use deog_grid::{Pose2, Resolution, SonarModelParams, TileSize};
 use deog_mapping::{Cartographer, FrameInput, PoseChoice, mapping_sonar_model};
+use deog_proto::names::check_robot_name;
 use deog_proto::v1 as pb;
 use deog_robot_client::{MapClient, UpdateSenderConfig};
 
@@ -113,7 +114,7 @@ fn pose_of(p: Option<pb::Pose2>) -> Option<Pose2> {
 
 /// Runs the cartographer.
 pub fn run(args: MapArgs) -> Result<()> {
-    deog_simulator::convert::robot_name("--robot", &args.robot)?;
+    check_robot_name(&args.robot).context("--robot")?;
     if args.batch_frames == 0 {
         bail!("--batch-frames must be at least 1");
     }

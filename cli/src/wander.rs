@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use deog_grid::{Pose2, SensorRing};
+use deog_proto::names::check_robot_name;
 use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient, SimClient};
 use deog_simulator::data_file::{DataUnits, format_line};
@@ -103,7 +104,7 @@ pub fn run(args: WanderArgs) -> Result<()> {
     if !(args.duration.is_finite() && args.duration >= 0.0) {
         bail!("--duration must be zero or positive, got {}", args.duration);
     }
-    deog_simulator::convert::robot_name("--robot", &args.robot)?;
+    check_robot_name(&args.robot).context("--robot")?;
     let params = WanderParams {
         cruise_speed: args.speed,
         ..WanderParams::default()
