@@ -8,11 +8,14 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, bail, ensure};
 use clap::Args;
-use deog_grid::{OccupancyThresholds, Pose2, Resolution, TileKey, TileSize};
+use deog_grid::{CellBox, CellIndex, OccupancyThresholds, Pose2, Resolution, TileKey, TileSize};
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::range_table::ConeGeometry;
 use deog_proto::v1 as pb;
+use deog_robot_client::convert::{
+    pose_from_wire, pose_to_wire, tile_key_from_wire, tile_key_to_wire,
+};
 use deog_robot_client::{MapClient, decode_tile};
 
 use crate::connection::ConnectionArgs;
@@ -148,23 +151,16 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             },
             budget_bytes: args.cache_mb << 20,
         })?;
+        // The whole plane: the map may grow anywhere.
+        let plane = CellBox {
+            min: CellIndex::new(i32::MIN, i32::MIN),
+            max: CellIndex::new(i32::MAX, i32::MAX),
+        };
         // Watch first, so no change between the first read and the stream is missed.
         let watch = client
-            .raw()
-            .watch_tiles(pb::WatchTilesRequest {
-                map: args.map.clone(),
-                // The whole plane: the map may grow anywhere.
-                region: Some(pb::CellBox {
-                    min_x: i32::MIN,
-                    min_y: i32::MIN,
-                    max_x: i32::MAX,
-                    max_y: i32::MAX,
-                }),
-                include_cells: false,
-            })
+            .watch_tiles(&args.map, plane, false)
             .await
-            .context("watching the map's tiles")?
-            .into_inner();
+            .context("watching the map's tiles")?;
         let (mut changes, watcher) = spawn_watcher(watch);
         match &args.initial_pose {
             Some(pose) => {
@@ -198,14 +194,9 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             }
         }
         let frames = client
-            .raw()
-            .subscribe_frames(pb::SubscribeFramesRequest {
-                robot: args.robot.clone(),
-                from_sequence: args.from,
-            })
+            .subscribe_frames(&args.robot, args.from)
             .await
-            .context("following the robot's frames")?
-            .into_inner();
+            .context("following the robot's frames")?;
         let mut queue = FrameQueue::spawn(frames, args.idle_exit);
         let shutdown = crate::signal::shutdown();
         tokio::pin!(shutdown);
@@ -265,7 +256,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             }
             let odometry = frame
                 .odometry
-                .map(|p| Pose2::new(p.x, p.y, p.theta))
+                .map(pose_from_wire)
                 .with_context(|| format!("frame {} has no odometry pose", frame.sequence))?;
             if mcl.predict(&odometry)? {
                 let needed = mcl.tiles_needed(&map);
@@ -294,11 +285,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
                         map: args.map.clone(),
                         frame_sequence: frame.sequence,
                         time_s: frame.time_s,
-                        pose: Some(pb::Pose2 {
-                            x: estimate.pose.x,
-                            y: estimate.pose.y,
-                            theta: estimate.pose.theta,
-                        }),
+                        pose: Some(pose_to_wire(estimate.pose)),
                         covariance: estimate.covariance.to_vec(),
                         particle_count: estimate.particle_count as u32,
                         converged: estimate.converged,
@@ -365,10 +352,7 @@ async fn fetch_tiles(
         .tiles(pb::TileQuery {
             map: map_name.to_string(),
             selection: Some(pb::tile_query::Selection::Keys(pb::TileKeys {
-                keys: keys
-                    .iter()
-                    .map(|k| pb::TileKey { x: k.x, y: k.y })
-                    .collect(),
+                keys: keys.iter().copied().map(tile_key_to_wire).collect(),
             })),
             newer_than_version: 0,
         })
@@ -407,7 +391,7 @@ fn spawn_watcher(
             let change = match stream.message().await {
                 Ok(Some(event)) => match event.event {
                     Some(pb::tile_event::Event::Changed(tile)) => match tile.key {
-                        Some(k) => Change::Tile(TileKey::new(k.x, k.y)),
+                        Some(key) => Change::Tile(tile_key_from_wire(key)),
                         None => continue,
                     },
                     Some(_) => Change::All,
