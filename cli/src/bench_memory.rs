@@ -37,7 +37,6 @@ use deog_evaluation::tracking::{LostStretch, Tracking, track};
 use deog_grid::{Pose2, Resolution, TileKey, TileSize};
 use deog_localizer::range_table::ConeGeometry;
 use deog_mapfile::write_map;
-use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient, SimClient};
 use deog_world::city;
 use deog_world::city::{MIN_SIDE_M, RESOLUTION_M};
@@ -853,12 +852,10 @@ async fn filter_figures(client: &MapClient) -> Result<FilterFigures> {
 /// The last frame sequence the server holds for the robot (0: none yet).
 async fn last_frame(client: &MapClient) -> u64 {
     client
-        .raw()
-        .list_robots(pb::ListRobotsRequest {})
+        .robots()
         .await
-        .map(|r| {
-            r.into_inner()
-                .robots
+        .map(|robots| {
+            robots
                 .iter()
                 .find(|r| r.robot == ROBOT)
                 .map_or(0, |r| r.last_sequence)

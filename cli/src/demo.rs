@@ -25,6 +25,7 @@ use deog_mapfile::{to_png, write_map};
 use deog_mapping::quality::{DEFAULT_ROBOT_RADIUS_M, MapQuality};
 use deog_mapping::{QualityInput, export_map, map_quality};
 use deog_proto::v1 as pb;
+use deog_robot_client::convert::pose_from_wire;
 use deog_robot_client::{ClientConfig, MapClient, SimClient};
 use deog_simulator::simulation::{SimConfig, Simulation};
 use deog_world::{World, load_world_spec};
@@ -401,7 +402,7 @@ async fn kidnap_robot(
 ) -> Result<KidnapDone> {
     let from = state
         .true_pose
-        .map(|p| Pose2::new(p.x, p.y, p.theta))
+        .map(pose_from_wire)
         .context("the simulator gave no true pose")?;
     let sampler = Simulation::new(world.clone(), SimConfig::default(), seed)
         .context("setting up the kidnap")?;
@@ -444,12 +445,7 @@ async fn progress(
     duration: f64,
 ) -> String {
     let mut line = format!("{now:5.0}/{duration:.0} s");
-    let listed = client
-        .raw()
-        .list_robots(pb::ListRobotsRequest {})
-        .await
-        .map(|r| r.into_inner().robots)
-        .unwrap_or_default();
+    let listed = client.robots().await.unwrap_or_default();
     let frames: u64 = listed.iter().map(|r| r.frame_count).sum();
     let _ = write!(line, " | {frames} frames");
     if let Ok(info) = client.map_info(MAP).await {

@@ -13,11 +13,11 @@ use deog_evaluation::localization::{
     self as evaluation, DEFAULT_CONVERGE_M, DEFAULT_CONVERGE_RAD, DEFAULT_KIDNAP_JUMP_M,
     EstimateSample, EvalInput, EvalParams, LocalizationReport, PlotInput, RobotPath, TruthSample,
 };
-use deog_grid::{Pose2, TileMap};
+use deog_grid::TileMap;
 use deog_mapping::quality::DEFAULT_ROBOT_RADIUS_M;
 use deog_mapping::{QualityInput, map_quality, verdict_image};
-use deog_proto::v1 as pb;
 use deog_robot_client::MapClient;
+use deog_robot_client::convert::pose_from_wire;
 use deog_world::{Point2, load_world_spec};
 
 use crate::connection::ConnectionArgs;
@@ -184,12 +184,9 @@ pub(crate) async fn fetch_map(client: &MapClient, name: &str) -> Result<TileMap>
 /// free space of the world counts as reachable.
 pub(crate) async fn robot_starts(client: &MapClient) -> Result<Vec<Point2>> {
     let robots = client
-        .raw()
-        .list_robots(pb::ListRobotsRequest {})
+        .robots()
         .await
-        .context("listing the robots whose frames the server holds")?
-        .into_inner()
-        .robots;
+        .context("listing the robots whose frames the server holds")?;
     let mut seeds = Vec::new();
     for robot in robots {
         let first = client
@@ -315,12 +312,11 @@ pub(crate) async fn read_robot(
         .read_poses(name, from, to)
         .await
         .with_context(|| format!("reading the pose estimates of robot {name}"))?;
-    let pose = |p: pb::Pose2| Pose2::new(p.x, p.y, p.theta);
     let truth: Vec<TruthSample> = frames
         .iter()
         .filter_map(|f| {
             f.true_pose
-                .map(|p| TruthSample::new(f.sequence, f.time_s, pose(p)))
+                .map(|p| TruthSample::new(f.sequence, f.time_s, pose_from_wire(p)))
         })
         .collect();
     if truth.len() < frames.len() {
@@ -347,7 +343,7 @@ pub(crate) async fn read_robot(
         })?;
         estimates.push(EstimateSample {
             sequence: estimate.frame_sequence,
-            pose: pose(p),
+            pose: pose_from_wire(p),
             filter_converged: estimate.converged,
         });
     }

@@ -49,12 +49,7 @@ pub fn run(args: FramesArgs) -> Result<()> {
                 format!("connecting to the map server at {}", args.connection.server)
             })?;
         let Some(robot) = &args.robot else {
-            let robots = map
-                .raw()
-                .list_robots(pb::ListRobotsRequest {})
-                .await?
-                .into_inner()
-                .robots;
+            let robots = map.robots().await?;
             if robots.is_empty() {
                 println!("no frames stored yet");
             }
@@ -72,14 +67,7 @@ pub fn run(args: FramesArgs) -> Result<()> {
             }
             return Ok(());
         }
-        let mut frames = map
-            .raw()
-            .subscribe_frames(pb::SubscribeFramesRequest {
-                robot: robot.clone(),
-                from_sequence: args.from,
-            })
-            .await?
-            .into_inner();
+        let mut frames = map.subscribe_frames(robot, args.from).await?;
         let shutdown = crate::signal::shutdown();
         tokio::pin!(shutdown);
         loop {

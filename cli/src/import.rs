@@ -10,7 +10,9 @@ use clap::{ArgGroup, Args};
 use deog_grid::{ClampLimits, Resolution, TileSize};
 use deog_mapfile::MapImage;
 use deog_mapping::{ImportTarget, image_origin_cell, import_map};
+use deog_proto::names::check_robot_name;
 use deog_proto::v1 as pb;
+use deog_robot_client::convert::pose_to_wire;
 use deog_robot_client::{MapClient, UpdateSenderConfig};
 use deog_simulator::data_file::{self, DataUnits};
 
@@ -72,7 +74,7 @@ pub fn run(args: ImportArgs) -> Result<()> {
 
 /// `--robot`: a data file's lines become the robot's frames.
 fn import_frames(args: &ImportArgs, robot: &str) -> Result<()> {
-    deog_simulator::convert::robot_name("--robot", robot)?;
+    check_robot_name(robot).context("--robot")?;
     if args.first_sequence == 0 {
         bail!("--first-sequence must be at least 1");
     }
@@ -89,11 +91,7 @@ fn import_frames(args: &ImportArgs, robot: &str) -> Result<()> {
         .iter()
         .enumerate()
         .map(|(i, line)| {
-            let pose = pb::Pose2 {
-                x: line.pose.x,
-                y: line.pose.y,
-                theta: line.pose.theta,
-            };
+            let pose = pose_to_wire(line.pose);
             pb::SonarFrame {
                 robot: robot.to_string(),
                 sequence: args.first_sequence + i as u64,

@@ -7,12 +7,15 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail, ensure};
 use clap::Args;
-use deog_grid::{OccupancyThresholds, Pose2, Resolution, TileKey, TileSize};
+use deog_grid::{CellBox, CellIndex, OccupancyThresholds, Pose2, Resolution, TileKey, TileSize};
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::range_table::ConeGeometry;
 use deog_localizer::step::{FetchedTile, Localizer, TileSource};
 use deog_proto::v1 as pb;
+use deog_robot_client::convert::{
+    pose_from_wire, pose_to_wire, tile_key_from_wire, tile_key_to_wire,
+};
 use deog_robot_client::{MapClient, decode_tile};
 
 use crate::connection::ConnectionArgs;
@@ -151,20 +154,14 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         budget_bytes: args.cache_mb << 20,
     })?;
     // Watch first, so no change between the first read and the stream is missed.
+    // The whole plane: the map may grow anywhere.
+    let plane = CellBox {
+        min: CellIndex::new(i32::MIN, i32::MIN),
+        max: CellIndex::new(i32::MAX, i32::MAX),
+    };
     let watch = runtime
-        .block_on(client.raw().watch_tiles(pb::WatchTilesRequest {
-            map: args.map.clone(),
-            // The whole plane: the map may grow anywhere.
-            region: Some(pb::CellBox {
-                min_x: i32::MIN,
-                min_y: i32::MIN,
-                max_x: i32::MAX,
-                max_y: i32::MAX,
-            }),
-            include_cells: false,
-        }))
-        .context("watching the map's tiles")?
-        .into_inner();
+        .block_on(client.watch_tiles(&args.map, plane, false))
+        .context("watching the map's tiles")?;
     let (mut changes, watcher) = spawn_watcher(watch);
     let mut tiles = ServerTiles {
         runtime: &runtime,
@@ -214,12 +211,8 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         }
     };
     let frames = runtime
-        .block_on(client.raw().subscribe_frames(pb::SubscribeFramesRequest {
-            robot: args.robot.clone(),
-            from_sequence: args.from,
-        }))
-        .context("following the robot's frames")?
-        .into_inner();
+        .block_on(client.subscribe_frames(&args.robot, args.from))
+        .context("following the robot's frames")?;
     let mut queue = FrameQueue::spawn(frames, args.idle_exit);
     let mut shutdown = Box::pin(crate::signal::shutdown());
     let (mut processed, mut corrections, mut last_sequence) = (0u64, 0u64, 0u64);
@@ -246,7 +239,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         }
         let odometry = frame
             .odometry
-            .map(|p| Pose2::new(p.x, p.y, p.theta))
+            .map(pose_from_wire)
             .with_context(|| format!("frame {} has no odometry pose", frame.sequence))?;
         let report = localizer
             .step(&odometry, &frame.ranges, Instant::now(), &mut tiles)
@@ -262,11 +255,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
                     map: args.map.clone(),
                     frame_sequence: frame.sequence,
                     time_s: frame.time_s,
-                    pose: Some(pb::Pose2 {
-                        x: estimate.pose.x,
-                        y: estimate.pose.y,
-                        theta: estimate.pose.theta,
-                    }),
+                    pose: Some(pose_to_wire(estimate.pose)),
                     covariance: estimate.covariance.to_vec(),
                     particle_count: estimate.particle_count as u32,
                     converged: estimate.converged,
@@ -333,18 +322,13 @@ impl TileSource for ServerTiles<'_> {
         &mut self,
         keys: &[TileKey],
     ) -> Result<Vec<FetchedTile>, Box<dyn std::error::Error + Send + Sync>> {
-        let wire = self.runtime.block_on(
-            self.client.tiles(pb::TileQuery {
-                map: self.map.to_string(),
-                selection: Some(pb::tile_query::Selection::Keys(pb::TileKeys {
-                    keys: keys
-                        .iter()
-                        .map(|k| pb::TileKey { x: k.x, y: k.y })
-                        .collect(),
-                })),
-                newer_than_version: 0,
-            }),
-        )?;
+        let wire = self.runtime.block_on(self.client.tiles(pb::TileQuery {
+            map: self.map.to_string(),
+            selection: Some(pb::tile_query::Selection::Keys(pb::TileKeys {
+                keys: keys.iter().copied().map(tile_key_to_wire).collect(),
+            })),
+            newer_than_version: 0,
+        }))?;
         Ok(decode_all(&wire, self.tile_size)?)
     }
 }
@@ -380,7 +364,7 @@ fn spawn_watcher(
             let change = match stream.message().await {
                 Ok(Some(event)) => match event.event {
                     Some(pb::tile_event::Event::Changed(tile)) => match tile.key {
-                        Some(k) => Change::Tile(TileKey::new(k.x, k.y)),
+                        Some(key) => Change::Tile(tile_key_from_wire(key)),
                         None => continue,
                     },
                     Some(_) => Change::All,

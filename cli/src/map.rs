@@ -7,9 +7,11 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
-use deog_grid::{Pose2, Resolution, SonarModelParams, TileSize};
+use deog_grid::{Resolution, SonarModelParams, TileSize};
 use deog_mapping::{Cartographer, FrameInput, PoseChoice, mapping_sonar_model};
+use deog_proto::names::check_robot_name;
 use deog_proto::v1 as pb;
+use deog_robot_client::convert::{pose_from_wire, pose_or_origin};
 use deog_robot_client::{MapClient, UpdateSenderConfig};
 
 use crate::connection::ConnectionArgs;
@@ -107,13 +109,9 @@ pub struct MapArgs {
 /// well inside the server's message limit even with dense tiles.
 const MAX_BATCH_TILES: usize = 256;
 
-fn pose_of(p: Option<pb::Pose2>) -> Option<Pose2> {
-    p.map(|p| Pose2::new(p.x, p.y, p.theta))
-}
-
 /// Runs the cartographer.
 pub fn run(args: MapArgs) -> Result<()> {
-    deog_simulator::convert::robot_name("--robot", &args.robot)?;
+    check_robot_name(&args.robot).context("--robot")?;
     if args.batch_frames == 0 {
         bail!("--batch-frames must be at least 1");
     }
@@ -184,14 +182,9 @@ pub fn run(args: MapArgs) -> Result<()> {
             None => None,
         };
         let frames = client
-            .raw()
-            .subscribe_frames(pb::SubscribeFramesRequest {
-                robot: args.robot.clone(),
-                from_sequence: start,
-            })
+            .subscribe_frames(&args.robot, start)
             .await
-            .context("following the robot's frames")?
-            .into_inner();
+            .context("following the robot's frames")?;
         let mut queue = FrameQueue::spawn(frames, args.idle_exit);
 
         let shutdown = crate::signal::shutdown();
@@ -235,8 +228,8 @@ pub fn run(args: MapArgs) -> Result<()> {
                 deltas.clear();
                 let input = FrameInput {
                     sequence: frame.sequence,
-                    true_pose: pose_of(frame.true_pose),
-                    odometry: pose_of(frame.odometry).unwrap_or_default(),
+                    true_pose: frame.true_pose.map(pose_from_wire),
+                    odometry: pose_or_origin(frame.odometry),
                     ranges: &frame.ranges,
                 };
                 cells += cartographer.integrate(&input, &mut deltas)? as u64;

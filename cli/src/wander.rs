@@ -7,7 +7,9 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use deog_grid::{Pose2, SensorRing};
+use deog_proto::names::check_robot_name;
 use deog_proto::v1 as pb;
+use deog_robot_client::convert::pose_or_origin;
 use deog_robot_client::{ClientConfig, MapClient, SimClient};
 use deog_simulator::data_file::{DataUnits, format_line};
 use deog_simulator::{WanderParams, Wanderer};
@@ -84,10 +86,6 @@ pub fn parse_pose(text: &str) -> Result<Pose2, String> {
     ))
 }
 
-fn pose_of(p: Option<&pb::Pose2>) -> Pose2 {
-    p.map_or(Pose2::new(0.0, 0.0, 0.0), |p| Pose2::new(p.x, p.y, p.theta))
-}
-
 /// What the wanderer did.
 #[derive(Debug, Default)]
 struct Summary {
@@ -103,7 +101,7 @@ pub fn run(args: WanderArgs) -> Result<()> {
     if !(args.duration.is_finite() && args.duration >= 0.0) {
         bail!("--duration must be zero or positive, got {}", args.duration);
     }
-    deog_simulator::convert::robot_name("--robot", &args.robot)?;
+    check_robot_name(&args.robot).context("--robot")?;
     let params = WanderParams {
         cruise_speed: args.speed,
         ..WanderParams::default()
@@ -123,7 +121,7 @@ pub fn run(args: WanderArgs) -> Result<()> {
             .with_context(|| format!("connecting to the simulator at {}", args.sim))?;
         if args.spawn {
             let state = sim.spawn(&args.robot, args.start).await?;
-            let p = pose_of(state.true_pose.as_ref());
+            let p = pose_or_origin(state.true_pose);
             tracing::info!(robot = %args.robot, x = p.x, y = p.y, theta = p.theta, "spawned");
         }
         let publisher = if args.no_publish {
@@ -168,7 +166,7 @@ pub fn run(args: WanderArgs) -> Result<()> {
                     continue;
                 }
                 last_sequence = state.sequence;
-                let true_pose = pose_of(state.true_pose.as_ref());
+                let true_pose = pose_or_origin(state.true_pose);
                 let start = *start_time.get_or_insert(state.time_s);
                 if let Some(previous) = last_pose {
                     summary.distance_m +=
@@ -184,7 +182,7 @@ pub fn run(args: WanderArgs) -> Result<()> {
                 if let Some(file) = data_file.as_mut() {
                     let pose = match args.data_pose {
                         PoseSource::True => true_pose,
-                        PoseSource::Odometry => pose_of(state.odometry.as_ref()),
+                        PoseSource::Odometry => pose_or_origin(state.odometry),
                     };
                     file.write_all(format_line(&pose, &state.ranges, args.data_units).as_bytes())
                         .context("writing the data file")?;

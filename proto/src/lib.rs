@@ -3,6 +3,8 @@
 //! # Layout
 //! - [`v1`]: every message and both services, `MapService` (the map server)
 //!   and `RobotService` (the simulator), with tonic clients and servers.
+//! - [`names`]: what the API accepts as a robot or map name or a client id,
+//!   the one rule every service and client checks.
 //! - [`FILE_DESCRIPTOR_SET`]: the encoded descriptors, for the gRPC reflection
 //!   service.
 
@@ -11,6 +13,8 @@
 pub mod v1 {
     tonic::include_proto!("deog.v1");
 }
+
+pub mod names;
 
 /// The encoded `FileDescriptorSet` of every deog proto file.
 pub const FILE_DESCRIPTOR_SET: &[u8] =

@@ -1,9 +1,10 @@
 //! [`MapClient`]: typed calls to the map server.
 
 use crate::connect::{ClientConfig, RawMapClient, connect, with_retry};
+use crate::convert::{cell_box_to_wire, decode_tile};
 use crate::error::ClientError;
 use crate::updates::{UpdateSender, UpdateSenderConfig};
-use deog_grid::{ClampLimits, Resolution, Tile, TileKey, TileMap, TileSize};
+use deog_grid::{CellBox, ClampLimits, Resolution, TileMap, TileSize};
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_client::MapServiceClient;
 use tokio_stream::StreamExt;
@@ -25,7 +26,8 @@ impl MapClient {
         Ok(Self { raw, config })
     }
 
-    /// The generated client, for calls this type does not wrap.
+    /// The generated client, for the calls no process makes and this type
+    /// therefore does not wrap (tests clear maps with it).
     pub fn raw(&self) -> RawMapClient {
         self.raw.clone()
     }
@@ -125,6 +127,24 @@ impl MapClient {
         Ok(out)
     }
 
+    /// Streams the tile events of `region` on `map` as they happen: changes
+    /// (with their cells when `include_cells`), resyncs after the stream
+    /// fell behind, and clears. Open it before reading the tiles, so no
+    /// change in between is missed.
+    pub async fn watch_tiles(
+        &self,
+        map: &str,
+        region: CellBox,
+        include_cells: bool,
+    ) -> Result<tonic::Streaming<pb::TileEvent>, ClientError> {
+        let request = pb::WatchTilesRequest {
+            map: map.to_string(),
+            region: Some(cell_box_to_wire(region)),
+            include_cells,
+        };
+        Ok(self.raw.clone().watch_tiles(request).await?.into_inner())
+    }
+
     /// Stores frames; returns (stored, duplicates). Safe to retry: the
     /// server skips sequences it has.
     pub async fn publish_frames(
@@ -161,6 +181,38 @@ impl MapClient {
             out.push(frame?);
         }
         Ok(out)
+    }
+
+    /// Streams a robot's stored frames from `from_sequence` on, then its
+    /// new frames as they are published (0: only frames published from now
+    /// on).
+    pub async fn subscribe_frames(
+        &self,
+        robot: &str,
+        from_sequence: u64,
+    ) -> Result<tonic::Streaming<pb::SonarFrame>, ClientError> {
+        let request = pb::SubscribeFramesRequest {
+            robot: robot.to_string(),
+            from_sequence,
+        };
+        Ok(self
+            .raw
+            .clone()
+            .subscribe_frames(request)
+            .await?
+            .into_inner())
+    }
+
+    /// The robots whose frames the server holds, with their sequence
+    /// ranges. One attempt, no retry: callers that poll it ask again anyway.
+    pub async fn robots(&self) -> Result<Vec<pb::RobotFrames>, ClientError> {
+        Ok(self
+            .raw
+            .clone()
+            .list_robots(pb::ListRobotsRequest {})
+            .await?
+            .into_inner()
+            .robots)
     }
 
     /// Stores a pose estimate.
@@ -207,24 +259,4 @@ impl MapClient {
         let last = self.update_cursor(map, client_id).await?;
         UpdateSender::start(self.clone(), info, client_id.to_string(), last + 1, config)
     }
-}
-
-/// A whole tile as the server sends it (dense cells): its key, version and
-/// cells.
-pub fn decode_tile(tile: &pb::Tile, size: TileSize) -> Result<(TileKey, u64, Tile), ClientError> {
-    let key = tile
-        .key
-        .map(|k| TileKey::new(k.x, k.y))
-        .ok_or_else(|| ClientError::Config("the server sent a tile without a key".into()))?;
-    if tile.encoding != pb::CellEncoding::DenseI16Le as i32 {
-        return Err(ClientError::Config(format!(
-            "the server sent tile ({}, {}) in encoding {}, expected dense",
-            key.x, key.y, tile.encoding
-        )));
-    }
-    Ok((
-        key,
-        tile.version,
-        Tile::from_dense_bytes(size, &tile.cells)?,
-    ))
 }

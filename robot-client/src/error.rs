@@ -24,6 +24,15 @@ pub enum ClientError {
     /// A tile from the server could not be decoded.
     #[error("bad tile from the server: {0}")]
     Grid(#[from] deog_grid::GridError),
+    /// A wire message lacks a field or holds a value the client cannot
+    /// use; `field` names it as the proto does.
+    #[error("{field}: {reason}")]
+    Wire {
+        /// Path of the offending field, e.g. `bounds_cells`.
+        field: String,
+        /// What is wrong with it.
+        reason: String,
+    },
     /// The update stream stopped for good (a refused batch, or the sender
     /// task ended).
     #[error("update stream failed: {0}")]
@@ -31,6 +40,14 @@ pub enum ClientError {
 }
 
 impl ClientError {
+    /// A [`ClientError::Wire`] naming `field`.
+    pub fn wire(field: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self::Wire {
+            field: field.into(),
+            reason: reason.into(),
+        }
+    }
+
     /// Whether retrying the same call later may succeed.
     pub fn is_transient(&self) -> bool {
         match self {

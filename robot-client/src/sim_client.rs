@@ -2,6 +2,7 @@
 //! robot process drives its (simulated) Scout.
 
 use crate::connect::{ClientConfig, TokenInterceptor, connect, with_retry};
+use crate::convert::pose_to_wire;
 use crate::error::ClientError;
 use deog_grid::Pose2;
 use deog_proto::v1 as pb;
@@ -10,21 +11,13 @@ use tonic::service::interceptor::InterceptedService;
 use tonic::transport::Channel;
 
 /// The generated robot-service client with the token interceptor.
-pub type RawSimClient = RobotServiceClient<InterceptedService<Channel, TokenInterceptor>>;
+type RawSimClient = RobotServiceClient<InterceptedService<Channel, TokenInterceptor>>;
 
 /// A connection to the simulator; cheap to clone.
 #[derive(Debug, Clone)]
 pub struct SimClient {
     raw: RawSimClient,
     config: ClientConfig,
-}
-
-fn pose_to_wire(p: &Pose2) -> pb::Pose2 {
-    pb::Pose2 {
-        x: p.x,
-        y: p.y,
-        theta: p.theta,
-    }
 }
 
 impl SimClient {
@@ -37,11 +30,6 @@ impl SimClient {
         })
     }
 
-    /// The generated client, for calls this type does not wrap.
-    pub fn raw(&self) -> RawSimClient {
-        self.raw.clone()
-    }
-
     /// Places a robot at `pose`, or at a random free pose when `None`.
     pub async fn spawn(
         &self,
@@ -50,7 +38,7 @@ impl SimClient {
     ) -> Result<pb::RobotState, ClientError> {
         let request = pb::SpawnRequest {
             name: name.to_string(),
-            pose: pose.as_ref().map(pose_to_wire),
+            pose: pose.map(pose_to_wire),
         };
         let raw = self.raw.clone();
         let state = with_retry(&self.config.retry, || {
@@ -100,7 +88,7 @@ impl SimClient {
     pub async fn teleport(&self, name: &str, pose: Pose2) -> Result<pb::RobotState, ClientError> {
         let request = pb::TeleportRequest {
             name: name.to_string(),
-            pose: Some(pose_to_wire(&pose)),
+            pose: Some(pose_to_wire(pose)),
         };
         let raw = self.raw.clone();
         let state = with_retry(&self.config.retry, || {

@@ -1,6 +1,7 @@
 //! [`TileCache`]: a client's copy of a map's tiles, kept current by version.
 
 use crate::client::MapClient;
+use crate::convert::{cell_box_to_wire, tile_key_from_wire, tile_key_to_wire};
 use crate::error::ClientError;
 use deog_grid::{CellBox, CellIndex, LogOdds, Tile, TileKey, TileSize};
 use deog_proto::v1 as pb;
@@ -71,12 +72,7 @@ impl TileCache {
         // Read before the tiles: a change in between is fetched again next
         // time rather than missed.
         let version = client.map_info(&self.map).await?.version;
-        let region_wire = pb::CellBox {
-            min_x: region.min.x,
-            min_y: region.min.y,
-            max_x: region.max.x,
-            max_y: region.max.y,
-        };
+        let region_wire = cell_box_to_wire(region);
         let listed = client
             .tiles(pb::TileQuery {
                 map: self.map.clone(),
@@ -90,7 +86,7 @@ impl TileCache {
         for tile in listed {
             let key = tile
                 .key
-                .map(|k| TileKey::new(k.x, k.y))
+                .map(tile_key_from_wire)
                 .ok_or_else(|| ClientError::Updates("tile without a key".into()))?;
             present.insert(key);
             if tile.cells.is_empty() {
@@ -101,7 +97,7 @@ impl TileCache {
                     .get(&key)
                     .is_none_or(|(cached, _)| *cached < tile.version)
                 {
-                    stale.push(pb::TileKey { x: key.x, y: key.y });
+                    stale.push(tile_key_to_wire(key));
                 }
                 continue;
             }
@@ -124,8 +120,8 @@ impl TileCache {
                 })
                 .await?
             {
-                if let Some(k) = tile.key {
-                    self.insert_wire(TileKey::new(k.x, k.y), &tile)?;
+                if let Some(key) = tile.key {
+                    self.insert_wire(tile_key_from_wire(key), &tile)?;
                     fetched += 1;
                 }
             }
@@ -139,8 +135,9 @@ impl TileCache {
     pub fn apply_event(&mut self, event: &pb::TileEvent) -> Result<(), ClientError> {
         match &event.event {
             Some(pb::tile_event::Event::Changed(tile)) => {
-                let Some(k) = tile.key else { return Ok(()) };
-                let key = TileKey::new(k.x, k.y);
+                let Some(key) = tile.key.map(tile_key_from_wire) else {
+                    return Ok(());
+                };
                 if tile.cells.is_empty() {
                     // Only told that it changed: drop ours so it is re-read.
                     self.tiles.remove(&key);

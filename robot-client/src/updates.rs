@@ -9,6 +9,7 @@
 
 use crate::client::MapClient;
 use crate::connect::RetryPolicy;
+use crate::convert::encode_delta;
 use crate::error::{ClientError, is_transient};
 use deog_grid::{TileDelta, TileKey, TileSize};
 use deog_proto::v1 as pb;
@@ -234,29 +235,6 @@ impl Drop for UpdateSender {
         if let Some(task) = self.task.take() {
             task.abort();
         }
-    }
-}
-
-/// The sparse form when it is smaller, else the dense one.
-pub fn encode_delta(delta: &TileDelta) -> pb::TileDelta {
-    let key = Some(pb::TileKey {
-        x: delta.key.x,
-        y: delta.key.y,
-    });
-    let sparse = (delta.nonzero_count() * 4 < delta.raw().len() * 2)
-        .then(|| delta.to_sparse_bytes())
-        .flatten();
-    match sparse {
-        Some(cells) => pb::TileDelta {
-            key,
-            encoding: pb::CellEncoding::SparseI16Le as i32,
-            cells,
-        },
-        None => pb::TileDelta {
-            key,
-            encoding: pb::CellEncoding::DenseI16Le as i32,
-            cells: delta.to_dense_bytes(),
-        },
     }
 }
 

@@ -162,20 +162,9 @@ async fn watch(server: &Server, include_cells: bool) -> tonic::Streaming<pb::Til
     let region = tiles_box(-100, -100, 100, 100);
     server
         .client
-        .raw()
-        .watch_tiles(pb::WatchTilesRequest {
-            map: MAP.into(),
-            region: Some(pb::CellBox {
-                min_x: region.min.x,
-                min_y: region.min.y,
-                max_x: region.max.x,
-                max_y: region.max.y,
-            }),
-            include_cells,
-        })
+        .watch_tiles(MAP, region, include_cells)
         .await
         .expect("watch")
-        .into_inner()
 }
 
 #[tokio::test]

@@ -4,6 +4,7 @@
 use crate::error::StoreError;
 use crate::store::{MapRecord, MapSettings};
 use deog_grid::{CellBox, CellIndex, ClampLimits, Resolution, Tile, TileDelta, TileKey, TileSize};
+use deog_proto::names::{self, NameError};
 use deog_proto::v1 as pb;
 
 /// Limits the server puts on requests.
@@ -52,40 +53,29 @@ impl Limits {
     }
 }
 
-/// A map, robot or client name: 1 to 128 characters of `[A-Za-z0-9_.-]`
-/// (client ids may also hold `/` and `:`).
-pub fn name(field: &str, value: &str, extra: &[char]) -> Result<String, StoreError> {
-    if value.is_empty() || value.len() > 128 {
-        return Err(StoreError::invalid(
-            field,
-            format!("must be 1 to 128 characters, got {}", value.len()),
-        ));
-    }
-    if let Some(bad) = value
-        .chars()
-        .find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '_' | '.' | '-') || extra.contains(c)))
-    {
-        return Err(StoreError::invalid(
-            field,
-            format!("character {bad:?} is not allowed (use A-Z a-z 0-9 _ . -)"),
-        ));
-    }
+/// A map name: 1 to 128 characters of `[A-Za-z0-9_.-]`
+/// ([`names::check_map_name`]).
+pub fn map_name(field: &str, value: &str) -> Result<String, StoreError> {
+    names::check_map_name(value).map_err(|e| invalid_name(field, e))?;
     Ok(value.to_string())
 }
 
-/// A map name.
-pub fn map_name(field: &str, value: &str) -> Result<String, StoreError> {
-    name(field, value, &[])
-}
-
-/// A robot name.
+/// A robot name, by the rule the simulator applies too
+/// ([`names::check_robot_name`]).
 pub fn robot_name(field: &str, value: &str) -> Result<String, StoreError> {
-    name(field, value, &[])
+    names::check_robot_name(value).map_err(|e| invalid_name(field, e))?;
+    Ok(value.to_string())
 }
 
-/// A client id.
+/// A client id: a name that may also hold `/` and `:`
+/// ([`names::check_client_id`]).
 pub fn client_id(field: &str, value: &str) -> Result<String, StoreError> {
-    name(field, value, &['/', ':'])
+    names::check_client_id(value).map_err(|e| invalid_name(field, e))?;
+    Ok(value.to_string())
+}
+
+fn invalid_name(field: &str, error: NameError) -> StoreError {
+    StoreError::invalid(field, error.to_string())
 }
 
 fn finite(field: &str, value: f64) -> Result<f64, StoreError> {
@@ -331,4 +321,31 @@ pub fn sequence_range(from: u64, to: u64) -> Result<(u64, u64), StoreError> {
         ));
     }
     Ok((from, to))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bad_name_is_refused_naming_the_field() {
+        let refused = |e: StoreError| match e {
+            StoreError::InvalidArgument { .. } => e.to_string(),
+            other => panic!("expected an invalid argument, got {other:?}"),
+        };
+        assert_eq!(
+            refused(map_name("name", "").unwrap_err()),
+            "name: must be 1 to 128 characters, got 0"
+        );
+        assert_eq!(
+            refused(robot_name("frames[2].robot", "a b").unwrap_err()),
+            "frames[2].robot: character ' ' is not allowed (use A-Z a-z 0-9 _ . -)"
+        );
+        assert_eq!(
+            refused(map_name("map", "a/b").unwrap_err()),
+            "map: character '/' is not allowed (use A-Z a-z 0-9 _ . -)"
+        );
+        assert_eq!(client_id("client_id", "carto/a:1").unwrap(), "carto/a:1");
+        assert_eq!(robot_name("robot", "scout-1").unwrap(), "scout-1");
+    }
 }

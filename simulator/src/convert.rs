@@ -2,6 +2,7 @@
 //! refusal names the field.
 
 use deog_grid::Pose2;
+use deog_proto::names;
 use deog_proto::v1 as pb;
 use tonic::{Code, Status};
 
@@ -40,23 +41,10 @@ pub fn check_size(what: &str, message: &impl prost::Message, limit: usize) -> Re
     Ok(())
 }
 
-/// A robot name: 1 to 128 characters of `[A-Za-z0-9_.-]`.
+/// A robot name: 1 to 128 characters of `[A-Za-z0-9_.-]`, the rule the
+/// map server applies too ([`names::check_robot_name`]).
 pub fn robot_name(field: &str, value: &str) -> Result<String, SimError> {
-    if value.is_empty() || value.len() > 128 {
-        return Err(SimError::invalid(
-            field,
-            format!("must be 1 to 128 characters, got {}", value.len()),
-        ));
-    }
-    if let Some(bad) = value
-        .chars()
-        .find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '_' | '.' | '-')))
-    {
-        return Err(SimError::invalid(
-            field,
-            format!("character {bad:?} is not allowed (use A-Z a-z 0-9 _ . -)"),
-        ));
-    }
+    names::check_robot_name(value).map_err(|e| SimError::invalid(field, e.to_string()))?;
     Ok(value.to_string())
 }
 
@@ -117,5 +105,23 @@ pub fn robot_state(s: &RobotSnapshot) -> pb::RobotState {
             angular: s.velocity.1,
         }),
         bumper: s.bumper,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bad_robot_name_is_an_invalid_argument_naming_the_field() {
+        let status = Status::from(robot_name("name", "").unwrap_err());
+        assert_eq!(status.code(), Code::InvalidArgument);
+        assert_eq!(status.message(), "name: must be 1 to 128 characters, got 0");
+        let status = Status::from(robot_name("name", "scout:1").unwrap_err());
+        assert_eq!(
+            status.message(),
+            "name: character ':' is not allowed (use A-Z a-z 0-9 _ . -)"
+        );
+        assert_eq!(robot_name("name", "scout-1").unwrap(), "scout-1");
     }
 }
