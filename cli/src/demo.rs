@@ -20,10 +20,10 @@ use clap::Args;
 use deog_evaluation::localization::{
     self as evaluation, EvalInput, EvalParams, LocalizationReport, PlotInput, RobotPath,
 };
+use deog_evaluation::map_quality::{DEFAULT_ROBOT_RADIUS_M, MapQuality, QualityInput, map_quality};
 use deog_grid::{Pose2, TileMap};
 use deog_mapfile::{to_png, write_map};
-use deog_mapping::quality::{DEFAULT_ROBOT_RADIUS_M, MapQuality};
-use deog_mapping::{QualityInput, export_map, map_quality};
+use deog_mapping::export_map;
 use deog_proto::v1 as pb;
 use deog_robot_client::convert::pose_from_wire;
 use deog_robot_client::{ClientConfig, MapClient, SimClient};

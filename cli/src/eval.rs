@@ -1,6 +1,6 @@
 //! `deog eval`: evaluation reports. `deog eval map` judges a map on the
 //! server against the ground truth of the world it was built in
-//! (definitions in `deog_mapping::quality`); `deog eval localize` judges a
+//! (definitions in `deog_evaluation::map_quality`); `deog eval localize` judges a
 //! localizer's pose estimates against the robot's true poses, with the
 //! thesis's error table, convergence and kidnap recovery, and plots the
 //! paths (definitions in `deog_evaluation::localization`).
@@ -13,9 +13,10 @@ use deog_evaluation::localization::{
     self as evaluation, DEFAULT_CONVERGE_M, DEFAULT_CONVERGE_RAD, DEFAULT_KIDNAP_JUMP_M,
     EstimateSample, EvalInput, EvalParams, LocalizationReport, PlotInput, RobotPath, TruthSample,
 };
+use deog_evaluation::map_quality::{
+    DEFAULT_ROBOT_RADIUS_M, QualityInput, map_quality, verdict_image,
+};
 use deog_grid::TileMap;
-use deog_mapping::quality::DEFAULT_ROBOT_RADIUS_M;
-use deog_mapping::{QualityInput, map_quality, verdict_image};
 use deog_robot_client::MapClient;
 use deog_robot_client::convert::pose_from_wire;
 use deog_world::{Point2, load_world_spec};

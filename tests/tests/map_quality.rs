@@ -19,7 +19,7 @@ const RESOLUTION_M: f64 = 0.05;
 const XS: std::ops::Range<i32> = -2..100;
 const YS: std::ops::Range<i32> = -2..80;
 
-/// The ground-truth rule of `deog_mapping::quality`, restated: a cell is
+/// The ground-truth rule of `deog_evaluation::map_quality`, restated: a cell is
 /// occupied when a wall passes within half its diagonal (plus 1e-9
 /// relative) of its centre or its centre is not free.
 struct Truth {

@@ -114,13 +114,13 @@
 
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
 
-use thiserror::Error;
-
 mod evaluate;
 mod input;
 pub mod plot;
 mod report;
+pub(crate) use report::pretty;
 
+pub use crate::error::EvaluationError;
 pub use evaluate::{AxisStats, ErrorStats, Kidnap, LocalizationReport, Settling, evaluate};
 pub use input::{EstimateSample, EvalInput, EvalParams, TruthSample};
 pub use plot::{PlotInput, Raster, RobotPath, render_plot};
@@ -146,47 +146,6 @@ pub const DEFAULT_MAX_SPEED_MPS: f64 = 1.0;
 /// Default top turn rate of the robot, radians per second: the simulated
 /// Scout's limit.
 pub const DEFAULT_MAX_TURN_RATE_RAD_S: f64 = FRAC_PI_2;
-
-/// Why an evaluation could not be made. Each variant names the offending
-/// field or robot.
-#[derive(Debug, Clone, PartialEq, Error)]
-pub enum EvaluationError {
-    /// A parameter or an input sample is unusable.
-    #[error("{field}: {reason}")]
-    Invalid {
-        /// The parameter or sample, e.g. `converge_m`, `truth[3].pose`.
-        field: String,
-        /// What is wrong with it.
-        reason: String,
-    },
-    /// There is nothing to evaluate.
-    #[error("robot {robot}: {reason}")]
-    NoData {
-        /// The robot evaluated.
-        robot: String,
-        /// What is missing.
-        reason: String,
-    },
-    /// The plot could not be drawn or encoded.
-    #[error("plot: {0}")]
-    Plot(String),
-}
-
-impl EvaluationError {
-    fn invalid(field: impl Into<String>, reason: impl Into<String>) -> Self {
-        Self::Invalid {
-            field: field.into(),
-            reason: reason.into(),
-        }
-    }
-
-    fn no_data(robot: &str, reason: impl Into<String>) -> Self {
-        Self::NoData {
-            robot: robot.to_string(),
-            reason: reason.into(),
-        }
-    }
-}
 
 #[cfg(test)]
 mod tests;
