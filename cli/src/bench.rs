@@ -27,6 +27,9 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail, ensure};
 use clap::{Args, Subcommand};
 use deog_grid::{LogOdds, TileDelta, TileKey, TileSize};
+use deog_harness::proc_stats::{
+    cpu_seconds as proc_cpu_seconds, own_cpu_seconds, status_kb as proc_status_kb,
+};
 use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient, UpdateSenderConfig};
 use tokio::sync::Barrier;
@@ -40,8 +43,6 @@ const BASELINE_COMMIT_EVERY: u64 = 300;
 /// Log-odds deltas (1/1000 nat) of the two kinds of evidence sent: a cell
 /// gets them in turn on successive visits, so beliefs move both ways.
 const EVIDENCE: (i16, i16) = (400, -300);
-/// Clock ticks per second of `/proc/<pid>/stat` on Linux.
-const CLOCK_TICKS: f64 = 100.0;
 
 /// Options of `deog bench`.
 #[derive(Debug, Args)]
@@ -274,7 +275,7 @@ impl ServerProcess {
 
     /// User plus system CPU seconds the server has used.
     fn cpu_seconds(&self) -> Result<f64> {
-        proc_cpu_seconds(&format!("/proc/{}/stat", self.pid))
+        proc_cpu_seconds(self.pid)
     }
 
     fn print_log_tail(&self) {
@@ -293,34 +294,6 @@ impl Drop for ServerProcess {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
-}
-
-/// A `kB` field of `/proc/<pid>/status`, such as `VmRSS` or `VmHWM`.
-pub(crate) fn proc_status_kb(pid: u32, field: &str) -> Result<u64> {
-    let status = fs::read_to_string(format!("/proc/{pid}/status"))
-        .with_context(|| format!("reading /proc/{pid}/status"))?;
-    status
-        .lines()
-        .find_map(|line| {
-            let rest = line.strip_prefix(field)?.strip_prefix(':')?;
-            rest.split_whitespace().next()?.parse().ok()
-        })
-        .with_context(|| format!("no {field} in /proc/{pid}/status"))
-}
-
-/// User plus system CPU seconds from a `/proc/.../stat` file.
-fn proc_cpu_seconds(path: &str) -> Result<f64> {
-    let stat = fs::read_to_string(path).with_context(|| format!("reading {path}"))?;
-    let (_, rest) = stat.rsplit_once(')').context("malformed stat file")?;
-    // After the command: state is field 3, utime 14 and stime 15.
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    let ticks = |i: usize| -> Result<f64> {
-        Ok(fields
-            .get(i - 3)
-            .context("short stat file")?
-            .parse::<u64>()? as f64)
-    };
-    Ok((ticks(14)? + ticks(15)?) / CLOCK_TICKS)
 }
 
 fn create_map_request(name: &str) -> pb::CreateMapRequest {
@@ -418,11 +391,8 @@ async fn durable_throughput(
         }));
     }
     barrier.wait().await;
-    let (start, server_cpu, bench_cpu) = (
-        Instant::now(),
-        server.cpu_seconds()?,
-        proc_cpu_seconds("/proc/self/stat")?,
-    );
+    let (start, server_cpu, bench_cpu) =
+        (Instant::now(), server.cpu_seconds()?, own_cpu_seconds()?);
     let mut runs = Vec::with_capacity(clients);
     for task in tasks {
         runs.push(task.await.context("client task panicked")??);
@@ -430,7 +400,7 @@ async fn durable_throughput(
     let end = runs.iter().map(|r| r.finished).max().unwrap_or(start);
     let seconds = end.duration_since(start).as_secs_f64();
     let server_cpu_s = server.cpu_seconds()? - server_cpu;
-    let bench_cpu_s = proc_cpu_seconds("/proc/self/stat")? - bench_cpu;
+    let bench_cpu_s = own_cpu_seconds()? - bench_cpu;
     let info = admin.map_info(&map).await?;
     let batches: u64 = runs.iter().map(|r| r.batches).sum();
     let applied: u64 = runs.iter().map(|r| r.applied).sum();

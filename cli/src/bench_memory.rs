@@ -41,8 +41,8 @@ use deog_robot_client::{ClientConfig, MapClient, SimClient};
 use deog_world::city;
 use deog_world::city::{MIN_SIDE_M, RESOLUTION_M};
 
-use crate::bench::proc_status_kb;
-use crate::supervisor::{Role, Supervisor, connect, free_loopback_addr, log_tail, os};
+use deog_harness::proc_stats::{cpu_seconds as proc_cpu_seconds, status_kb as proc_status_kb};
+use deog_harness::{Role, Supervisor, connect, free_loopback_addr, log_tail, os};
 
 /// The map's name on the server.
 const MAP: &str = "bench";
@@ -327,31 +327,6 @@ impl MemorySamples {
             self.series.push((t, rss));
         }
     }
-}
-
-/// User plus system CPU seconds process `pid` has used, from
-/// `/proc/<pid>/stat` (fields 14 and 15, after the parenthesised name).
-fn proc_cpu_seconds(pid: u32) -> Result<f64> {
-    /// Clock ticks per second of `/proc/<pid>/stat` on Linux.
-    const CLOCK_TICKS: f64 = 100.0;
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat"))
-        .with_context(|| format!("reading /proc/{pid}/stat"))?;
-    // The name may hold spaces and parentheses: the fields start after the
-    // last ')'.
-    let rest = stat
-        .rsplit_once(')')
-        .map(|(_, rest)| rest)
-        .context("no process name in /proc/<pid>/stat")?;
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    // After the name: state is field 3, so utime (14) and stime (15) are
-    // at 11 and 12.
-    let ticks = |i: usize| -> Result<f64> {
-        fields
-            .get(i)
-            .and_then(|f| f.parse::<f64>().ok())
-            .with_context(|| format!("field {} of /proc/{pid}/stat", i + 3))
-    };
-    Ok((ticks(11)? + ticks(12)?) / CLOCK_TICKS)
 }
 
 /// Finding the baseline: the first frame past [`BASELINE_MOVE_M`] from the
@@ -699,7 +674,7 @@ async fn bench(args: &LocalizeMemoryArgs, plan: &Plan, work: &Path) -> Result<Fi
     let filter = filter_figures(&client).await?;
     let logged_cache_max_mib = logged_cache_max(&text);
 
-    let samples = crate::eval::read_robot(&client, ROBOT, Some(MAP), 0, 0).await?;
+    let samples = deog_harness::run_reads::read_robot(&client, ROBOT, Some(MAP), 0, 0).await?;
     let report = evaluation::evaluate(&EvalInput {
         robot: ROBOT,
         map: Some(MAP),

@@ -20,7 +20,9 @@ use clap::Args;
 use deog_evaluation::localization::{
     self as evaluation, EvalInput, EvalParams, LocalizationReport, PlotInput, RobotPath,
 };
-use deog_evaluation::map_quality::{DEFAULT_ROBOT_RADIUS_M, MapQuality, QualityInput, map_quality};
+use deog_evaluation::map_quality::{
+    DEFAULT_ROBOT_RADIUS_M, MapQuality, QualityInput, map_quality, verdict_png,
+};
 use deog_grid::{Pose2, TileMap};
 use deog_mapfile::{to_png, write_map};
 use deog_mapping::export_map;
@@ -32,7 +34,8 @@ use deog_world::{World, load_world_spec};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::supervisor::{Role, Supervisor, connect, free_loopback_addr, os};
+use deog_harness::run_reads::{read_map, read_robot, robot_starts};
+use deog_harness::{Role, Supervisor, connect, free_loopback_addr, os};
 
 /// Options of `deog demo`.
 #[derive(Debug, Args)]
@@ -556,8 +559,8 @@ struct Results {
 /// Judges the map against the world and each localizer against its
 /// robot's true poses; writes the map files and the path plots.
 async fn judge(client: &MapClient, plan: &Plan, out: &Path) -> Result<Results> {
-    let map = crate::eval::fetch_map(client, MAP).await?;
-    let seeds = crate::eval::robot_starts(client).await?;
+    let map = read_map(client, MAP).await?;
+    let seeds = robot_starts(client).await?;
     let input = QualityInput {
         map: &map,
         world: &plan.world,
@@ -566,7 +569,9 @@ async fn judge(client: &MapClient, plan: &Plan, out: &Path) -> Result<Results> {
     };
     let quality = map_quality(&input).context("judging the map against the world")?;
     let (map_yaml, map_png) = write_map_files(&map, out)?;
-    crate::eval::write_verdict_png(&input, &out.join(VERDICT_PNG))?;
+    let png = verdict_png(&input).context("drawing where the map is right and wrong")?;
+    std::fs::write(out.join(VERDICT_PNG), png)
+        .with_context(|| format!("writing {}", out.join(VERDICT_PNG).display()))?;
     let mut robots = Vec::with_capacity(plan.robots.len());
     for name in &plan.robots {
         // Judge from the first frame the localizer saw, not from the
@@ -580,7 +585,7 @@ async fn judge(client: &MapClient, plan: &Plan, out: &Path) -> Result<Results> {
             .map(|p| p.frame_sequence)
             .min()
             .with_context(|| format!("the localizer of {name} published no estimate"))?;
-        let samples = crate::eval::read_robot(client, name, Some(MAP), first, 0).await?;
+        let samples = read_robot(client, name, Some(MAP), first, 0).await?;
         let report = evaluation::evaluate(&EvalInput {
             robot: name,
             map: Some(MAP),

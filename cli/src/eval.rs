@@ -5,21 +5,20 @@
 //! thesis's error table, convergence and kidnap recovery, and plots the
 //! paths (definitions in `deog_evaluation::localization`).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use deog_evaluation::localization::{
-    self as evaluation, DEFAULT_CONVERGE_M, DEFAULT_CONVERGE_RAD, DEFAULT_KIDNAP_JUMP_M,
-    EstimateSample, EvalInput, EvalParams, LocalizationReport, PlotInput, RobotPath, TruthSample,
+    self as evaluation, DEFAULT_CONVERGE_M, DEFAULT_CONVERGE_RAD, DEFAULT_KIDNAP_JUMP_M, EvalInput,
+    EvalParams, LocalizationReport, PlotInput, RobotPath,
 };
 use deog_evaluation::map_quality::{
-    DEFAULT_ROBOT_RADIUS_M, QualityInput, map_quality, verdict_image,
+    DEFAULT_ROBOT_RADIUS_M, QualityInput, map_quality, verdict_png,
 };
-use deog_grid::TileMap;
+use deog_harness::run_reads::{read_map, read_robot, robot_starts};
 use deog_robot_client::MapClient;
-use deog_robot_client::convert::pose_from_wire;
-use deog_world::{Point2, load_world_spec};
+use deog_world::load_world_spec;
 
 use crate::connection::ConnectionArgs;
 
@@ -113,10 +112,6 @@ pub struct EvalLocalizeArgs {
     pub connection: ConnectionArgs,
 }
 
-/// The verdict picture's longer side at most, pixels: small worlds are
-/// scaled up to about this, a cell a square of pixels.
-pub(crate) const VERDICT_MAX_SIDE_PX: u32 = 1000;
-
 /// Runs the evaluation asked for.
 pub fn run(args: EvalArgs) -> Result<()> {
     match args.target {
@@ -137,7 +132,7 @@ fn run_map(args: EvalMapArgs) -> Result<()> {
             .with_context(|| {
                 format!("connecting to the map server at {}", args.connection.server)
             })?;
-        let map = fetch_map(&client, &args.map).await?;
+        let map = read_map(&client, &args.map).await?;
         let seeds = robot_starts(&client).await?;
         anyhow::Ok((map, seeds))
     })?;
@@ -156,59 +151,10 @@ fn run_map(args: EvalMapArgs) -> Result<()> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     if let Some(path) = &args.png {
-        write_verdict_png(&input, path)?;
+        let png = verdict_png(&input).context("drawing where the map is right and wrong")?;
+        std::fs::write(path, png).with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
-}
-
-/// Draws where the map is right and wrong, scaled up to about
-/// [`VERDICT_MAX_SIDE_PX`], and writes it to `path` as a PNG.
-pub(crate) fn write_verdict_png(input: &QualityInput<'_>, path: &Path) -> Result<()> {
-    let image = verdict_image(input).context("drawing where the map is right and wrong")?;
-    let image = image.scaled(image.fit_factor(VERDICT_MAX_SIDE_PX));
-    let png = deog_mapfile::encode_rgb_png(image.width, image.height, &image.rgb)?;
-    std::fs::write(path, png).with_context(|| format!("writing {}", path.display()))
-}
-
-/// Every stored tile of `name`, as a tile map with the map's settings.
-pub(crate) async fn fetch_map(client: &MapClient, name: &str) -> Result<TileMap> {
-    let (_, map) = client
-        .download(name)
-        .await
-        .with_context(|| format!("reading map {name}"))?;
-    Ok(map)
-}
-
-/// Where each robot whose frames the server holds started: the true pose
-/// of its first frame. Robots whose first frame has no true pose (frames
-/// imported with odometry only) give none; with no seed at all the whole
-/// free space of the world counts as reachable.
-pub(crate) async fn robot_starts(client: &MapClient) -> Result<Vec<Point2>> {
-    let robots = client
-        .robots()
-        .await
-        .context("listing the robots whose frames the server holds")?;
-    let mut seeds = Vec::new();
-    for robot in robots {
-        let first = client
-            .read_frames(&robot.robot, robot.first_sequence, robot.first_sequence)
-            .await
-            .with_context(|| format!("reading the first frame of robot {}", robot.robot))?;
-        match first.first().and_then(|f| f.true_pose) {
-            Some(p) => seeds.push(Point2::new(p.x, p.y)),
-            None => {
-                tracing::warn!(robot = %robot.robot, "first frame has no true pose: not a seed")
-            }
-        }
-    }
-    Ok(seeds)
-}
-
-/// One robot's true poses and estimates, as the evaluation takes them.
-pub(crate) struct RobotSamples {
-    pub name: String,
-    pub truth: Vec<TruthSample>,
-    pub estimates: Vec<EstimateSample>,
 }
 
 /// Reads the robots' frames and estimates (and the map, to plot over),
@@ -240,7 +186,7 @@ fn run_localize(args: EvalLocalizeArgs) -> Result<()> {
             robots.push(read_robot(&client, name, args.map.as_deref(), from, to).await?);
         }
         let map = match (&args.plot, &args.map) {
-            (Some(_), Some(name)) => Some(fetch_map(&client, name).await?),
+            (Some(_), Some(name)) => Some(read_map(&client, name).await?),
             _ => None,
         };
         anyhow::Ok((robots, map))
@@ -294,70 +240,4 @@ fn run_localize(args: EvalLocalizeArgs) -> Result<()> {
         );
     }
     Ok(())
-}
-
-/// A robot's frames with a true pose and its estimates (on `map`, when
-/// given) for frames `from..=to` (0 = open).
-pub(crate) async fn read_robot(
-    client: &MapClient,
-    name: &str,
-    map: Option<&str>,
-    from: u64,
-    to: u64,
-) -> Result<RobotSamples> {
-    let frames = client
-        .read_frames(name, from, to)
-        .await
-        .with_context(|| format!("reading the frames of robot {name}"))?;
-    let poses = client
-        .read_poses(name, from, to)
-        .await
-        .with_context(|| format!("reading the pose estimates of robot {name}"))?;
-    let truth: Vec<TruthSample> = frames
-        .iter()
-        .filter_map(|f| {
-            f.true_pose
-                .map(|p| TruthSample::new(f.sequence, f.time_s, pose_from_wire(p)))
-        })
-        .collect();
-    if truth.len() < frames.len() {
-        tracing::info!(
-            robot = name,
-            skipped = frames.len() - truth.len(),
-            "frames without a true pose skipped"
-        );
-    }
-    let mut maps: Vec<&str> = Vec::new();
-    let mut estimates = Vec::with_capacity(poses.len());
-    for estimate in &poses {
-        if map.is_some_and(|m| m != estimate.map) {
-            continue;
-        }
-        if !maps.contains(&estimate.map.as_str()) {
-            maps.push(&estimate.map);
-        }
-        let p = estimate.pose.with_context(|| {
-            format!(
-                "the estimate of robot {name} for frame {} has no pose",
-                estimate.frame_sequence
-            )
-        })?;
-        estimates.push(EstimateSample {
-            sequence: estimate.frame_sequence,
-            pose: pose_from_wire(p),
-            filter_converged: estimate.converged,
-        });
-    }
-    if maps.len() > 1 {
-        tracing::warn!(
-            robot = name,
-            maps = maps.join(", "),
-            "estimates on several maps are judged together; --map picks one"
-        );
-    }
-    Ok(RobotSamples {
-        name: name.to_string(),
-        truth,
-        estimates,
-    })
 }

@@ -15,7 +15,6 @@ mod map;
 mod server;
 mod signal;
 mod sim;
-mod supervisor;
 mod teleport;
 mod wander;
 

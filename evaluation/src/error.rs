@@ -22,7 +22,7 @@ pub enum EvaluationError {
         /// What is missing.
         reason: String,
     },
-    /// The plot could not be drawn or encoded.
+    /// A picture could not be drawn or encoded.
     #[error("plot: {0}")]
     Plot(String),
     /// A grid computation refused its input.

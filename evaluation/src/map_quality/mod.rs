@@ -53,7 +53,8 @@ use deog_world::{Point2, World};
 use crate::error::EvaluationError;
 use truth::{REACHABLE, SURFACE, Truth, TruthRaster};
 pub use verdict::{
-    UNOBSERVED_FREE_RGB, UNOBSERVED_OCCUPIED_RGB, Verdict, VerdictImage, verdict_image,
+    UNOBSERVED_FREE_RGB, UNOBSERVED_OCCUPIED_RGB, VERDICT_MAX_SIDE_PX, Verdict, VerdictImage,
+    verdict_image, verdict_png,
 };
 
 /// Probability above which a map cell is occupied (map_server's default).

@@ -330,7 +330,11 @@ fn undefined_figures_are_none_and_null() {
     assert_eq!(q.coverage(), Some(1.0 / 44.0));
     let json = q.to_json();
     let value: serde_json::Value = serde_json::from_str(&json).expect("valid JSON");
-    assert_eq!(value["occupied_precision"], serde_json::Value::Null, "{json}");
+    assert_eq!(
+        value["occupied_precision"],
+        serde_json::Value::Null,
+        "{json}"
+    );
     assert_eq!(value["fraction_correct"].as_f64(), Some(1.0), "{json}");
     assert_eq!(value["seeds_used"], 1, "{json}");
     assert_eq!(value["confusion"]["free_as_free"], 1, "{json}");
@@ -392,7 +396,8 @@ fn bad_input_is_an_error() {
 #[test]
 fn the_truth_uses_the_worlds_own_free_space() {
     let office =
-        deog_world::parse_world(include_str!("../../../worlds/office.toml"), "office.toml").unwrap();
+        deog_world::parse_world(include_str!("../../../worlds/office.toml"), "office.toml")
+            .unwrap();
     for world in [room(), two_rooms(), office] {
         let truth = Truth::new(&world, res(), 0.2);
         let (min, max) = world.bounds();

@@ -144,3 +144,16 @@ pub fn verdict_image(input: &QualityInput<'_>) -> Result<VerdictImage, Evaluatio
         min_cell: grid.origin,
     })
 }
+
+/// The longer side, in pixels, that [`verdict_png`] scales a picture up to
+/// (in whole cells a pixel square).
+pub const VERDICT_MAX_SIDE_PX: u32 = 1000;
+
+/// [`verdict_image`] scaled up to about [`VERDICT_MAX_SIDE_PX`] and
+/// encoded as a PNG file's bytes.
+pub fn verdict_png(input: &QualityInput<'_>) -> Result<Vec<u8>, EvaluationError> {
+    let image = verdict_image(input)?;
+    let image = image.scaled(image.fit_factor(VERDICT_MAX_SIDE_PX));
+    deog_mapfile::encode_rgb_png(image.width, image.height, &image.rgb)
+        .map_err(|e| EvaluationError::Plot(e.to_string()))
+}

@@ -1,8 +1,9 @@
-//! Child processes of `deog demo`: each started from this same binary in its
-//! own process group (so a ctrl-c at the terminal reaches only the demo,
-//! which then stops them in order), its output in a log file, watched for
-//! failure, and stopped with SIGTERM, then SIGKILL, when the demo ends for
-//! any reason, including an error or a panic.
+//! Child processes of `deog demo` and the benchmarks: each started from
+//! the `deog` executable in its own process group (so a ctrl-c at the
+//! terminal reaches only the parent, which then stops them in order), its
+//! output in a log file, watched for failure, and stopped with SIGTERM,
+//! then SIGKILL, when the run ends for any reason, including an error or a
+//! panic.
 
 use std::ffi::OsString;
 use std::fs::File;
@@ -246,20 +247,21 @@ pub fn log_tail(path: &Path, lines: usize) -> String {
 }
 
 /// A loopback address no one listens on at the moment of asking.
-pub(crate) fn free_loopback_addr() -> Result<SocketAddr> {
+pub fn free_loopback_addr() -> Result<SocketAddr> {
     let listener = TcpListener::bind("127.0.0.1:0").context("finding a free loopback port")?;
     listener
         .local_addr()
         .context("finding a free loopback port")
 }
 
-pub(crate) fn os(args: &[&str]) -> Vec<OsString> {
+/// Arguments as the `OsString`s [`Supervisor::start`] takes.
+pub fn os(args: &[&str]) -> Vec<OsString> {
     args.iter().map(OsString::from).collect()
 }
 
 /// Connects to a child's service, retrying while the child starts, and
 /// failing at once if it dies.
-pub(crate) async fn connect<C, E, F, Fut>(
+pub async fn connect<C, E, F, Fut>(
     children: &mut Supervisor,
     what: &str,
     mut attempt: F,

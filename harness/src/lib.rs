@@ -1,0 +1,23 @@
+//! Running deog's processes from outside, as `deog demo` and the
+//! benchmarks do, and reading a run back from the map server to judge it,
+//! as they and `deog eval` do.
+//!
+//! This is orchestration, used by the binary's subcommands and by nothing
+//! else: like the binary, it reports errors as `anyhow` chains with the
+//! context a person at the terminal needs.
+//!
+//! # Layout
+//! - [`supervisor`]: [`Supervisor`], child processes of the `deog`
+//!   executable, each in its own process group with its own log, watched
+//!   for failure and stopped on any exit; [`connect`] waits for a child's
+//!   service.
+//! - [`proc_stats`]: a process's memory and CPU time from `/proc`.
+//! - [`run_reads`]: a map, the robots' start poses, and a robot's true
+//!   poses and estimates read from the map server, as the evaluation takes
+//!   them.
+
+pub mod proc_stats;
+pub mod run_reads;
+pub mod supervisor;
+
+pub use supervisor::{Role, Supervisor, connect, free_loopback_addr, log_tail, os};
