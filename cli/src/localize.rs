@@ -13,10 +13,8 @@ use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::range_table::ConeGeometry;
 use deog_localizer::step::{FetchedTile, Localizer, TileSource};
 use deog_proto::v1 as pb;
-use deog_robot_client::convert::{
-    pose_from_wire, pose_to_wire, tile_key_from_wire, tile_key_to_wire,
-};
-use deog_robot_client::{MapClient, decode_tile};
+use deog_robot_client::convert::{cell_box_from_wire, pose_from_wire, pose_to_wire};
+use deog_robot_client::{MapClient, TileChange, TileWatch};
 
 use crate::connection::ConnectionArgs;
 use crate::frame_queue::FrameQueue;
@@ -162,7 +160,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     let watch = runtime
         .block_on(client.watch_tiles(&args.map, plane, false))
         .context("watching the map's tiles")?;
-    let (mut changes, watcher) = spawn_watcher(watch);
+    let mut changes = TileWatch::spawn(watch);
     let mut tiles = ServerTiles {
         runtime: &runtime,
         client: &client,
@@ -189,14 +187,12 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
                     args.map
                 );
             };
-            let wire = runtime
-                .block_on(client.tiles(pb::TileQuery {
-                    map: args.map.clone(),
-                    selection: Some(pb::tile_query::Selection::Region(region)),
-                    newer_than_version: 0,
-                }))
-                .context("reading the map")?;
-            let whole = decode_all(&wire, tile_size)?;
+            let region = cell_box_from_wire("bounds_cells", region)?;
+            let whole = runtime
+                .block_on(client.tiles_in_region(&args.map, tile_size, region))
+                .context("reading the map")?
+                .into_iter()
+                .map(|(key, version, tile)| FetchedTile { key, version, tile });
             let mut localizer = Localizer::new(mcl, map, refresh, Instant::now());
             localizer
                 .start_global(whole)
@@ -231,10 +227,10 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             break;
         }
         last_sequence = frame.sequence;
-        while let Ok(change) = changes.try_recv() {
+        while let Some(change) = changes.try_next() {
             match change {
-                Change::Tile(key) => localizer.tile_changed(key),
-                Change::All => localizer.all_changed(),
+                TileChange::Tile(key) => localizer.tile_changed(key),
+                TileChange::All => localizer.all_changed(),
             }
         }
         let odometry = frame
@@ -296,7 +292,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             break;
         }
     }
-    watcher.abort();
+    drop(changes);
     let map = localizer.map();
     println!(
         "{} on {}: {processed} frames, {corrections} sensor updates, {} range tables built, cache {:.1} MiB",
@@ -322,64 +318,12 @@ impl TileSource for ServerTiles<'_> {
         &mut self,
         keys: &[TileKey],
     ) -> Result<Vec<FetchedTile>, Box<dyn std::error::Error + Send + Sync>> {
-        let wire = self.runtime.block_on(self.client.tiles(pb::TileQuery {
-            map: self.map.to_string(),
-            selection: Some(pb::tile_query::Selection::Keys(pb::TileKeys {
-                keys: keys.iter().copied().map(tile_key_to_wire).collect(),
-            })),
-            newer_than_version: 0,
-        }))?;
-        Ok(decode_all(&wire, self.tile_size)?)
+        let tiles =
+            self.runtime
+                .block_on(self.client.tiles_by_key(self.map, self.tile_size, keys))?;
+        Ok(tiles
+            .into_iter()
+            .map(|(key, version, tile)| FetchedTile { key, version, tile })
+            .collect())
     }
-}
-
-fn decode_all(
-    wire: &[pb::Tile],
-    size: TileSize,
-) -> Result<Vec<FetchedTile>, deog_robot_client::ClientError> {
-    wire.iter()
-        .map(|t| {
-            let (key, version, tile) = decode_tile(t, size)?;
-            Ok(FetchedTile { key, version, tile })
-        })
-        .collect()
-}
-
-/// What the watch stream reports.
-enum Change {
-    Tile(TileKey),
-    /// Events were lost or the map was cleared: everything held is stale.
-    All,
-}
-
-fn spawn_watcher(
-    mut stream: tonic::Streaming<pb::TileEvent>,
-) -> (
-    tokio::sync::mpsc::UnboundedReceiver<Change>,
-    tokio::task::JoinHandle<()>,
-) {
-    let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
-    let task = tokio::spawn(async move {
-        loop {
-            let change = match stream.message().await {
-                Ok(Some(event)) => match event.event {
-                    Some(pb::tile_event::Event::Changed(tile)) => match tile.key {
-                        Some(key) => Change::Tile(tile_key_from_wire(key)),
-                        None => continue,
-                    },
-                    Some(_) => Change::All,
-                    None => continue,
-                },
-                Ok(None) => break,
-                Err(status) => {
-                    tracing::warn!(%status, "the tile watch stream ended; the map is no longer kept current");
-                    break;
-                }
-            };
-            if tx.send(change).is_err() {
-                break;
-            }
-        }
-    });
-    (rx, task)
 }

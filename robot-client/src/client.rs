@@ -1,10 +1,11 @@
 //! [`MapClient`]: typed calls to the map server.
 
 use crate::connect::{ClientConfig, RawMapClient, connect, with_retry};
-use crate::convert::{cell_box_to_wire, decode_tile};
+use crate::convert::{cell_box_from_wire, cell_box_to_wire, decode_tile, tile_key_to_wire};
 use crate::error::ClientError;
+use crate::tile_cache::TileCache;
 use crate::updates::{UpdateSender, UpdateSenderConfig};
-use deog_grid::{CellBox, ClampLimits, Resolution, TileMap, TileSize};
+use deog_grid::{CellBox, ClampLimits, Resolution, Tile, TileKey, TileMap, TileSize};
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_client::MapServiceClient;
 use tokio_stream::StreamExt;
@@ -73,16 +74,11 @@ impl MapClient {
         let Some(region) = info.bounds_cells else {
             return Ok((info, map));
         };
-        let tiles = self
-            .tiles(pb::TileQuery {
-                map: name.to_string(),
-                selection: Some(pb::tile_query::Selection::Region(region)),
-                newer_than_version: 0,
-            })
-            .await?;
-        for tile in tiles {
-            let (key, _, cells) = decode_tile(&tile, tile_size)?;
-            map.insert(key, cells)?;
+        let region = cell_box_from_wire("bounds_cells", region)?;
+        let mut cache = TileCache::new(name, tile_size);
+        cache.refresh(self, region).await?;
+        for (key, _, tile) in cache.into_tiles() {
+            map.insert(key, tile)?;
         }
         Ok((info, map))
     }
@@ -125,6 +121,44 @@ impl MapClient {
             out.push(tile?);
         }
         Ok(out)
+    }
+
+    /// The tiles `keys` of `map` that the server has, decoded, with their
+    /// versions; a key left out has no tile (every cell unknown).
+    pub async fn tiles_by_key(
+        &self,
+        map: &str,
+        tile_size: TileSize,
+        keys: &[TileKey],
+    ) -> Result<Vec<(TileKey, u64, Tile)>, ClientError> {
+        let wire = self
+            .tiles(pb::TileQuery {
+                map: map.to_string(),
+                selection: Some(pb::tile_query::Selection::Keys(pb::TileKeys {
+                    keys: keys.iter().copied().map(tile_key_to_wire).collect(),
+                })),
+                newer_than_version: 0,
+            })
+            .await?;
+        wire.iter().map(|t| decode_tile(t, tile_size)).collect()
+    }
+
+    /// Every tile of `map` within `region` that the server has, decoded,
+    /// with its version.
+    pub async fn tiles_in_region(
+        &self,
+        map: &str,
+        tile_size: TileSize,
+        region: CellBox,
+    ) -> Result<Vec<(TileKey, u64, Tile)>, ClientError> {
+        let wire = self
+            .tiles(pb::TileQuery {
+                map: map.to_string(),
+                selection: Some(pb::tile_query::Selection::Region(cell_box_to_wire(region))),
+                newer_than_version: 0,
+            })
+            .await?;
+        wire.iter().map(|t| decode_tile(t, tile_size)).collect()
     }
 
     /// Streams the tile events of `region` on `map` as they happen: changes

@@ -11,7 +11,10 @@
 //!   drive, state, teleport, watch).
 //! - [`convert`]: wire messages to the grid core's types and back (poses,
 //!   tile keys, boxes of cells, tiles and deltas).
-//! - [`tile_cache`]: [`TileCache`], a versioned copy of a map's tiles.
+//! - [`tile_cache`]: [`TileCache`], a versioned copy of a map's tiles,
+//!   which [`MapClient::download`] fills.
+//! - [`tile_watch`]: [`TileWatch`], a map's tile events as the changes
+//!   they mean to a copy of some of its tiles.
 //! - [`error`]: [`ClientError`], and which failures are worth a retry.
 
 pub mod client;
@@ -20,6 +23,7 @@ pub mod convert;
 pub mod error;
 pub mod sim_client;
 pub mod tile_cache;
+pub mod tile_watch;
 pub mod updates;
 
 pub use client::MapClient;
@@ -28,4 +32,5 @@ pub use convert::{decode_tile, encode_delta};
 pub use error::ClientError;
 pub use sim_client::SimClient;
 pub use tile_cache::TileCache;
+pub use tile_watch::{TileChange, TileWatch};
 pub use updates::{AckState, UpdateSender, UpdateSenderConfig};

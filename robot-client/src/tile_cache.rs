@@ -55,6 +55,16 @@ impl TileCache {
         self.tiles.get(&key).map(|(v, t)| (*v, t))
     }
 
+    /// Every cached tile with its key and version, in no particular order.
+    pub fn tiles(&self) -> impl Iterator<Item = (TileKey, u64, &Tile)> {
+        self.tiles.iter().map(|(k, (v, t))| (*k, *v, t))
+    }
+
+    /// The cached tiles, given up: each with its key and version.
+    pub fn into_tiles(self) -> impl Iterator<Item = (TileKey, u64, Tile)> {
+        self.tiles.into_iter().map(|(k, (v, t))| (k, v, t))
+    }
+
     /// The belief of a cell, if its tile is cached and the cell observed.
     pub fn cell(&self, cell: CellIndex) -> Option<LogOdds> {
         let (key, offset) = self.tile_size.split(cell);

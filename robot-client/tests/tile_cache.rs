@@ -4,7 +4,9 @@
 
 use deog_grid::{CellBox, CellIndex, TileDelta, TileKey, TileSize};
 use deog_proto::v1 as pb;
-use deog_robot_client::{ClientConfig, MapClient, TileCache, UpdateSender, UpdateSenderConfig};
+use deog_robot_client::{
+    ClientConfig, MapClient, TileCache, TileChange, TileWatch, UpdateSender, UpdateSenderConfig,
+};
 use deog_server::{ServerConfig, SledConfig, SledStore};
 use std::sync::Arc;
 use std::time::Duration;
@@ -321,4 +323,58 @@ async fn a_watcher_that_fell_behind_resyncs_to_the_servers_tiles() {
     assert_eq!(cache.len(), keys.len());
     assert_eq!(cached(&cache, 0, 0).map(|(_, cell)| cell), Some(110));
     assert_current(&cache, &server).await;
+}
+
+#[tokio::test]
+async fn a_tile_watch_names_the_changed_tiles_and_a_clear_as_everything() {
+    let server = Server::start(ServerConfig::default()).await;
+    let mut sender = server.sender().await;
+    let mut changes = TileWatch::spawn(watch(&server, false).await);
+    add(&mut sender, &[(2, -3)], 100).await;
+    let mut next = async || {
+        for _ in 0..200 {
+            if let Some(change) = changes.try_next() {
+                return change;
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        panic!("no change within 10 s");
+    };
+    assert_eq!(next().await, TileChange::Tile(TileKey::new(2, -3)));
+    server
+        .client
+        .raw()
+        .clear_map(pb::MapRef { name: MAP.into() })
+        .await
+        .expect("clear");
+    assert_eq!(next().await, TileChange::All);
+}
+
+#[tokio::test]
+async fn tiles_by_key_and_download_give_the_servers_tiles() {
+    let server = Server::start(ServerConfig::default()).await;
+    let mut sender = server.sender().await;
+    let version = add(&mut sender, &[(0, 0), (-1, 2)], 100).await;
+    let keys = [TileKey::new(0, 0), TileKey::new(5, 5)];
+    let got = server
+        .client
+        .tiles_by_key(MAP, size(), &keys)
+        .await
+        .expect("tiles by key");
+    assert_eq!(got.len(), 1, "tile (5, 5) was never written");
+    assert_eq!((got[0].0, got[0].1), (TileKey::new(0, 0), version));
+    let (_, map) = server.client.download(MAP).await.expect("download");
+    let mut downloaded: Vec<(TileKey, Vec<i16>)> = map
+        .tiles()
+        .map(|(k, t)| (*k, t.raw_cells().to_vec()))
+        .collect();
+    downloaded.sort();
+    let mut stored: Vec<(TileKey, Vec<i16>)> = server
+        .server_tiles()
+        .await
+        .into_iter()
+        .map(|(k, _, cells)| (k, cells))
+        .collect();
+    stored.sort();
+    assert_eq!(downloaded, stored);
 }

@@ -10,7 +10,7 @@ use crate::convert::{self, Limits};
 use crate::error::StoreError;
 use crate::events::{Events, MapEvent};
 use crate::store::{MapRecord, Store, TileRange};
-use crate::writer::{Batch, FrameInput, WriterHandle};
+use crate::writer::{Batch, EncodedFrame, WriterHandle};
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_server::MapService;
 use std::sync::Arc;
@@ -491,7 +491,7 @@ impl<S: Store> MapService for MapServer<S> {
         let mut inputs = Vec::with_capacity(request.frames.len());
         for (i, frame) in request.frames.iter().enumerate() {
             convert::sonar_frame(&format!("frames[{i}]"), frame, &self.limits)?;
-            inputs.push(FrameInput {
+            inputs.push(EncodedFrame {
                 robot: frame.robot.clone(),
                 sequence: frame.sequence,
                 bytes: prost::Message::encode_to_vec(frame),

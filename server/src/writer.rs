@@ -44,7 +44,7 @@ pub struct Ack {
 
 /// One frame to store.
 #[derive(Debug)]
-pub struct FrameInput {
+pub struct EncodedFrame {
     /// Robot name.
     pub robot: String,
     /// Sequence.
@@ -60,7 +60,7 @@ enum WriteOp {
     ClearMap(String, Reply<MapRecord>),
     DeleteMap(String, Reply<()>),
     Apply(Batch, Reply<Ack>),
-    Frames(Vec<FrameInput>, Reply<(u32, u32)>),
+    Frames(Vec<EncodedFrame>, Reply<(u32, u32)>),
     Pose(Arc<PoseEstimate>, Vec<u8>, Reply<()>),
     Stop,
 }
@@ -162,7 +162,10 @@ impl WriterHandle {
     }
 
     /// Stores frames; returns (stored, duplicates).
-    pub async fn publish_frames(&self, frames: Vec<FrameInput>) -> Result<(u32, u32), StoreError> {
+    pub async fn publish_frames(
+        &self,
+        frames: Vec<EncodedFrame>,
+    ) -> Result<(u32, u32), StoreError> {
         self.call(|r| WriteOp::Frames(frames, r)).await
     }
 
@@ -530,7 +533,7 @@ impl<'s, S: Store> Group<'s, S> {
         }
     }
 
-    fn add_frames(&mut self, frames: Vec<FrameInput>) -> Result<(u32, u32), StoreError> {
+    fn add_frames(&mut self, frames: Vec<EncodedFrame>) -> Result<(u32, u32), StoreError> {
         let (mut stored, mut duplicates) = (0u32, 0u32);
         for frame in frames {
             if !self.frames.contains_key(&frame.robot) {
