@@ -17,7 +17,7 @@ use deog_robot_client::{MapClient, UpdateSenderConfig};
 use deog_simulator::data_file::{self, DataUnits};
 
 use crate::connection::ConnectionArgs;
-use crate::wander::PoseSource;
+use crate::pose_args::PoseSource;
 
 /// Frames sent per request.
 const FRAMES_PER_REQUEST: usize = 1000;

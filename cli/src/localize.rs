@@ -39,7 +39,7 @@ pub struct LocalizeArgs {
     pub idle_exit: f64,
     /// Track from a known pose "x,y,theta" (metres, radians) instead of
     /// localizing globally.
-    #[arg(long, value_parser = crate::wander::parse_pose, allow_hyphen_values = true)]
+    #[arg(long, value_parser = crate::pose_args::parse_pose, allow_hyphen_values = true)]
     pub initial_pose: Option<Pose2>,
     /// Standard deviation of the initial position, metres (with --initial-pose).
     #[arg(long, default_value_t = 0.25)]

@@ -12,6 +12,7 @@ mod frames;
 mod import;
 mod localize;
 mod map;
+mod pose_args;
 mod server;
 mod signal;
 mod sim;

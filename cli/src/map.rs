@@ -6,7 +6,7 @@
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use clap::{Args, ValueEnum};
+use clap::Args;
 use deog_grid::{Resolution, SonarModelParams, TileSize};
 use deog_mapping::{Cartographer, FrameInput, PoseChoice, mapping_sonar_model};
 use deog_proto::names::check_robot_name;
@@ -16,15 +16,7 @@ use deog_robot_client::{MapClient, UpdateSenderConfig};
 
 use crate::connection::ConnectionArgs;
 use crate::frame_queue::FrameQueue;
-
-/// Which pose to map from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum PoseArg {
-    /// The simulator's true pose (the thesis's choice).
-    True,
-    /// The robot's odometry.
-    Odometry,
-}
+use crate::pose_args::PoseSource;
 
 /// Options of `deog map`.
 #[derive(Debug, Args)]
@@ -37,8 +29,8 @@ pub struct MapArgs {
     #[arg(long, env = "DEOG_MAP")]
     pub map: String,
     /// The pose to map from.
-    #[arg(long, value_enum, default_value_t = PoseArg::True)]
-    pub pose: PoseArg,
+    #[arg(long, value_enum, default_value_t = PoseSource::True)]
+    pub pose: PoseSource,
     /// Start from this frame (frames the server already applied for this
     /// robot and map are skipped whatever this says).
     #[arg(long, default_value_t = 1)]
@@ -152,10 +144,7 @@ pub fn run(args: MapArgs) -> Result<()> {
             .with_context(|| format!("opening map {}", args.map))?;
         let resolution = Resolution::new(info.resolution_m)?;
         let tile_size = TileSize::new(info.tile_size)?;
-        let pose = match args.pose {
-            PoseArg::True => PoseChoice::True,
-            PoseArg::Odometry => PoseChoice::Odometry,
-        };
+        let pose = PoseChoice::from(args.pose);
         let mut cartographer = Cartographer::with_model(resolution, tile_size, pose, params)
             .context("the sonar model's figures")?;
         let mut sender = client

@@ -6,7 +6,7 @@ use clap::Args;
 use deog_grid::Pose2;
 use deog_robot_client::{ClientConfig, SimClient};
 
-use crate::wander::parse_pose;
+use crate::pose_args::parse_pose;
 
 /// Options of `deog teleport`.
 #[derive(Debug, Args)]

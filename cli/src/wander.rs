@@ -5,7 +5,7 @@ use std::io::Write as _;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use clap::{Args, ValueEnum};
+use clap::Args;
 use deog_grid::{Pose2, SensorRing};
 use deog_proto::names::check_robot_name;
 use deog_proto::v1 as pb;
@@ -16,15 +16,7 @@ use deog_simulator::{WanderParams, Wanderer};
 use tokio::sync::mpsc;
 
 use crate::connection::ConnectionArgs;
-
-/// Which pose a data file line holds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum PoseSource {
-    /// The simulator's true pose (as the thesis's mapper used).
-    True,
-    /// The robot's odometry.
-    Odometry,
-}
+use crate::pose_args::{PoseSource, parse_pose};
 
 /// Options of `deog wander`.
 #[derive(Debug, Args)]
@@ -65,25 +57,6 @@ pub struct WanderArgs {
     pub data_pose: PoseSource,
     #[command(flatten)]
     pub connection: ConnectionArgs,
-}
-
-/// `x,y,theta` in metres and radians.
-pub fn parse_pose(text: &str) -> Result<Pose2, String> {
-    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
-    let [x, y, theta] = parts.as_slice() else {
-        return Err(format!("expected x,y,theta, got {text:?}"));
-    };
-    let number = |name: &str, s: &str| -> Result<f64, String> {
-        s.parse::<f64>()
-            .ok()
-            .filter(|v| v.is_finite())
-            .ok_or_else(|| format!("{name}: not a finite number: {s:?}"))
-    };
-    Ok(Pose2::new(
-        number("x", x)?,
-        number("y", y)?,
-        number("theta", theta)?,
-    ))
 }
 
 /// What the wanderer did.

@@ -1,0 +1,43 @@
+//! Argument types several subcommands share: a pose on the command line,
+//! and which of a frame's two poses to use.
+
+use clap::ValueEnum;
+use deog_grid::Pose2;
+use deog_mapping::PoseChoice;
+
+/// Which pose of a frame: the simulator's or the robot's own.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PoseSource {
+    /// The simulator's true pose (the thesis's mapper used it).
+    True,
+    /// The robot's odometry.
+    Odometry,
+}
+
+impl From<PoseSource> for PoseChoice {
+    fn from(source: PoseSource) -> Self {
+        match source {
+            PoseSource::True => PoseChoice::True,
+            PoseSource::Odometry => PoseChoice::Odometry,
+        }
+    }
+}
+
+/// `x,y,theta` in metres and radians.
+pub fn parse_pose(text: &str) -> Result<Pose2, String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let [x, y, theta] = parts.as_slice() else {
+        return Err(format!("expected x,y,theta, got {text:?}"));
+    };
+    let number = |name: &str, s: &str| -> Result<f64, String> {
+        s.parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("{name}: not a finite number: {s:?}"))
+    };
+    Ok(Pose2::new(
+        number("x", x)?,
+        number("y", y)?,
+        number("theta", theta)?,
+    ))
+}
