@@ -4,57 +4,15 @@
 
 use deog_grid::Pose2;
 use deog_proto::v1 as pb;
+use deog_robot_client::ClientError;
 use deog_robot_client::convert::{pose_from_wire, pose_to_wire};
-use deog_robot_client::{ClientConfig, ClientError, MapClient};
-use deog_server::{ServerConfig, SledConfig, SledStore};
-use std::sync::Arc;
+use deog_server::ServerConfig;
 use std::time::Duration;
-use tokio::sync::oneshot;
+
+mod common;
+use common::Server;
 
 const ROBOT: &str = "scout-1";
-
-/// A map server in-process, stopped when dropped.
-struct Server {
-    client: MapClient,
-    stop: Option<oneshot::Sender<()>>,
-    _dir: tempfile::TempDir,
-}
-
-impl Server {
-    async fn start() -> Self {
-        let dir = tempfile::tempdir().expect("temp dir");
-        let store = SledStore::open(&SledConfig::new(dir.path().join("store"))).expect("store");
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
-            .await
-            .expect("bind");
-        let addr = listener.local_addr().expect("addr");
-        let (stop, stopped) = oneshot::channel::<()>();
-        tokio::spawn(deog_server::serve(
-            Arc::new(store),
-            listener,
-            ServerConfig::default(),
-            async {
-                let _ = stopped.await;
-            },
-        ));
-        let client = MapClient::connect(ClientConfig::new(addr.to_string()))
-            .await
-            .expect("connect");
-        Self {
-            client,
-            stop: Some(stop),
-            _dir: dir,
-        }
-    }
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        if let Some(stop) = self.stop.take() {
-            let _ = stop.send(());
-        }
-    }
-}
 
 fn frame(sequence: u64) -> pb::SonarFrame {
     pb::SonarFrame {
@@ -77,7 +35,7 @@ async fn next_frame(stream: &mut tonic::Streaming<pb::SonarFrame>) -> pb::SonarF
 
 #[tokio::test]
 async fn robots_lists_each_robot_with_its_sequence_range() {
-    let server = Server::start().await;
+    let server = Server::start(ServerConfig::default()).await;
     assert!(server.client.robots().await.expect("robots").is_empty());
     server
         .client
@@ -94,7 +52,7 @@ async fn robots_lists_each_robot_with_its_sequence_range() {
 
 #[tokio::test]
 async fn a_subscription_replays_from_its_sequence_then_follows() {
-    let server = Server::start().await;
+    let server = Server::start(ServerConfig::default()).await;
     server
         .client
         .publish_frames((1..=3).map(frame).collect())
@@ -123,7 +81,7 @@ async fn a_subscription_replays_from_its_sequence_then_follows() {
 
 #[tokio::test]
 async fn a_subscription_to_a_bad_robot_name_is_refused_naming_the_field() {
-    let server = Server::start().await;
+    let server = Server::start(ServerConfig::default()).await;
     match server.client.subscribe_frames("no robot", 1).await {
         Err(ClientError::Status(status)) => {
             assert_eq!(status.code(), tonic::Code::InvalidArgument);

@@ -4,62 +4,40 @@
 
 use deog_grid::{CellBox, CellIndex, TileDelta, TileKey, TileSize};
 use deog_proto::v1 as pb;
-use deog_robot_client::{
-    ClientConfig, MapClient, TileCache, TileChange, TileWatch, UpdateSender, UpdateSenderConfig,
-};
-use deog_server::{ServerConfig, SledConfig, SledStore};
-use std::sync::Arc;
+use deog_robot_client::{TileCache, TileChange, TileWatch, UpdateSender, UpdateSenderConfig};
+use deog_server::ServerConfig;
 use std::time::Duration;
-use tokio::sync::oneshot;
+
+mod common;
+use common::Server;
 
 const MAP: &str = "cache";
 /// Cells per tile side of the test map.
 const SIDE: u32 = 8;
 
 /// A map server in-process, stopped when dropped.
-struct Server {
-    client: MapClient,
-    stop: Option<oneshot::Sender<()>>,
-    _dir: tempfile::TempDir,
+/// The common server with the test map created.
+async fn server_with_map(config: ServerConfig) -> Server {
+    let server = Server::start(config).await;
+    server
+        .client
+        .ensure_map(pb::CreateMapRequest {
+            name: MAP.into(),
+            tile_size: SIDE,
+            ..Default::default()
+        })
+        .await
+        .expect("map");
+    server
 }
 
-impl Server {
-    async fn start(config: ServerConfig) -> Self {
-        let dir = tempfile::tempdir().expect("temp dir");
-        let store = SledStore::open(&SledConfig::new(dir.path().join("store"))).expect("store");
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
-            .await
-            .expect("bind");
-        let addr = listener.local_addr().expect("addr");
-        let (stop, stopped) = oneshot::channel::<()>();
-        tokio::spawn(deog_server::serve(
-            Arc::new(store),
-            listener,
-            config,
-            async {
-                let _ = stopped.await;
-            },
-        ));
-        // The listener is bound already, so the client's retries wait for
-        // the server rather than for a port.
-        let client = MapClient::connect(ClientConfig::new(addr.to_string()))
-            .await
-            .expect("connect");
-        client
-            .ensure_map(pb::CreateMapRequest {
-                name: MAP.into(),
-                tile_size: SIDE,
-                ..Default::default()
-            })
-            .await
-            .expect("map");
-        Self {
-            client,
-            stop: Some(stop),
-            _dir: dir,
-        }
-    }
+/// What the tests below ask of the server.
+trait TestServer {
+    async fn sender(&self) -> UpdateSender;
+    async fn server_tiles(&self) -> Vec<(TileKey, u64, Vec<i16>)>;
+}
 
+impl TestServer for Server {
     async fn sender(&self) -> UpdateSender {
         self.client
             .updates(
@@ -97,14 +75,6 @@ impl Server {
                 (key, version, tile.raw_cells().to_vec())
             })
             .collect()
-    }
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        if let Some(stop) = self.stop.take() {
-            let _ = stop.send(());
-        }
     }
 }
 
@@ -171,7 +141,7 @@ async fn watch(server: &Server, include_cells: bool) -> tonic::Streaming<pb::Til
 
 #[tokio::test]
 async fn a_refresh_fetches_only_the_tiles_changed_since_the_last() {
-    let server = Server::start(ServerConfig::default()).await;
+    let server = server_with_map(ServerConfig::default()).await;
     let mut sender = server.sender().await;
     let mut cache = TileCache::new(MAP, size());
     let everything = tiles_box(-4, -4, 4, 4);
@@ -196,7 +166,7 @@ async fn a_refresh_fetches_only_the_tiles_changed_since_the_last() {
 
 #[tokio::test]
 async fn a_tile_changed_while_another_region_was_refreshed_is_fetched() {
-    let server = Server::start(ServerConfig::default()).await;
+    let server = server_with_map(ServerConfig::default()).await;
     let mut sender = server.sender().await;
     let mut cache = TileCache::new(MAP, size());
     let (west, east) = (tiles_box(-3, 0, -3, 0), tiles_box(3, 0, 3, 0));
@@ -214,7 +184,7 @@ async fn a_tile_changed_while_another_region_was_refreshed_is_fetched() {
 
 #[tokio::test]
 async fn tiles_cleared_on_the_server_are_dropped_by_the_next_refresh() {
-    let server = Server::start(ServerConfig::default()).await;
+    let server = server_with_map(ServerConfig::default()).await;
     let mut sender = server.sender().await;
     let mut cache = TileCache::new(MAP, size());
     let region = tiles_box(0, 0, 2, 0);
@@ -242,7 +212,7 @@ async fn tiles_cleared_on_the_server_are_dropped_by_the_next_refresh() {
 
 #[tokio::test]
 async fn changes_arrive_through_the_watch_stream() {
-    let server = Server::start(ServerConfig::default()).await;
+    let server = server_with_map(ServerConfig::default()).await;
     let mut sender = server.sender().await;
     let mut cache = TileCache::new(MAP, size());
     let everything = tiles_box(-4, -4, 4, 4);
@@ -291,7 +261,7 @@ async fn changes_arrive_through_the_watch_stream() {
 
 #[tokio::test]
 async fn a_watcher_that_fell_behind_resyncs_to_the_servers_tiles() {
-    let server = Server::start(ServerConfig {
+    let server = server_with_map(ServerConfig {
         event_buffer: 16,
         stream_buffer: 4,
         ..ServerConfig::default()
@@ -327,7 +297,7 @@ async fn a_watcher_that_fell_behind_resyncs_to_the_servers_tiles() {
 
 #[tokio::test]
 async fn a_tile_watch_names_the_changed_tiles_and_a_clear_as_everything() {
-    let server = Server::start(ServerConfig::default()).await;
+    let server = server_with_map(ServerConfig::default()).await;
     let mut sender = server.sender().await;
     let mut changes = TileWatch::spawn(watch(&server, false).await);
     add(&mut sender, &[(2, -3)], 100).await;
@@ -352,7 +322,7 @@ async fn a_tile_watch_names_the_changed_tiles_and_a_clear_as_everything() {
 
 #[tokio::test]
 async fn tiles_by_key_and_download_give_the_servers_tiles() {
-    let server = Server::start(ServerConfig::default()).await;
+    let server = server_with_map(ServerConfig::default()).await;
     let mut sender = server.sender().await;
     let version = add(&mut sender, &[(0, 0), (-1, 2)], 100).await;
     let keys = [TileKey::new(0, 0), TileKey::new(5, 5)];
