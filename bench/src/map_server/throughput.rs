@@ -96,6 +96,10 @@ pub(super) async fn durable_throughput(
                 sender.push(delta).await?;
                 visit += 1;
             }
+            // The deadline can pass with a batch part-filled: send it now,
+            // as closing would, so that it counts among the batches sent
+            // (its cells are counted already).
+            sender.send_batch().await?;
             let batches = sender.next_sequence() - 1;
             let state = sender.close().await?;
             ensure!(
