@@ -1,8 +1,6 @@
 //! `deog`: every process of the system as a subcommand.
 
 mod bench;
-mod bench_localize;
-mod bench_memory;
 mod connection;
 mod demo;
 mod eval;

@@ -15,9 +15,13 @@
 //! - [`run_reads`]: a map, the robots' start poses, and a robot's true
 //!   poses and estimates read from the map server, as the evaluation takes
 //!   them.
+//! - [`shutdown`]: [`shutdown_signal`], ctrl-c or SIGTERM, on which a run
+//!   stops its children and a long-running subcommand ends.
 
 pub mod proc_stats;
 pub mod run_reads;
+pub mod shutdown;
 pub mod supervisor;
 
+pub use shutdown::shutdown_signal;
 pub use supervisor::{Role, Supervisor, connect, free_loopback_addr, log_tail, os};

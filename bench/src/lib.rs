@@ -1,0 +1,32 @@
+//! deog's release benchmarks, one module a benchmark, each the library
+//! half of a `deog bench` subcommand: its options (clap-derived, so the
+//! binary only parses them and calls [`map_server::run`],
+//! [`localize::run`] or [`localize_memory::run`]), their checks, the run,
+//! and the figures it prints and writes. What each measures, and the
+//! figures of record, are in BENCHMARKS.md.
+//!
+//! This is orchestration, used by the binary and by nothing else: like
+//! deog-harness, whose processes and `/proc` sampling it uses, it reports
+//! run errors as `anyhow` chains with the context a person at the
+//! terminal needs. Bad options are an [`OptionError`] naming the flag.
+//!
+//! # Layout
+//! - [`map_server`]: `deog bench map-server`, the map server as a child
+//!   process: durable throughput from concurrent clients, the thesis's
+//!   mapper on the same store engine as the baseline, and the server's
+//!   memory while a map grows.
+//! - [`localize`]: `deog bench localize`, localization accuracy over
+//!   seeded runs per world, in one process: global convergence, error
+//!   after convergence, kidnap recovery.
+//! - [`localize_memory`]: `deog bench localize-memory`, the localizer's
+//!   memory against its cache setting, with the real processes, on a
+//!   generated city far larger than the cache.
+//! - [`option_error`]: [`OptionError`], an option out of its range or
+//!   options that do not go together.
+
+pub mod localize;
+pub mod localize_memory;
+pub mod map_server;
+pub mod option_error;
+
+pub use option_error::OptionError;

@@ -1,0 +1,95 @@
+//! A world's map as the cartographer builds it from a wandering robot's
+//! frames, and the simulator's sonar with or without specular reflection.
+
+use anyhow::{Context, Result};
+use deog_grid::{ClampLimits, OccupancyThresholds, Resolution, SensorRing, TileMap, TileSize};
+use deog_localizer::local_map::{LocalMap, MapSettings};
+use deog_localizer::range_table::ConeGeometry;
+use deog_mapping::{Cartographer, FrameInput, PoseChoice};
+use deog_simulator::simulation::{SimConfig, Simulation};
+use deog_simulator::{Specular, WanderParams, Wanderer};
+
+/// The simulator's settings: the default sonar, or with `specular` lost
+/// echoes past 60° of incidence and 2 % dropouts.
+pub(super) fn sim_config(specular: bool) -> SimConfig {
+    let mut config = SimConfig::default();
+    if specular {
+        config.sonar.specular = Specular::Lost {
+            max_incidence: 60f64.to_radians(),
+        };
+        config.sonar.dropout_probability = 0.02;
+    }
+    config
+}
+
+/// The map a wandering robot's frames give, as the cartographer builds it
+/// from the sonar of `config`, with range tables for the sonar of
+/// `localize_config`.
+pub(super) fn build_map(
+    world: deog_world::World,
+    config: &SimConfig,
+    localize_config: &SimConfig,
+    minutes: f64,
+    surface_depth: f64,
+) -> Result<(TileMap, LocalMap)> {
+    let res = Resolution::DEFAULT;
+    let size = TileSize::new(64)?;
+    let mut sim = Simulation::new(world, config.clone(), 1000)?;
+    let mut state = sim.spawn("cartographer", None)?;
+    let mut wanderer = Wanderer::new(WanderParams::default(), &SensorRing::scout(), 1000)?;
+    // The sonar model `deog map` maps with.
+    let mut params = deog_mapping::mapping_sonar_model();
+    if !matches!(config.sonar.specular, Specular::Off) {
+        // A specular sonar's no-echo readings are mostly lost echoes, not
+        // free space: the cartographer is told to ignore them.
+        params.no_echo_free_range = 0.0;
+    }
+    let mut cartographer = Cartographer::with_model(res, size, PoseChoice::True, params)?;
+    let mut tiles = TileMap::new(res, size, ClampLimits::default());
+    let mut deltas = Vec::new();
+    let mut fired = Vec::new();
+    let period = sim.config().sonar_period_s;
+    while sim.time_s() < minutes * 60.0 {
+        let (v, w) = wanderer.command(&state.ranges, state.bumper, period)?;
+        sim.drive("cartographer", v, w)?;
+        fired.clear();
+        while fired.is_empty() {
+            sim.advance(period, &mut fired)?;
+        }
+        state = fired.pop().context("a firing")?;
+        deltas.clear();
+        cartographer.integrate(
+            &FrameInput {
+                sequence: state.sequence,
+                true_pose: Some(state.true_pose),
+                odometry: state.odometry,
+                ranges: &state.ranges,
+            },
+            &mut deltas,
+        )?;
+        for d in &deltas {
+            tiles.apply(d)?;
+        }
+    }
+    let mut map = LocalMap::new(MapSettings {
+        resolution: res,
+        tile_size: size,
+        thresholds: OccupancyThresholds::default(),
+        // The localizer knows its sonar: specular past the same angle.
+        geometry: ConeGeometry {
+            specular_max_incidence: match localize_config.sonar.specular {
+                Specular::Off => None,
+                Specular::Lost { max_incidence } | Specular::Long { max_incidence, .. } => {
+                    Some(max_incidence)
+                }
+            },
+            surface_depth,
+            ..ConeGeometry::default()
+        },
+        budget_bytes: 512 << 20,
+    })?;
+    for (key, tile) in tiles.tiles() {
+        map.insert_tile(*key, 1, Some(tile))?;
+    }
+    Ok((tiles, map))
+}

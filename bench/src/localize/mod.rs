@@ -1,0 +1,264 @@
+//! `deog bench localize`: localization accuracy over many seeded runs, in
+//! one process with the same parts the separate processes use (simulator,
+//! wanderer, cartographer, filter), so that 20 runs per world take minutes.
+//!
+//! Per world: one robot wanders for `--map-minutes` while the cartographer
+//! builds the map from its true poses (as `deog map` does). Then, per run,
+//! a robot starts at a random pose, the filter starts with no idea where
+//! (uniform over the map's free cells), the wanderer drives, and half-way
+//! the robot is kidnapped to another random pose.
+//!
+//! Its parts: `map_build` (a world's map, as the cartographer builds it),
+//! `seeded_run` (one run, judged) and `diagnostics` (the optional
+//! per-frame printouts of beams, mirror images and the particles).
+
+mod diagnostics;
+mod map_build;
+mod seeded_run;
+
+use std::time::Instant;
+
+use anyhow::Result;
+use clap::Args;
+use deog_evaluation::runs::summarize;
+use deog_localizer::beam_model::BeamModelParams;
+use deog_localizer::filter::FilterSettings;
+use deog_localizer::range_table::ConeGeometry;
+use deog_world::load_world_spec;
+
+use crate::option_error::{OptionError, require};
+
+/// Options of `deog bench localize`.
+#[derive(Debug, Clone, Args)]
+pub struct LocalizeOptions {
+    /// Worlds to run in, comma-separated.
+    #[arg(long, default_value = "map1,map2", value_delimiter = ',')]
+    pub worlds: Vec<String>,
+    /// Seeded runs per world.
+    #[arg(long, default_value_t = 20)]
+    pub runs: u64,
+    /// First seed; runs use consecutive seeds.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Simulated seconds per run.
+    #[arg(long, default_value_t = 180.0)]
+    pub seconds: f64,
+    /// Simulated second of the kidnap (0: none).
+    #[arg(long, default_value_t = 90.0)]
+    pub kidnap_at: f64,
+    /// Simulated minutes of wandering that build each world's map.
+    #[arg(long, default_value_t = 10.0)]
+    pub map_minutes: f64,
+    /// Most particles.
+    #[arg(long, default_value_t = FilterSettings::default().kld.max_particles)]
+    pub max_particles: usize,
+    /// Turn specular reflection (lost echoes past 60° of incidence) and 2 %
+    /// dropouts on in the simulator.
+    #[arg(long)]
+    pub specular: bool,
+    /// With `--specular`, build the map from the default sonar all the same
+    /// (as a map drawn from a laser scan would be): the runs' specular
+    /// readings then meet a map without the holes such readings leave in it.
+    #[arg(long)]
+    pub clean_map: bool,
+    /// Fewest particles.
+    #[arg(long, default_value_t = FilterSettings::default().kld.min_particles)]
+    pub min_particles: usize,
+    /// The beam model's tempering τ (see deog_localizer::beam_model).
+    #[arg(long, default_value_t = BeamModelParams::default().tempering)]
+    pub tempering: f64,
+    /// The beam model's hit spread at zero range, metres.
+    #[arg(long, default_value_t = BeamModelParams::default().hit_sigma_m)]
+    pub hit_sigma: f64,
+    /// The beam model's hit spread growth per metre.
+    #[arg(long, default_value_t = BeamModelParams::default().hit_sigma_per_m)]
+    pub hit_sigma_per_m: f64,
+    /// How far past the first occupied cell's near face echoes are
+    /// expected, metres (see `deog localize --surface-depth`).
+    #[arg(long, default_value_t = ConeGeometry::default().surface_depth)]
+    pub surface_depth: f64,
+    /// Scale of the motion model's four noise parameters (1: the filter's
+    /// defaults).
+    #[arg(long, default_value_t = 1.0)]
+    pub motion_noise_scale: f64,
+    /// Smoothing rate of the long-term likelihood average.
+    #[arg(long, default_value_t = FilterSettings::default().alpha_slow)]
+    pub alpha_slow: f64,
+    /// Smoothing rate of the short-term likelihood average.
+    #[arg(long, default_value_t = FilterSettings::default().alpha_fast)]
+    pub alpha_fast: f64,
+    /// A cluster holding at least this share of the weight keeps at least
+    /// `--cluster-min-particles` through a resampling.
+    #[arg(long, default_value_t = FilterSettings::default().cluster_keep_weight)]
+    pub cluster_keep_weight: f64,
+    /// The fewest particles a kept cluster gets at a resampling.
+    #[arg(long, default_value_t = FilterSettings::default().cluster_min_particles)]
+    pub cluster_min_particles: usize,
+    /// Print every run's figures.
+    #[arg(long)]
+    pub verbose: bool,
+    /// Print, for every frame between these simulated seconds ("from,to"),
+    /// each beam's measured range beside the one the map predicts at the
+    /// true pose: where the sensor model and the world disagree.
+    #[arg(long, value_delimiter = ',')]
+    pub beams_between: Option<Vec<f64>>,
+    /// Also score each frame at the true pose and at its image turned 180°
+    /// about this point ("x,y"), and print the sums: how much the map tells
+    /// a symmetric world's two halves apart.
+    #[arg(long, value_delimiter = ',')]
+    pub mirror_about: Option<Vec<f64>>,
+    /// Print each run's true and estimated pose every this many simulated
+    /// seconds (0: never).
+    #[arg(long, default_value_t = 0.0)]
+    pub trace_every: f64,
+}
+
+impl LocalizeOptions {
+    /// Checks the options a run cannot start with.
+    pub fn validate(&self) -> Result<(), OptionError> {
+        require(self.runs > 0, "--runs", || {
+            "--runs must be at least 1".into()
+        })?;
+        require(self.seconds > 0.0, "--seconds", || {
+            "--seconds must be positive".into()
+        })?;
+        if let Some(window) = &self.beams_between {
+            require(
+                window.len() == 2 && window[0] <= window[1],
+                "--beams-between",
+                || {
+                    "--beams-between takes two times in seconds, \"from,to\", from no later than to"
+                        .into()
+                },
+            )?;
+        }
+        if let Some(centre) = &self.mirror_about {
+            require(
+                centre.len() == 2 && centre.iter().all(|v| v.is_finite()),
+                "--mirror-about",
+                || "--mirror-about takes a point in metres, \"x,y\"".into(),
+            )?;
+        }
+        require(!self.clean_map || self.specular, "--clean-map", || {
+            "--clean-map only means something with --specular".into()
+        })
+    }
+}
+
+/// Convergence and recovery count when they come within this many
+/// seconds.
+const CONVERGE_LIMIT_S: f64 = 60.0;
+
+/// Runs `deog bench localize`: per world, a line when its map is built,
+/// with `--verbose` a line per run, and a summary line.
+pub fn run(options: LocalizeOptions) -> Result<()> {
+    options.validate()?;
+    for world_name in &options.worlds {
+        let started = Instant::now();
+        let world = load_world_spec(world_name)?;
+        let config = map_build::sim_config(options.specular);
+        let map_config = map_build::sim_config(options.specular && !options.clean_map);
+        let (mut tiles, mut map) = map_build::build_map(
+            world.clone(),
+            &map_config,
+            &config,
+            options.map_minutes,
+            options.surface_depth,
+        )?;
+        println!(
+            "{world_name}: map built in {:.1} s ({} tiles)",
+            started.elapsed().as_secs_f64(),
+            map.tile_count()
+        );
+        let mut all = Vec::new();
+        for seed in options.seed..options.seed + options.runs {
+            let t0 = Instant::now();
+            let (figures, held) =
+                seeded_run::run_once(world.clone(), &config, map, &mut tiles, seed, &options)?;
+            map = held;
+            if options.verbose {
+                println!(
+                    "  seed {seed}: converge {} s, recover {} s, mean error {:.3} m {:.2}°, {} samples, {:.1} s",
+                    fmt_opt(figures.converge_s),
+                    fmt_opt(figures.recover_s),
+                    figures.mean_position_m.unwrap_or(0.0),
+                    figures.mean_heading_deg.unwrap_or(0.0),
+                    figures.samples,
+                    t0.elapsed().as_secs_f64()
+                );
+            }
+            all.push(figures);
+        }
+        let summary = summarize(&all, CONVERGE_LIMIT_S);
+        println!(
+            "{world_name}: converged within 60 s {}/{} ({:.0} %), recovered within 60 s {}/{} ({:.0} %), mean error after convergence {:.3} m, {:.2}°; {:.1} s",
+            summary.converged,
+            summary.runs,
+            summary.converged_percent(),
+            summary.recovered,
+            summary.runs,
+            summary.recovered_percent(),
+            summary.mean_position_m.unwrap_or(0.0),
+            summary.mean_heading_deg.unwrap_or(0.0),
+            started.elapsed().as_secs_f64()
+        );
+    }
+    Ok(())
+}
+
+/// A time to a tenth of a second, or `-` for none.
+fn fmt_opt(v: Option<f64>) -> String {
+    v.map_or("-".to_string(), |v| format!("{v:.1}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        options: LocalizeOptions,
+    }
+
+    fn parse(args: &[&str]) -> LocalizeOptions {
+        Cli::try_parse_from(std::iter::once("localize").chain(args.iter().copied()))
+            .expect("options parse")
+            .options
+    }
+
+    #[test]
+    fn the_defaults_are_valid() {
+        let options = parse(&[]);
+        assert_eq!(options.worlds, ["map1", "map2"]);
+        assert_eq!(options.validate(), Ok(()));
+        let diagnostics = parse(&[
+            "--beams-between",
+            "1,2",
+            "--mirror-about",
+            "3,4",
+            "--specular",
+            "--clean-map",
+        ]);
+        assert_eq!(diagnostics.validate(), Ok(()));
+    }
+
+    #[test]
+    fn bad_options_are_refused_naming_the_flag() {
+        for (flag, args) in [
+            ("--runs", &["--runs", "0"][..]),
+            ("--seconds", &["--seconds", "0"][..]),
+            ("--beams-between", &["--beams-between", "2,1"][..]),
+            ("--beams-between", &["--beams-between", "1"][..]),
+            ("--mirror-about", &["--mirror-about", "1,2,3"][..]),
+            ("--mirror-about", &["--mirror-about", "1,NaN"][..]),
+            ("--clean-map", &["--clean-map"][..]),
+        ] {
+            let err = parse(args).validate().expect_err(flag);
+            assert_eq!(err.flag, flag);
+            assert!(err.to_string().starts_with(flag), "{err}");
+        }
+    }
+}

@@ -1,0 +1,182 @@
+//! One seeded run: a robot at a random pose, a filter that starts knowing
+//! nothing, a kidnap part-way, and the run judged.
+
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use deog_evaluation::localization::{EstimateSample, EvalInput, TruthSample, evaluate};
+use deog_evaluation::runs::RunFigures;
+use deog_grid::{SensorRing, TileMap};
+use deog_localizer::filter::{FilterSettings, Mcl};
+use deog_localizer::local_map::LocalMap;
+use deog_localizer::step::{Localizer, TileSource};
+use deog_simulator::simulation::{SimConfig, Simulation};
+use deog_simulator::{WanderParams, Wanderer};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use super::LocalizeOptions;
+use super::diagnostics::{image_of, particles_near, print_beams};
+
+/// The filter's settings for run `seed`, with the options' overrides.
+fn filter_settings(options: &LocalizeOptions, seed: u64) -> FilterSettings {
+    let mut settings = FilterSettings {
+        seed,
+        ..FilterSettings::default()
+    };
+    settings.kld.max_particles = options.max_particles;
+    settings.kld.min_particles = options.min_particles;
+    settings.beam.tempering = options.tempering;
+    settings.beam.hit_sigma_m = options.hit_sigma;
+    settings.beam.hit_sigma_per_m = options.hit_sigma_per_m;
+    settings.alpha_fast = options.alpha_fast;
+    let k = options.motion_noise_scale;
+    settings.motion.rot_per_rot *= k;
+    settings.motion.rot_per_trans *= k;
+    settings.motion.trans_per_trans *= k;
+    settings.motion.trans_per_rot *= k;
+    settings.alpha_slow = options.alpha_slow;
+    settings.cluster_keep_weight = options.cluster_keep_weight;
+    settings.cluster_min_particles = options.cluster_min_particles;
+    settings
+}
+
+/// One seeded run on `map` (its tiles from `tiles`); returns its figures
+/// and the map, with the tables it built, for the next run.
+pub(super) fn run_once(
+    world: deog_world::World,
+    config: &SimConfig,
+    map: LocalMap,
+    tiles: &mut TileMap,
+    seed: u64,
+    options: &LocalizeOptions,
+) -> Result<(RunFigures, LocalMap)> {
+    let mut sim = Simulation::new(world, config.clone(), seed)?;
+    let mut state = sim.spawn("scout", None)?;
+    let mut wanderer = Wanderer::new(WanderParams::default(), &SensorRing::scout(), seed)?;
+    let mcl = Mcl::new(filter_settings(options, seed))?;
+    // No change is ever reported: the map in memory is the whole map.
+    let mut localizer = Localizer::new(mcl, map, Duration::MAX, Instant::now());
+    let whole = tiles
+        .fetch(&tiles.tiles().map(|(k, _)| *k).collect::<Vec<_>>())
+        .map_err(|e| anyhow::anyhow!(e))?;
+    localizer.start_global(whole)?;
+    let mut kidnap_rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6b69_646e_6170);
+    let mut kidnapped_at = None;
+    // The first frame after the kidnap.
+    let mut kidnap_frame = None;
+    let mut fired = Vec::new();
+    let period = sim.config().sonar_period_s;
+    let mut truth = Vec::new();
+    let mut estimates = Vec::new();
+    let mut mirror_sums = (0.0, 0.0, 0u64, 0u64);
+    // Particles injected since the last trace line.
+    let mut injected_since_trace = 0usize;
+    while sim.time_s() < options.seconds {
+        if options.kidnap_at > 0.0 && kidnapped_at.is_none() && sim.time_s() >= options.kidnap_at {
+            let to = sim.random_free_pose(&mut kidnap_rng)?;
+            sim.teleport("scout", to)?;
+            kidnapped_at = Some(sim.time_s());
+            // The mirror sums compare the halves from the new pose on.
+            mirror_sums = (0.0, 0.0, 0, 0);
+        }
+        let (v, w) = wanderer.command(&state.ranges, state.bumper, period)?;
+        sim.drive("scout", v, w)?;
+        fired.clear();
+        while fired.is_empty() {
+            sim.advance(period, &mut fired)?;
+        }
+        state = fired.pop().context("a firing")?;
+        if kidnapped_at.is_some() && kidnap_frame.is_none() {
+            kidnap_frame = Some(state.sequence);
+        }
+        if let Some(centre) = &options.mirror_about {
+            let t = state.true_pose;
+            let image = image_of(&t, centre);
+            let (mcl, map) = localizer.parts_mut();
+            let here = mcl.score_pose(map, &t, &state.ranges)?;
+            let there = mcl.score_pose(map, &image, &state.ranges)?;
+            mirror_sums.0 += here;
+            mirror_sums.1 += there;
+            if here > there {
+                mirror_sums.2 += 1;
+            }
+            mirror_sums.3 += 1;
+            if sim.time_s() + period >= options.seconds || state.sequence % 100 == 0 {
+                println!(
+                    "    t {:6.1}  Σ log-likelihood true {:9.1}  image {:9.1}  frames favouring the truth {}/{}",
+                    state.time_s, mirror_sums.0, mirror_sums.1, mirror_sums.2, mirror_sums.3
+                );
+            }
+        }
+        if let Some(window) = &options.beams_between
+            && (window[0]..=window[1]).contains(&state.time_s)
+        {
+            print_beams(
+                localizer.parts_mut().1,
+                &state.true_pose,
+                &state.ranges,
+                state.time_s,
+            )?;
+        }
+        let report = localizer.step(&state.odometry, &state.ranges, Instant::now(), tiles)?;
+        if let Some(correction) = report.correction {
+            injected_since_trace += correction.injected;
+        }
+        if let Some(e) = report.estimate {
+            let mcl = localizer.mcl();
+            let t = state.true_pose;
+            if options.trace_every > 0.0
+                && (state.time_s / options.trace_every).fract()
+                    < period / options.trace_every * 0.999
+            {
+                // The particles within the convergence bounds of the truth.
+                let (near, near_weight) = particles_near(mcl, &t);
+                // And near the truth's image, when a centre is given.
+                let image = match &options.mirror_about {
+                    Some(c) => {
+                        let (n, w) = particles_near(mcl, &image_of(&t, c));
+                        format!(
+                            "  near the image {n} weighing {w:.1e}  Σ log-likelihood true {:.1} image {:.1}",
+                            mirror_sums.0, mirror_sums.1
+                        )
+                    }
+                    None => String::new(),
+                };
+                println!(
+                    "    t {:6.1}  true ({:5.2}, {:5.2}, {:6.1}°)  estimate ({:5.2}, {:5.2}, {:6.1}°)  particles {:5}  weight {:.2}  converged {}  lost {:.2}  near the truth {near} weighing {near_weight:.1e}{image}  injected {injected_since_trace}",
+                    state.time_s,
+                    t.x,
+                    t.y,
+                    t.theta.to_degrees(),
+                    e.pose.x,
+                    e.pose.y,
+                    e.pose.theta.to_degrees(),
+                    e.particle_count,
+                    e.cluster_weight,
+                    e.converged,
+                    e.lost_score
+                );
+                injected_since_trace = 0;
+            }
+            estimates.push(EstimateSample {
+                sequence: state.sequence,
+                pose: e.pose,
+                filter_converged: e.converged,
+            });
+        }
+        truth.push(TruthSample::new(
+            state.sequence,
+            state.time_s,
+            state.true_pose,
+        ));
+    }
+    let known: Vec<u64> = kidnap_frame.into_iter().collect();
+    let report = evaluate(&EvalInput {
+        known_kidnaps: &known,
+        ..EvalInput::new("scout", &truth, &estimates)
+    })
+    .with_context(|| format!("judging seed {seed}"))?;
+    let figures = RunFigures::from(&report);
+    Ok((figures, localizer.into_map()))
+}

@@ -1,0 +1,146 @@
+//! Durable throughput: cell updates a second the server acknowledges as
+//! applied (flushed to disk) from concurrent clients, each sending dense
+//! tile deltas over the shared region.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, ensure};
+use deog_grid::{TileDelta, TileKey, TileSize};
+use deog_harness::proc_stats::own_cpu_seconds;
+use deog_robot_client::{ClientConfig, MapClient, UpdateSenderConfig};
+use tokio::sync::Barrier;
+
+use super::ServerUnderTest;
+use super::workload::{create_map_request, evidence_pattern};
+
+/// What one throughput client did.
+struct ClientRun {
+    cells: u64,
+    batches: u64,
+    applied: u64,
+    finished: Instant,
+}
+
+/// Figures of one throughput measurement.
+pub(super) struct ThroughputRun {
+    /// Concurrent clients.
+    pub clients: usize,
+    /// Cell updates acknowledged.
+    pub cells: u64,
+    /// Batches acknowledged as applied.
+    pub batches: u64,
+    /// From the clients' start to the last one's last acknowledgement.
+    pub seconds: f64,
+    /// CPU seconds the server used meanwhile.
+    pub server_cpu_s: f64,
+    /// CPU seconds this process (the clients) used meanwhile.
+    pub bench_cpu_s: f64,
+    /// The map's version afterwards: one per batch applied.
+    pub map_version: u64,
+}
+
+impl ThroughputRun {
+    /// Cell updates a second.
+    pub fn cells_per_s(&self) -> f64 {
+        self.cells as f64 / self.seconds
+    }
+}
+
+/// `clients` clients, each on its own connection, send the region's tiles
+/// from their own starting points for `duration`; counted once every
+/// batch is acknowledged.
+pub(super) async fn durable_throughput(
+    server: &ServerUnderTest,
+    clients: usize,
+    duration: Duration,
+    size: TileSize,
+    region: &[TileKey],
+    config: UpdateSenderConfig,
+) -> Result<ThroughputRun> {
+    let map = format!("bench-throughput-{clients}");
+    let admin = MapClient::connect(ClientConfig::new(server.url.clone())).await?;
+    admin.ensure_map(create_map_request(&map)).await?;
+    let region = Arc::new(region.to_vec());
+    let barrier = Arc::new(Barrier::new(clients + 1));
+    let mut tasks = Vec::with_capacity(clients);
+    for i in 0..clients {
+        let (url, map, region, barrier) = (
+            server.url.clone(),
+            map.clone(),
+            region.clone(),
+            barrier.clone(),
+        );
+        let start = i * region.len() / clients;
+        tasks.push(tokio::spawn(async move {
+            let client = MapClient::connect(ClientConfig::new(url)).await;
+            let sender = match &client {
+                Ok(client) => Some(
+                    client
+                        .updates(&map, &format!("bench-{clients}-{i}"), config)
+                        .await,
+                ),
+                Err(_) => None,
+            };
+            // Everyone passes the barrier, ready or not, so none waits for ever.
+            barrier.wait().await;
+            let mut sender = sender.context("connecting")??;
+            let deadline = Instant::now() + duration;
+            let patterns = [evidence_pattern(size, 0), evidence_pattern(size, 1)];
+            let (mut cells, mut visit) = (0u64, start);
+            while Instant::now() < deadline {
+                let key = region[visit % region.len()];
+                let pattern = &patterns[(visit / region.len()) % 2];
+                let delta = TileDelta::from_raw(key, size, pattern.clone())?;
+                cells += delta.nonzero_count() as u64;
+                sender.push(delta).await?;
+                visit += 1;
+            }
+            // The deadline can pass with a batch part-filled: send it now,
+            // as closing would, so that it counts among the batches sent
+            // (its cells are counted already).
+            sender.send_batch().await?;
+            let batches = sender.next_sequence() - 1;
+            let state = sender.close().await?;
+            ensure!(
+                state.last_acked == batches && state.failure.is_none(),
+                "client {i}: {} of {batches} batches acknowledged",
+                state.last_acked
+            );
+            anyhow::Ok(ClientRun {
+                cells,
+                batches,
+                applied: state.applied,
+                finished: Instant::now(),
+            })
+        }));
+    }
+    barrier.wait().await;
+    let (start, server_cpu, bench_cpu) =
+        (Instant::now(), server.cpu_seconds()?, own_cpu_seconds()?);
+    let mut runs = Vec::with_capacity(clients);
+    for task in tasks {
+        runs.push(task.await.context("client task panicked")??);
+    }
+    let end = runs.iter().map(|r| r.finished).max().unwrap_or(start);
+    let seconds = end.duration_since(start).as_secs_f64();
+    let server_cpu_s = server.cpu_seconds()? - server_cpu;
+    let bench_cpu_s = own_cpu_seconds()? - bench_cpu;
+    let info = admin.map_info(&map).await?;
+    let batches: u64 = runs.iter().map(|r| r.batches).sum();
+    let applied: u64 = runs.iter().map(|r| r.applied).sum();
+    ensure!(
+        applied == batches && info.version == batches,
+        "{batches} batches sent, {applied} acknowledged as applied, map version {}",
+        info.version
+    );
+    Ok(ThroughputRun {
+        clients,
+        cells: runs.iter().map(|r| r.cells).sum(),
+        batches,
+        seconds,
+        server_cpu_s,
+        bench_cpu_s,
+        map_version: info.version,
+    })
+}
