@@ -1,29 +1,5 @@
-//! The shutdown signal of long-running subcommands.
+//! The shutdown signal of long-running subcommands: one copy, in
+//! deog-harness. This name stays for the benchmark subcommands, which
+//! still call it.
 
-/// Resolves on ctrl-c or, on Unix, SIGTERM.
-pub async fn shutdown() {
-    let ctrl_c = async {
-        if let Err(error) = tokio::signal::ctrl_c().await {
-            tracing::warn!(%error, "cannot listen for ctrl-c");
-            std::future::pending::<()>().await;
-        }
-    };
-    #[cfg(unix)]
-    let terminate = async {
-        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-            Ok(mut signal) => {
-                signal.recv().await;
-            }
-            Err(error) => {
-                tracing::warn!(%error, "cannot listen for SIGTERM");
-                std::future::pending::<()>().await;
-            }
-        }
-    };
-    #[cfg(not(unix))]
-    let terminate = std::future::pending::<()>();
-    tokio::select! {
-        () = ctrl_c => tracing::info!("ctrl-c received"),
-        () = terminate => tracing::info!("SIGTERM received"),
-    }
-}
+pub use deog_harness::shutdown_signal as shutdown;

@@ -15,9 +15,13 @@
 //! - [`run_reads`]: a map, the robots' start poses, and a robot's true
 //!   poses and estimates read from the map server, as the evaluation takes
 //!   them.
+//! - [`signal`]: [`shutdown_signal`], ctrl-c or SIGTERM, for every
+//!   long-running subcommand and for runs that must stop their children.
 
 pub mod proc_stats;
 pub mod run_reads;
+pub mod signal;
 pub mod supervisor;
 
+pub use signal::shutdown_signal;
 pub use supervisor::{Role, Supervisor, connect, free_loopback_addr, log_tail, os};
