@@ -38,7 +38,7 @@ enum Command {
     /// simulator, and per robot a wanderer, a cartographer and a localizer
     /// that starts knowing nothing; one robot is kidnapped half-way. Writes
     /// the map, path plots and a report to demo-out/.
-    Demo(demo::DemoArgs),
+    Demo(demo::DemoOptions),
     /// Runs the map server: maps, frames and poses in an embedded store,
     /// served over gRPC.
     Server(server::ServerArgs),
@@ -96,7 +96,7 @@ fn main() -> std::process::ExitCode {
 
 fn run(command: Command) -> Result<()> {
     match command {
-        Command::Demo(args) => demo::run(args),
+        Command::Demo(options) => demo::run(options),
         Command::Server(args) => server::run(args),
         Command::Sim(args) => sim::run(args),
         Command::Wander(args) => wander::run(args),
