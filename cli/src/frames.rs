@@ -68,7 +68,7 @@ pub fn run(args: FramesArgs) -> Result<()> {
             return Ok(());
         }
         let mut frames = map.subscribe_frames(robot, args.from).await?;
-        let shutdown = crate::signal::shutdown();
+        let shutdown = deog_harness::shutdown_signal();
         tokio::pin!(shutdown);
         loop {
             tokio::select! {

@@ -210,7 +210,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         .block_on(client.subscribe_frames(&args.robot, args.from))
         .context("following the robot's frames")?;
     let mut queue = FrameQueue::spawn(frames, args.idle_exit);
-    let mut shutdown = Box::pin(crate::signal::shutdown());
+    let mut shutdown = Box::pin(deog_harness::shutdown_signal());
     let (mut processed, mut corrections, mut last_sequence) = (0u64, 0u64, 0u64);
     loop {
         let next = runtime.block_on(async {

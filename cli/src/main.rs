@@ -12,7 +12,6 @@ mod localize;
 mod map;
 mod pose_args;
 mod server;
-mod signal;
 mod sim;
 mod teleport;
 mod wander;
@@ -37,7 +36,7 @@ enum Command {
     /// simulator, and per robot a wanderer, a cartographer and a localizer
     /// that starts knowing nothing; one robot is kidnapped half-way. Writes
     /// the map, path plots and a report to demo-out/.
-    Demo(demo::DemoArgs),
+    Demo(demo::DemoOptions),
     /// Runs the map server: maps, frames and poses in an embedded store,
     /// served over gRPC.
     Server(server::ServerArgs),
@@ -95,7 +94,7 @@ fn main() -> std::process::ExitCode {
 
 fn run(command: Command) -> Result<()> {
     match command {
-        Command::Demo(args) => demo::run(args),
+        Command::Demo(options) => demo::run(options),
         Command::Server(args) => server::run(args),
         Command::Sim(args) => sim::run(args),
         Command::Wander(args) => wander::run(args),

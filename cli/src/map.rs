@@ -176,7 +176,7 @@ pub fn run(args: MapArgs) -> Result<()> {
             .context("following the robot's frames")?;
         let mut queue = FrameQueue::spawn(frames, args.idle_exit);
 
-        let shutdown = crate::signal::shutdown();
+        let shutdown = deog_harness::shutdown_signal();
         tokio::pin!(shutdown);
         // Timed from the first frame to the last acknowledgement: the
         // rate of the pipeline, not of waiting for frames.

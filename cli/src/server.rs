@@ -80,7 +80,13 @@ pub fn run(args: ServerArgs) -> Result<()> {
             auth = config.token.is_some(),
             "map server listening"
         );
-        deog_server::serve(Arc::new(store), listener, config, crate::signal::shutdown()).await?;
+        deog_server::serve(
+            Arc::new(store),
+            listener,
+            config,
+            deog_harness::shutdown_signal(),
+        )
+        .await?;
         Ok(())
     })
 }

@@ -114,7 +114,7 @@ pub fn run(args: SimArgs) -> Result<()> {
             .with_context(|| format!("binding {}", args.listen))?;
         let addr = listener.local_addr()?;
         tracing::info!(%addr, world = %sim.world().name(), speed = args.speed, robots = sim.robot_count(), "simulator listening");
-        serve_sim(sim, listener, serve_config, crate::signal::shutdown()).await?;
+        serve_sim(sim, listener, serve_config, deog_harness::shutdown_signal()).await?;
         Ok(())
     })
 }

@@ -107,7 +107,7 @@ pub fn run(args: WanderArgs) -> Result<()> {
             Some(spawn_publisher(map))
         };
         let mut states = spawn_state_reader(sim.watch(&args.robot).await?);
-        let shutdown = crate::signal::shutdown();
+        let shutdown = deog_harness::shutdown_signal();
         tokio::pin!(shutdown);
         let mut summary = Summary::default();
         let (mut start_time, mut last_control, mut last_pose) = (None, None::<f64>, None::<Pose2>);

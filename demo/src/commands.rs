@@ -1,0 +1,170 @@
+//! The command line of every process the demo starts, as `deog`
+//! arguments: the same a person would type to run the parts by hand
+//! (report.md lists them).
+
+use std::ffi::OsString;
+use std::net::SocketAddr;
+use std::path::Path;
+
+use deog_harness::os;
+
+use crate::plan::{DemoPlan, PlannedRobot};
+
+/// The name of the shared map on the server.
+pub(crate) const MAP: &str = "demo";
+/// A cartographer or localizer ends once no frame came for this long,
+/// seconds.
+const IDLE_EXIT_S: &str = "3";
+
+/// Where the demo's two services listen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Addresses {
+    /// The map server.
+    pub server: SocketAddr,
+    /// The simulator.
+    pub sim: SocketAddr,
+}
+
+impl Addresses {
+    /// The map server's URL, as clients take it.
+    pub fn server_url(&self) -> String {
+        format!("http://{}", self.server)
+    }
+
+    /// The simulator's URL, as clients take it.
+    pub fn sim_url(&self) -> String {
+        format!("http://{}", self.sim)
+    }
+}
+
+/// The map server, on a fresh store in `data`.
+pub(crate) fn server(addresses: &Addresses, data: &Path) -> Vec<OsString> {
+    os(&["server", "--listen", &addresses.server.to_string()])
+        .into_iter()
+        .chain([OsString::from("--data"), data.as_os_str().to_owned()])
+        .collect()
+}
+
+/// The simulator, with the plan's world, speed and seed.
+pub(crate) fn sim(plan: &DemoPlan, addresses: &Addresses) -> Vec<OsString> {
+    os(&[
+        "sim",
+        "--world",
+        &plan.world_spec,
+        "--listen",
+        &addresses.sim.to_string(),
+        "--speed",
+        &plan.schedule.speed.to_string(),
+        "--seed",
+        &plan.seed.to_string(),
+    ])
+}
+
+/// A wanderer that spawns `robot` and drives it for the plan's duration.
+pub(crate) fn wander(
+    plan: &DemoPlan,
+    robot: &PlannedRobot,
+    addresses: &Addresses,
+) -> Vec<OsString> {
+    os(&[
+        "wander",
+        "--robot",
+        &robot.name,
+        "--spawn",
+        "--seed",
+        &robot.seed.to_string(),
+        "--duration",
+        &plan.schedule.duration_s.to_string(),
+        "--sim",
+        &addresses.sim_url(),
+        "--server",
+        &addresses.server_url(),
+    ])
+}
+
+/// A cartographer adding `robot`'s frames to the shared map.
+pub(crate) fn map(robot: &PlannedRobot, addresses: &Addresses) -> Vec<OsString> {
+    os(&[
+        "map",
+        "--robot",
+        &robot.name,
+        "--map",
+        MAP,
+        "--idle-exit",
+        IDLE_EXIT_S,
+        "--server",
+        &addresses.server_url(),
+    ])
+}
+
+/// A localizer for `robot` on the shared map, with no initial pose.
+pub(crate) fn localize(robot: &PlannedRobot, addresses: &Addresses) -> Vec<OsString> {
+    os(&[
+        "localize",
+        "--robot",
+        &robot.name,
+        "--map",
+        MAP,
+        "--idle-exit",
+        IDLE_EXIT_S,
+        "--seed",
+        &robot.seed.to_string(),
+        "--server",
+        &addresses.server_url(),
+    ])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fixtures::plan;
+
+    fn line(args: &[OsString]) -> String {
+        args.iter()
+            .map(|a| a.to_string_lossy().into_owned())
+            .collect::<Vec<_>>()
+            .join(" ")
+    }
+
+    #[test]
+    fn every_process_gets_the_flags_of_the_plan() {
+        let plan = plan(&[
+            "--seed",
+            "2",
+            "--robots",
+            "2",
+            "--duration",
+            "100",
+            "--speed",
+            "4",
+        ])
+        .expect("valid options");
+        let addresses = Addresses {
+            server: "127.0.0.1:5001".parse().expect("address"),
+            sim: "127.0.0.1:5002".parse().expect("address"),
+        };
+        let robot = &plan.robots[1];
+        assert_eq!(
+            line(&server(&addresses, Path::new("out/server-data"))),
+            "server --listen 127.0.0.1:5001 --data out/server-data"
+        );
+        assert_eq!(
+            line(&sim(&plan, &addresses)),
+            "sim --world map2 --listen 127.0.0.1:5002 --speed 4 --seed 2"
+        );
+        assert_eq!(
+            line(&wander(&plan, robot, &addresses)),
+            "wander --robot scout-2 --spawn --seed 2002 --duration 100 \
+             --sim http://127.0.0.1:5002 --server http://127.0.0.1:5001"
+        );
+        assert_eq!(
+            line(&map(robot, &addresses)),
+            "map --robot scout-2 --map demo --idle-exit 3 --server http://127.0.0.1:5001"
+        );
+        assert_eq!(
+            line(&localize(robot, &addresses)),
+            "localize --robot scout-2 --map demo --idle-exit 3 --seed 2002 \
+             --server http://127.0.0.1:5001"
+        );
+    }
+}

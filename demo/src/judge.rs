@@ -1,0 +1,131 @@
+//! The run judged once the processes have stopped, with the same code as
+//! `deog eval`: the map against the world's ground truth, each localizer
+//! against its robot's true poses. Writes the pictures: the map, where it
+//! is right and wrong, and each robot's paths.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use deog_evaluation::localization::{
+    EvalInput, EvalParams, LocalizationReport, PlotInput, RobotPath, evaluate, render_plot,
+};
+use deog_evaluation::map_quality::{
+    DEFAULT_ROBOT_RADIUS_M, MapQuality, QualityInput, map_quality, verdict_png,
+};
+use deog_grid::TileMap;
+use deog_harness::run_reads::{read_map, read_robot, robot_starts};
+use deog_mapfile::{to_png, write_map};
+use deog_mapping::export_map;
+use deog_robot_client::MapClient;
+
+use crate::commands::MAP;
+use crate::plan::DemoPlan;
+
+/// Where the map is right and wrong, drawn over the world.
+pub(crate) const VERDICT_PNG: &str = "map-verdict.png";
+
+/// One robot's figures and its plot's file name.
+#[derive(Debug, Clone)]
+pub(crate) struct RobotJudgement {
+    /// Its localizer against its true poses.
+    pub report: LocalizationReport,
+    /// The file of its path plot, in the output folder.
+    pub plot: String,
+}
+
+/// What the judging found.
+#[derive(Debug, Clone)]
+pub(crate) struct Judgement {
+    /// The robots, in the plan's order.
+    pub robots: Vec<RobotJudgement>,
+    /// The map against the world.
+    pub quality: MapQuality,
+    /// The map's picture, in the output folder.
+    pub map_png: String,
+    /// The map's map_server YAML file, in the output folder.
+    pub map_yaml: String,
+}
+
+/// Judges the map against the world and each localizer against its
+/// robot's true poses; writes the map files and the path plots to `out`.
+pub(crate) async fn judge(client: &MapClient, plan: &DemoPlan, out: &Path) -> Result<Judgement> {
+    let map = read_map(client, MAP).await?;
+    let seeds = robot_starts(client).await?;
+    let input = QualityInput {
+        map: &map,
+        world: &plan.world,
+        seeds: &seeds,
+        robot_radius_m: DEFAULT_ROBOT_RADIUS_M,
+    };
+    let quality = map_quality(&input).context("judging the map against the world")?;
+    let (map_yaml, map_png) = write_map_files(&map, out)?;
+    let png = verdict_png(&input).context("drawing where the map is right and wrong")?;
+    write(out, VERDICT_PNG, &png)?;
+    let mut robots = Vec::with_capacity(plan.robots.len());
+    for name in plan.robot_names() {
+        robots.push(judge_robot(client, &map, name, out).await?);
+    }
+    Ok(Judgement {
+        robots,
+        quality,
+        map_png,
+        map_yaml,
+    })
+}
+
+/// Judges robot `name`'s localizer and draws its paths over `map`.
+async fn judge_robot(
+    client: &MapClient,
+    map: &TileMap,
+    name: &str,
+    out: &Path,
+) -> Result<RobotJudgement> {
+    // Judge from the first frame the localizer saw, not from the mapping
+    // head start before it ran.
+    let first = client
+        .read_poses(name, 0, 0)
+        .await
+        .with_context(|| format!("reading the estimates of {name}"))?
+        .iter()
+        .filter(|p| p.map == MAP)
+        .map(|p| p.frame_sequence)
+        .min()
+        .with_context(|| format!("the localizer of {name} published no estimate"))?;
+    let samples = read_robot(client, name, Some(MAP), first, 0).await?;
+    let report = evaluate(&EvalInput {
+        robot: name,
+        map: Some(MAP),
+        truth: &samples.truth,
+        estimates: &samples.estimates,
+        params: EvalParams::default(),
+        known_kidnaps: &[],
+    })
+    .with_context(|| format!("judging the estimates of {name}"))?;
+    let plot = format!("{name}.png");
+    let raster = render_plot(&PlotInput {
+        map: Some(map),
+        robots: &[RobotPath {
+            truth: &samples.truth,
+            estimates: &samples.estimates,
+            kidnaps: &report.kidnaps,
+        }],
+    })
+    .with_context(|| format!("drawing the paths of {name}"))?;
+    let png = raster.to_png().context("encoding the plot")?;
+    write(out, &plot, &png)?;
+    Ok(RobotJudgement { report, plot })
+}
+
+/// The map as map_server files and a PNG; returns the YAML and PNG names.
+fn write_map_files(map: &TileMap, out: &Path) -> Result<(String, String)> {
+    let export = export_map(map).context("exporting the map")?;
+    write_map(out, "map", &export.image)?;
+    to_png(out.join("map.png"), &export.image)?;
+    Ok(("map.yaml".to_string(), "map.png".to_string()))
+}
+
+/// Writes `bytes` to file `name` in `out`.
+fn write(out: &Path, name: &str, bytes: &[u8]) -> Result<()> {
+    let path = out.join(name);
+    std::fs::write(&path, bytes).with_context(|| format!("writing {}", path.display()))
+}

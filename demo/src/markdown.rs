@@ -1,0 +1,261 @@
+//! The demo's results for people: report.md (the thesis-style tables, the
+//! pictures, the commands each process ran with) and the short summary
+//! printed at the end.
+
+use std::fmt::Write as _;
+
+use deog_evaluation::localization::LocalizationReport;
+
+use crate::judge::VERDICT_PNG;
+use crate::report::DemoOutcome;
+
+// Writing to a String cannot fail: the `let _ =` on every `writeln!` below
+// drops an error that never comes.
+
+/// The short table printed at the end.
+pub(crate) fn summary(outcome: &DemoOutcome<'_>) -> String {
+    let mut out = String::new();
+    let q = &outcome.judgement.quality;
+    let _ = writeln!(
+        out,
+        "\nmap: {} cells observed, {:.1}% classified right, occupied precision {}, recall {}",
+        q.cells_observed(),
+        100.0 * q.fraction_correct(),
+        percent(q.occupied_precision()),
+        percent(q.occupied_recall()),
+    );
+    for robot in &outcome.judgement.robots {
+        let _ = writeln!(out, "{}", robot_line(&robot.report));
+    }
+    let _ = writeln!(
+        out,
+        "{:.0} s in all; wrote {} (report.md, report.json, {}, the plots, logs/)",
+        outcome.wall_s,
+        outcome.plan.out.display(),
+        outcome.judgement.map_yaml
+    );
+    out
+}
+
+/// report.md: the thesis-style tables and the figures of the run.
+pub(crate) fn report(outcome: &DemoOutcome<'_>) -> String {
+    let mut md = String::new();
+    let plan = outcome.plan;
+    let judgement = outcome.judgement;
+    let _ = writeln!(md, "# deog demo: {}\n", plan.world.name());
+    let _ = writeln!(
+        md,
+        "{} robots drove {} simulated seconds at {}x (seed {}), in {:.0} s of wall-clock time. \
+         Each robot had its own wanderer, cartographer and localizer process; the \
+         localizers started at {:.0} s with no idea where their robots were.",
+        plan.robots.len(),
+        plan.schedule.duration_s,
+        plan.schedule.speed,
+        plan.seed,
+        outcome.wall_s,
+        plan.schedule.localize_at_s,
+    );
+    match outcome.kidnap {
+        Some(k) => {
+            let _ = writeln!(
+                md,
+                "At {:.1} s {} was kidnapped: carried from ({:.2}, {:.2}) to ({:.2}, {:.2}) \
+                 without its odometry noticing.",
+                k.time_s, k.robot, k.from.x, k.from.y, k.to.x, k.to.y
+            );
+        }
+        None => {
+            let _ = writeln!(md, "No robot was kidnapped.");
+        }
+    }
+    let _ = writeln!(md, "\n## Localization\n");
+    let _ = writeln!(
+        md,
+        "| robot | converged after | mean abs. error x | y | heading | RMS position | kidnapped | recovered after |"
+    );
+    let _ = writeln!(md, "|---|---:|---:|---:|---:|---:|---|---:|");
+    for robot in &judgement.robots {
+        let r = &robot.report;
+        let stats = r.stats.as_ref();
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {} | {} | {} | {} |",
+            r.robot,
+            seconds(r.converge_s()),
+            metres(stats.map(|s| s.x_m.mean_abs)),
+            metres(stats.map(|s| s.y_m.mean_abs)),
+            stats.map_or("-".to_string(), |s| format!(
+                "{:.2}°",
+                s.theta_rad.mean_abs.to_degrees()
+            )),
+            metres(stats.map(|s| s.rms_position_m)),
+            if r.kidnapped() { "yes" } else { "no" },
+            match r.recovered() {
+                None => "-".to_string(),
+                Some(false) => "not recovered".to_string(),
+                Some(true) => seconds(r.recover_s()),
+            },
+        );
+    }
+    for robot in &judgement.robots {
+        let _ = writeln!(md, "\n### {}\n", robot.report.robot);
+        let _ = writeln!(
+            md,
+            "True path red, estimate green; a kidnap is marked.\n\n![{}]({})\n",
+            robot.report.robot, robot.plot
+        );
+        let _ = writeln!(md, "```\n{}```", robot.report.table());
+    }
+    let _ = writeln!(md, "\n## Map\n");
+    let _ = writeln!(
+        md,
+        "![map]({})\n\nExported as ROS map_server files: `{}` with its `.pgm`. \
+         Judged against the world's ground truth:\n",
+        judgement.map_png, judgement.map_yaml
+    );
+    let _ = writeln!(md, "{}", judgement.quality.table());
+    let _ = writeln!(
+        md,
+        "Where it is right and wrong (white free and black occupied: right; yellow free \
+         but uncertain, red free but occupied, blue occupied but free, purple occupied \
+         but uncertain; light grey never observed, dark grey the world's walls):\n\n\
+         ![where the map is right]({VERDICT_PNG})\n"
+    );
+    let _ = writeln!(md, "## The processes\n");
+    let _ = writeln!(
+        md,
+        "Each ran as its own process; the logs are in `logs/`. By hand, the same \
+         commands (with the addresses of your server and simulator):\n"
+    );
+    let _ = writeln!(md, "```");
+    for (name, line) in &outcome.commands {
+        let _ = writeln!(md, "# {name}\n{line}");
+    }
+    let _ = writeln!(md, "```");
+    md
+}
+
+/// One robot's figures on one line.
+fn robot_line(r: &LocalizationReport) -> String {
+    let mut line = format!("{}: ", r.robot);
+    match r.converge_s() {
+        Some(s) => {
+            let _ = write!(line, "converged after {s:.1} s");
+        }
+        None => line.push_str("never converged"),
+    }
+    if let Some(s) = &r.stats {
+        let _ = write!(
+            line,
+            ", mean error {:.1} cm x, {:.1} cm y, {:.2}°",
+            100.0 * s.x_m.mean_abs,
+            100.0 * s.y_m.mean_abs,
+            s.theta_rad.mean_abs.to_degrees()
+        );
+    }
+    match r.recovered() {
+        Some(true) => {
+            let _ = write!(
+                line,
+                "; kidnapped, found again after {}",
+                seconds(r.recover_s())
+            );
+        }
+        Some(false) => line.push_str("; kidnapped, not found again"),
+        None => {}
+    }
+    line
+}
+
+fn seconds(v: Option<f64>) -> String {
+    v.map_or("-".to_string(), |s| format!("{s:.1} s"))
+}
+
+fn metres(v: Option<f64>) -> String {
+    v.map_or("-".to_string(), |m| format!("{:.1} cm", 100.0 * m))
+}
+
+fn percent(v: Option<f64>) -> String {
+    v.map_or("-".to_string(), |p| format!("{:.1}%", 100.0 * p))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fixtures::{judgement, kidnap, two_robots};
+
+    #[test]
+    fn report_md_has_the_tables_the_kidnap_and_the_commands() {
+        let (plan, judgement, kidnap) = (two_robots(), judgement(), kidnap());
+        let outcome = DemoOutcome {
+            plan: &plan,
+            judgement: &judgement,
+            kidnap: Some(&kidnap),
+            wall_s: 80.4,
+            commands: vec![("server".to_string(), "deog server --data d".to_string())],
+        };
+        let md = report(&outcome);
+        assert!(md.starts_with(
+            "# deog demo: map2\n\n2 robots drove 100 simulated seconds at 4x (seed 1), in 80 s"
+        ));
+        assert!(md.contains(
+            "At 50.2 s scout-1 was kidnapped: carried from (1.00, 2.00) to (4.00, 3.00)"
+        ));
+        assert!(md.contains("| robot | converged after |"));
+        assert!(
+            md.contains("| scout-1 | 0.0 s | 5.0 cm | 0.0 cm | 0.00° | 5.0 cm | yes | 0.0 s |")
+        );
+        assert!(md.contains("| scout-2 | 0.0 s | 5.0 cm | 0.0 cm | 0.00° | 5.0 cm | no | - |"));
+        assert!(md.contains("![scout-2](scout-2.png)"));
+        assert!(md.contains("![where the map is right](map-verdict.png)"));
+        assert!(md.ends_with("```\n# server\ndeog server --data d\n```\n"));
+    }
+
+    #[test]
+    fn no_kidnap_is_said() {
+        let (plan, judgement) = (two_robots(), judgement());
+        let outcome = DemoOutcome {
+            plan: &plan,
+            judgement: &judgement,
+            kidnap: None,
+            wall_s: 1.0,
+            commands: Vec::new(),
+        };
+        assert!(report(&outcome).contains("No robot was kidnapped."));
+    }
+
+    #[test]
+    fn the_summary_has_a_line_per_robot() {
+        let (plan, judgement) = (two_robots(), judgement());
+        let outcome = DemoOutcome {
+            plan: &plan,
+            judgement: &judgement,
+            kidnap: None,
+            wall_s: 80.4,
+            commands: Vec::new(),
+        };
+        let summary = summary(&outcome);
+        let lines: Vec<&str> = summary.lines().collect();
+        assert_eq!(lines.len(), 5, "{summary}");
+        assert_eq!(
+            lines[1],
+            "map: 90 cells observed, 98.9% classified right, occupied precision 90.0%, recall 75.0%"
+        );
+        assert_eq!(
+            lines[2],
+            "scout-1: converged after 0.0 s, mean error 5.0 cm x, 0.0 cm y, 0.00°; \
+             kidnapped, found again after 0.0 s"
+        );
+        assert_eq!(
+            lines[4],
+            "80 s in all; wrote demo-out (report.md, report.json, map.yaml, the plots, logs/)"
+        );
+    }
+
+    #[test]
+    fn missing_figures_are_dashes() {
+        assert_eq!(seconds(None), "-");
+        assert_eq!(metres(Some(0.0123)), "1.2 cm");
+        assert_eq!(percent(Some(0.981)), "98.1%");
+    }
+}

@@ -1,0 +1,200 @@
+//! The demo's reports: report.json for tools, from the serde record
+//! [`DemoReport`], and report.md for people (`markdown`). The keys of
+//! report.json are an interface: README.md documents them and the
+//! end-to-end test reads them.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use deog_evaluation::localization::{LocalizationRecord, PoseRecord};
+use deog_evaluation::map_quality::MapQualityRecord;
+use serde::Serialize;
+
+use crate::judge::Judgement;
+use crate::kidnap::KidnapDone;
+use crate::markdown;
+use crate::plan::DemoPlan;
+
+/// Everything the reports say about one run.
+#[derive(Debug)]
+pub(crate) struct DemoOutcome<'a> {
+    /// What was run.
+    pub plan: &'a DemoPlan,
+    /// What the judging found.
+    pub judgement: &'a Judgement,
+    /// The kidnap, if one happened.
+    pub kidnap: Option<&'a KidnapDone>,
+    /// Wall-clock seconds from start to the end of the judging.
+    pub wall_s: f64,
+    /// Each process's name and command line, in the order they started.
+    pub commands: Vec<(String, String)>,
+}
+
+/// report.json: the robots' and the map's figures, with the run's
+/// settings. Figures that do not exist are `null`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DemoReport {
+    /// Each robot's localization figures, in order from `scout-1`.
+    pub robots: Vec<LocalizationRecord>,
+    /// The map against the world's ground truth.
+    pub map: MapQualityRecord,
+    /// Wall-clock seconds the demo took, up to the end of the judging.
+    pub duration_s: f64,
+    /// Simulated seconds the robots drove (`--duration`).
+    pub simulated_s: f64,
+    /// Simulated seconds per wall-clock second (`--speed`).
+    pub speed: f64,
+    /// The world's name.
+    pub world: String,
+    /// The demo's seed (`--seed`).
+    pub seed: u64,
+    /// Simulated second the localizers started.
+    pub localize_at_s: f64,
+    /// The kidnap; `null` when nobody was kidnapped.
+    pub kidnap: Option<DemoKidnapRecord>,
+}
+
+/// The kidnap the demo made, in report.json.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DemoKidnapRecord {
+    /// The robot carried off.
+    pub robot: String,
+    /// Simulated second it was carried off.
+    pub time_s: f64,
+    /// Its true pose before.
+    pub from: PoseRecord,
+    /// Its true pose after.
+    pub to: PoseRecord,
+}
+
+impl DemoReport {
+    /// The record of `outcome`.
+    pub(crate) fn new(outcome: &DemoOutcome<'_>) -> Self {
+        let plan = outcome.plan;
+        Self {
+            robots: outcome
+                .judgement
+                .robots
+                .iter()
+                .map(|r| r.report.record())
+                .collect(),
+            map: outcome.judgement.quality.record(),
+            duration_s: outcome.wall_s,
+            simulated_s: plan.schedule.duration_s,
+            speed: plan.schedule.speed,
+            world: plan.world.name().to_string(),
+            seed: plan.seed,
+            localize_at_s: plan.schedule.localize_at_s,
+            kidnap: outcome.kidnap.map(|k| DemoKidnapRecord {
+                robot: k.robot.clone(),
+                time_s: k.time_s,
+                from: k.from.into(),
+                to: k.to.into(),
+            }),
+        }
+    }
+
+    /// Pretty JSON with a closing newline.
+    pub(crate) fn to_json(&self) -> Result<String> {
+        let mut text = serde_json::to_string_pretty(self).context("assembling report.json")?;
+        text.push('\n');
+        Ok(text)
+    }
+}
+
+/// Writes report.md and report.json to `out`.
+pub(crate) fn write_reports(outcome: &DemoOutcome<'_>, out: &Path) -> Result<()> {
+    let md = out.join("report.md");
+    std::fs::write(&md, markdown::report(outcome))
+        .with_context(|| format!("writing {}", md.display()))?;
+    let json = out.join("report.json");
+    std::fs::write(&json, DemoReport::new(outcome).to_json()?)
+        .with_context(|| format!("writing {}", json.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeSet;
+
+    use serde_json::Value;
+
+    use super::*;
+    use crate::fixtures::{judgement, kidnap, two_robots};
+
+    fn keys(value: &Value) -> BTreeSet<&str> {
+        value
+            .as_object()
+            .expect("an object")
+            .keys()
+            .map(String::as_str)
+            .collect()
+    }
+
+    #[test]
+    fn report_json_keeps_its_keys_and_nesting() {
+        let (plan, judgement, kidnap) = (two_robots(), judgement(), kidnap());
+        let outcome = DemoOutcome {
+            plan: &plan,
+            judgement: &judgement,
+            kidnap: Some(&kidnap),
+            wall_s: 80.5,
+            commands: Vec::new(),
+        };
+        let text = DemoReport::new(&outcome).to_json().expect("serialises");
+        assert!(text.ends_with("}\n"));
+        let json: Value = serde_json::from_str(&text).expect("JSON");
+        assert_eq!(
+            keys(&json),
+            BTreeSet::from([
+                "robots",
+                "map",
+                "duration_s",
+                "simulated_s",
+                "speed",
+                "world",
+                "seed",
+                "localize_at_s",
+                "kidnap"
+            ])
+        );
+        assert_eq!(json["duration_s"], 80.5);
+        assert_eq!(json["simulated_s"], 100.0);
+        assert_eq!(json["speed"], 4.0);
+        assert_eq!(json["world"], "map2");
+        assert_eq!(json["seed"], 1);
+        assert_eq!(json["localize_at_s"], 25.0);
+        let k = &json["kidnap"];
+        assert_eq!(keys(k), BTreeSet::from(["robot", "time_s", "from", "to"]));
+        assert_eq!(k["robot"], "scout-1");
+        assert_eq!(k["time_s"], 50.25);
+        assert_eq!(keys(&k["from"]), BTreeSet::from(["x", "y", "theta"]));
+        assert_eq!(k["to"]["x"], 4.0);
+        assert_eq!(k["to"]["theta"], -1.0);
+
+        // The libraries' own JSON, nested unchanged.
+        let robots = json["robots"].as_array().expect("robots");
+        for (robot, judged) in robots.iter().zip(&judgement.robots) {
+            let alone: Value = serde_json::from_str(&judged.report.to_json()).expect("JSON");
+            assert_eq!(robot, &alone);
+        }
+        assert_eq!(robots[0]["kidnapped"], true);
+        assert_eq!(robots[1]["recovered"], Value::Null);
+        let map: Value = serde_json::from_str(&judgement.quality.to_json()).expect("JSON");
+        assert_eq!(json["map"], map);
+    }
+
+    #[test]
+    fn no_kidnap_is_null() {
+        let (plan, judgement) = (two_robots(), judgement());
+        let outcome = DemoOutcome {
+            plan: &plan,
+            judgement: &judgement,
+            kidnap: None,
+            wall_s: 1.0,
+            commands: Vec::new(),
+        };
+        let json: Value = serde_json::from_str(&DemoReport::new(&outcome).to_json().expect("JSON"))
+            .expect("JSON");
+        assert_eq!(json["kidnap"], Value::Null);
+    }
+}

@@ -1,0 +1,238 @@
+//! The demo from start to end: the processes started through the
+//! supervisor, the robots driving (localizers started, the kidnap made),
+//! the cartographers and localizers draining their last frames, then the
+//! judging and the reports. Any failure, or ctrl-c, returns an error, and
+//! dropping the supervisor stops every process.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use deog_harness::{Role, Supervisor, connect, free_loopback_addr};
+use deog_robot_client::{ClientConfig, MapClient, SimClient};
+
+use crate::commands::{self, Addresses};
+use crate::judge::judge;
+use crate::kidnap::{KidnapDone, kidnap_robot};
+use crate::markdown;
+use crate::options::DemoOptions;
+use crate::pacer::Pacer;
+use crate::plan::DemoPlan;
+use crate::progress::Progress;
+use crate::report::{DemoOutcome, write_reports};
+use crate::status_line::StatusLine;
+
+/// How long the cartographers and localizers may take to drain their
+/// frames after the wanderers stop, wall-clock.
+const FINISH_TIMEOUT: Duration = Duration::from_secs(300);
+
+/// Runs the demo as `options` say: checks them, starts every process,
+/// waits for the robots to finish, judges the run and writes the map, the
+/// plots and the reports to `--out`. Bad options are refused before
+/// anything is written or started.
+pub fn run(options: DemoOptions) -> Result<()> {
+    let plan = DemoPlan::new(&options)?;
+    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    runtime.block_on(demo(&plan))
+}
+
+/// The running demo: its processes and its connections to them.
+struct Demo<'a> {
+    plan: &'a DemoPlan,
+    children: Supervisor,
+    addresses: Addresses,
+    map_client: MapClient,
+    sim: SimClient,
+    status: StatusLine,
+    pacer: Pacer,
+}
+
+async fn demo(plan: &DemoPlan) -> Result<()> {
+    let started = Instant::now();
+    let mut demo = Demo::start(plan).await?;
+    let kidnap = demo.drive().await?;
+    demo.drain().await?;
+
+    let out = &plan.out;
+    let judgement = judge(&demo.map_client, plan, out).await?;
+    let outcome = DemoOutcome {
+        plan,
+        judgement: &judgement,
+        kidnap: kidnap.as_ref(),
+        wall_s: started.elapsed().as_secs_f64(),
+        commands: demo
+            .children
+            .command_lines()
+            .map(|(name, line)| (name.to_string(), line.to_string()))
+            .collect(),
+    };
+    write_reports(&outcome, out)?;
+    print!("{}", markdown::summary(&outcome));
+    if plan.keep {
+        demo.children.keep("server");
+        let pid = demo.children.pid("server").unwrap_or_default();
+        println!(
+            "the map server keeps running at {} (process {pid}), data in {}; stop it with: kill {pid}",
+            demo.addresses.server_url(),
+            server_data(out).display(),
+        );
+    }
+    Ok(())
+}
+
+/// The map server's store in the output folder.
+fn server_data(out: &Path) -> PathBuf {
+    out.join("server-data")
+}
+
+impl<'a> Demo<'a> {
+    /// Clears the output folder, starts the map server and the simulator
+    /// and connects to them, then starts each robot's wanderer and
+    /// cartographer.
+    async fn start(plan: &'a DemoPlan) -> Result<Self> {
+        let out = &plan.out;
+        prepare_out(out)?;
+        let mut children = Supervisor::new(&out.join("logs"))?;
+        let addresses = Addresses {
+            server: free_loopback_addr()?,
+            sim: free_loopback_addr()?,
+        };
+        println!(
+            "deog demo: {} with {} robots for {} simulated s at {}x; writing to {}",
+            plan.world.name(),
+            plan.robots.len(),
+            plan.schedule.duration_s,
+            plan.schedule.speed,
+            out.display()
+        );
+        children.start(
+            "server",
+            Role::Service,
+            &commands::server(&addresses, &server_data(out)),
+        )?;
+        children.start("sim", Role::Service, &commands::sim(plan, &addresses))?;
+        let server_url = addresses.server_url();
+        let map_client = connect(&mut children, "map server", || {
+            MapClient::connect(ClientConfig::new(server_url.clone()))
+        })
+        .await?;
+        let sim_url = addresses.sim_url();
+        let sim = connect(&mut children, "simulator", || {
+            SimClient::connect(ClientConfig::new(sim_url.clone()))
+        })
+        .await?;
+        for robot in &plan.robots {
+            children.start(
+                &format!("wander-{}", robot.name),
+                Role::Task,
+                &commands::wander(plan, robot, &addresses),
+            )?;
+            children.start(
+                &format!("map-{}", robot.name),
+                Role::Task,
+                &commands::map(robot, &addresses),
+            )?;
+        }
+        Ok(Self {
+            plan,
+            children,
+            addresses,
+            map_client,
+            sim,
+            status: StatusLine::new(),
+            pacer: Pacer::new(),
+        })
+    }
+}
+
+impl Demo<'_> {
+    /// Until every wanderer has finished its simulated time: starts the
+    /// localizers and makes the kidnap when their times come, and keeps
+    /// the status line. Returns the kidnap, if one was made.
+    async fn drive(&mut self) -> Result<Option<KidnapDone>> {
+        let plan = self.plan;
+        let mut progress = Progress::new(plan.robot_names());
+        let mut localizing = false;
+        let mut kidnap: Option<KidnapDone> = None;
+        loop {
+            self.pacer.next(&mut self.status).await?;
+            self.children.check()?;
+            let states = self.sim.robots().await.context("asking the simulator")?;
+            let now = states.iter().map(|s| s.time_s).fold(0.0, f64::max);
+            if !localizing
+                && now >= plan.schedule.localize_at_s
+                && states.len() == plan.robots.len()
+            {
+                for robot in &plan.robots {
+                    self.children.start(
+                        &format!("localize-{}", robot.name),
+                        Role::Task,
+                        &commands::localize(robot, &self.addresses),
+                    )?;
+                }
+                localizing = true;
+                self.status.note(&format!(
+                    "{now:.0} s: localizers started, knowing nothing of where their robots are"
+                ));
+            }
+            if let Some(at) = plan.schedule.kidnap_at_s
+                && kidnap.is_none()
+                && now >= at
+                && let Some(first) = plan.robots.first()
+                && let Some(state) = states.iter().find(|s| s.name == first.name)
+            {
+                let done = kidnap_robot(&self.sim, &plan.world, state, plan.seed).await?;
+                self.status.note(&format!(
+                    "{:.0} s: {} kidnapped from ({:.2}, {:.2}) to ({:.2}, {:.2})",
+                    done.time_s, done.robot, done.from.x, done.from.y, done.to.x, done.to.y
+                ));
+                kidnap = Some(done);
+            }
+            let line = progress
+                .line(&self.map_client, now, plan.schedule.duration_s)
+                .await;
+            self.status.show(&line);
+            if self.children.all_done("wander-") {
+                return Ok(kidnap);
+            }
+        }
+    }
+
+    /// Until the cartographers and localizers, idle once the robots
+    /// stopped, have ended.
+    async fn drain(&mut self) -> Result<()> {
+        let finishing = Instant::now();
+        while !(self.children.all_done("map-") && self.children.all_done("localize-")) {
+            self.pacer.next(&mut self.status).await?;
+            self.children.check()?;
+            let mut waiting = self.children.running("map-");
+            waiting.extend(self.children.running("localize-"));
+            if finishing.elapsed() > FINISH_TIMEOUT {
+                bail!(
+                    "{} still had frames to work through {} s after the robots stopped",
+                    waiting.join(", "),
+                    FINISH_TIMEOUT.as_secs()
+                );
+            }
+            self.status.show(&format!(
+                "robots stopped; {} working through their last frames",
+                waiting.join(", ")
+            ));
+        }
+        self.status.finish();
+        self.children.check()
+    }
+}
+
+/// Creates `out` and clears what an earlier demo left in it.
+fn prepare_out(out: &Path) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    for folder in ["server-data", "logs"] {
+        let path = out.join(folder);
+        if path.exists() {
+            std::fs::remove_dir_all(&path)
+                .with_context(|| format!("clearing {} of an earlier demo", path.display()))?;
+        }
+    }
+    Ok(())
+}
