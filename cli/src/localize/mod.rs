@@ -3,17 +3,20 @@
 //! particles need (keeping them current through the watch stream, within a
 //! memory budget), and publishes an estimate per frame.
 
+mod server;
+
+use server::{ServerTiles, estimate_message, log_estimate};
+
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail, ensure};
 use clap::Args;
-use deog_grid::{CellBox, CellIndex, OccupancyThresholds, Pose2, Resolution, TileKey, TileSize};
+use deog_grid::{CellBox, CellIndex, OccupancyThresholds, Pose2, Resolution, TileSize};
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::range_table::ConeGeometry;
-use deog_localizer::step::{FetchedTile, Localizer, TileSource};
-use deog_proto::v1 as pb;
-use deog_robot_client::convert::{cell_box_from_wire, pose_from_wire, pose_to_wire};
+use deog_localizer::step::{FetchedTile, Localizer};
+use deog_robot_client::convert::{cell_box_from_wire, pose_from_wire};
 use deog_robot_client::{MapClient, TileChange, TileWatch};
 
 use crate::connection::ConnectionArgs;
@@ -246,47 +249,14 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         processed += 1;
         if let Some(estimate) = report.estimate {
             runtime
-                .block_on(client.publish_pose(pb::PoseEstimate {
-                    robot: args.robot.clone(),
-                    map: args.map.clone(),
-                    frame_sequence: frame.sequence,
-                    time_s: frame.time_s,
-                    pose: Some(pose_to_wire(estimate.pose)),
-                    covariance: estimate.covariance.to_vec(),
-                    particle_count: estimate.particle_count as u32,
-                    converged: estimate.converged,
-                    lost_score: estimate.lost_score,
-                }))
+                .block_on(client.publish_pose(estimate_message(
+                    &args.robot,
+                    &args.map,
+                    &frame,
+                    &estimate,
+                )))
                 .with_context(|| format!("publishing the estimate of frame {}", frame.sequence))?;
-            if let Some(truth) = &frame.true_pose {
-                tracing::debug!(
-                    frame = frame.sequence,
-                    x = format!("{:.3}", estimate.pose.x),
-                    y = format!("{:.3}", estimate.pose.y),
-                    theta = format!("{:.3}", estimate.pose.theta),
-                    true_x = format!("{:.3}", truth.x),
-                    true_y = format!("{:.3}", truth.y),
-                    true_theta = format!("{:.3}", truth.theta),
-                    particles = estimate.particle_count,
-                    converged = estimate.converged,
-                    lost = format!("{:.2}", estimate.lost_score),
-                    "estimate beside the simulator's true pose"
-                );
-            }
-            if processed % 100 == 0 {
-                tracing::info!(
-                    frame = frame.sequence,
-                    x = format!("{:.3}", estimate.pose.x),
-                    y = format!("{:.3}", estimate.pose.y),
-                    theta = format!("{:.3}", estimate.pose.theta),
-                    particles = estimate.particle_count,
-                    converged = estimate.converged,
-                    lost = format!("{:.2}", estimate.lost_score),
-                    cache_mb =
-                        format!("{:.1}", localizer.map().bytes() as f64 / f64::from(1 << 20)),
-                    "estimate"
-                );
-            }
+            log_estimate(&frame, &estimate, processed, localizer.map().bytes());
         }
         if args.to > 0 && frame.sequence >= args.to {
             break;
@@ -302,28 +272,4 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         map.bytes() as f64 / f64::from(1 << 20)
     );
     Ok(())
-}
-
-/// The map server as the localizer's tile source: each fetch waits on the
-/// runtime for one `GetTiles` by key.
-struct ServerTiles<'a> {
-    runtime: &'a tokio::runtime::Runtime,
-    client: &'a MapClient,
-    map: &'a str,
-    tile_size: TileSize,
-}
-
-impl TileSource for ServerTiles<'_> {
-    fn fetch(
-        &mut self,
-        keys: &[TileKey],
-    ) -> Result<Vec<FetchedTile>, Box<dyn std::error::Error + Send + Sync>> {
-        let tiles =
-            self.runtime
-                .block_on(self.client.tiles_by_key(self.map, self.tile_size, keys))?;
-        Ok(tiles
-            .into_iter()
-            .map(|(key, version, tile)| FetchedTile { key, version, tile })
-            .collect())
-    }
 }

@@ -1,0 +1,91 @@
+//! The localizer's ends at the map server: the tiles it fetches and the
+//! estimates it publishes (and logs).
+
+use deog_grid::{TileKey, TileSize};
+use deog_localizer::filter::Estimate;
+use deog_localizer::step::{FetchedTile, TileSource};
+use deog_proto::v1 as pb;
+use deog_robot_client::MapClient;
+use deog_robot_client::convert::pose_to_wire;
+
+/// The map server as the localizer's tile source: each fetch waits on the
+/// runtime for one `GetTiles` by key.
+pub(super) struct ServerTiles<'a> {
+    pub(super) runtime: &'a tokio::runtime::Runtime,
+    pub(super) client: &'a MapClient,
+    pub(super) map: &'a str,
+    pub(super) tile_size: TileSize,
+}
+
+impl TileSource for ServerTiles<'_> {
+    fn fetch(
+        &mut self,
+        keys: &[TileKey],
+    ) -> Result<Vec<FetchedTile>, Box<dyn std::error::Error + Send + Sync>> {
+        let tiles =
+            self.runtime
+                .block_on(self.client.tiles_by_key(self.map, self.tile_size, keys))?;
+        Ok(tiles
+            .into_iter()
+            .map(|(key, version, tile)| FetchedTile { key, version, tile })
+            .collect())
+    }
+}
+
+/// The wire message of the estimate made after `frame`.
+pub(super) fn estimate_message(
+    robot: &str,
+    map: &str,
+    frame: &pb::SonarFrame,
+    estimate: &Estimate,
+) -> pb::PoseEstimate {
+    pb::PoseEstimate {
+        robot: robot.to_string(),
+        map: map.to_string(),
+        frame_sequence: frame.sequence,
+        time_s: frame.time_s,
+        pose: Some(pose_to_wire(estimate.pose)),
+        covariance: estimate.covariance.to_vec(),
+        particle_count: estimate.particle_count as u32,
+        converged: estimate.converged,
+        lost_score: estimate.lost_score,
+    }
+}
+
+/// Logs the estimate beside the true pose at debug level, and every
+/// hundredth frame at info level with the cache's size (`cache_bytes`).
+pub(super) fn log_estimate(
+    frame: &pb::SonarFrame,
+    estimate: &Estimate,
+    processed: u64,
+    cache_bytes: usize,
+) {
+    if let Some(truth) = &frame.true_pose {
+        tracing::debug!(
+            frame = frame.sequence,
+            x = format!("{:.3}", estimate.pose.x),
+            y = format!("{:.3}", estimate.pose.y),
+            theta = format!("{:.3}", estimate.pose.theta),
+            true_x = format!("{:.3}", truth.x),
+            true_y = format!("{:.3}", truth.y),
+            true_theta = format!("{:.3}", truth.theta),
+            particles = estimate.particle_count,
+            converged = estimate.converged,
+            lost = format!("{:.2}", estimate.lost_score),
+            "estimate beside the simulator's true pose"
+        );
+    }
+    if processed % 100 == 0 {
+        tracing::info!(
+            frame = frame.sequence,
+            x = format!("{:.3}", estimate.pose.x),
+            y = format!("{:.3}", estimate.pose.y),
+            theta = format!("{:.3}", estimate.pose.theta),
+            particles = estimate.particle_count,
+            converged = estimate.converged,
+            lost = format!("{:.2}", estimate.lost_score),
+            cache_mb = format!("{:.1}", cache_bytes as f64 / f64::from(1 << 20)),
+            "estimate"
+        );
+    }
+}
