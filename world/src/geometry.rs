@@ -16,6 +16,7 @@ impl Point2 {
     }
 
     /// Euclidean distance to `other`.
+    #[inline]
     pub fn distance(self, other: Point2) -> f64 {
         (self.x - other.x).hypot(self.y - other.y)
     }
@@ -37,11 +38,13 @@ impl Segment {
     }
 
     /// Length, metres.
+    #[inline]
     pub fn length(&self) -> f64 {
         self.a.distance(self.b)
     }
 
     /// The point of the segment nearest to `p`.
+    #[inline]
     pub fn closest_point(&self, p: Point2) -> Point2 {
         let (dx, dy) = (self.b.x - self.a.x, self.b.y - self.a.y);
         let len2 = dx * dx + dy * dy;
@@ -53,6 +56,7 @@ impl Segment {
     }
 
     /// Distance from `p` to the segment.
+    #[inline]
     pub fn distance_to(&self, p: Point2) -> f64 {
         self.closest_point(p).distance(p)
     }

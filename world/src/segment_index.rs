@@ -46,6 +46,7 @@ struct CellRect {
 }
 
 impl CellRect {
+    #[inline]
     fn intersect(&self, lo: (i64, i64), hi: (i64, i64)) -> CellRect {
         CellRect {
             x0: self.x0.max(lo.0),
@@ -323,6 +324,7 @@ impl SegmentIndex {
     }
 
     /// The cell holding `p`, clamped to the grid.
+    #[inline]
     fn cell_of(&self, p: Point2) -> (i64, i64) {
         let x = ((p.x - self.origin.x) * self.inv_cell).floor();
         let y = ((p.y - self.origin.y) * self.inv_cell).floor();
@@ -334,6 +336,7 @@ impl SegmentIndex {
 
     /// The grid's cells covering the square of half-side `radius` around
     /// `center`, or `None` when it misses the grid or the input is bad.
+    #[inline]
     fn query_rect(&self, center: Point2, radius: f64) -> Option<CellRect> {
         if !(center.x.is_finite() && center.y.is_finite() && radius >= 0.0) || self.walls.is_empty()
         {
@@ -357,6 +360,7 @@ impl SegmentIndex {
 }
 
 /// How far `c` lies outside `lo..=hi`, in cells.
+#[inline]
 fn gap(lo: i64, hi: i64, c: i64) -> i64 {
     if c < lo {
         lo - c
@@ -371,6 +375,7 @@ fn gap(lo: i64, hi: i64, c: i64) -> i64 {
 /// wall in: of the cells of `r` in the nearest ring that meets `r`, the first
 /// in row-major order. Any fixed choice in that ring would do; this one is
 /// cheap to compute.
+#[inline]
 fn designated(r: CellRect, cx: i64, cy: i64) -> (i64, i64) {
     let k = gap(r.x0, r.x1, cx).max(gap(r.y0, r.y1, cy));
     let y = r.y0.max(cy - k);
