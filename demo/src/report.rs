@@ -96,9 +96,7 @@ impl DemoReport {
 
     /// Pretty JSON with a closing newline.
     pub(crate) fn to_json(&self) -> Result<String> {
-        let mut text = serde_json::to_string_pretty(self).context("assembling report.json")?;
-        text.push('\n');
-        Ok(text)
+        deog_evaluation::json::pretty_json(self).context("assembling report.json")
     }
 }
 

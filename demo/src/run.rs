@@ -91,7 +91,7 @@ impl<'a> Demo<'a> {
     /// cartographer.
     async fn start(plan: &'a DemoPlan) -> Result<Self> {
         let out = &plan.out;
-        prepare_out(out)?;
+        deog_harness::prepare_run_folder(out)?;
         let mut children = Supervisor::new(&out.join("logs"))?;
         let addresses = Addresses {
             server: free_loopback_addr()?,
@@ -222,17 +222,4 @@ impl Demo<'_> {
         self.status.finish();
         self.children.check()
     }
-}
-
-/// Creates `out` and clears what an earlier demo left in it.
-fn prepare_out(out: &Path) -> Result<()> {
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    for folder in ["server-data", "logs"] {
-        let path = out.join(folder);
-        if path.exists() {
-            std::fs::remove_dir_all(&path)
-                .with_context(|| format!("clearing {} of an earlier demo", path.display()))?;
-        }
-    }
-    Ok(())
 }

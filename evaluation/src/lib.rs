@@ -14,9 +14,11 @@
 //!   ([`tracking::track`]): what a tracking benchmark reports.
 //! - [`runs`]: many seeded runs summed up: how many converged and
 //!   recovered within a time limit, and the mean errors.
+//! - [`json`]: [`json::pretty_json`], how every record is written.
 //! - [`error`]: [`EvaluationError`], the crate's one error type.
 
 pub mod error;
+pub mod json;
 pub mod localization;
 pub mod map_quality;
 pub mod runs;

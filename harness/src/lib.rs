@@ -24,4 +24,6 @@ pub mod shutdown;
 pub mod supervisor;
 
 pub use shutdown::shutdown_signal;
-pub use supervisor::{Role, Supervisor, connect, free_loopback_addr, log_tail, os};
+pub use supervisor::{
+    Role, Supervisor, connect, free_loopback_addr, log_tail, os, prepare_run_folder,
+};

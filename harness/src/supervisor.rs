@@ -246,6 +246,20 @@ pub fn log_tail(path: &Path, lines: usize) -> String {
     }
 }
 
+/// Creates a run's output folder `out` and clears the server data and
+/// logs an earlier run left in it (other files stay).
+pub fn prepare_run_folder(out: &Path) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    for folder in ["server-data", "logs"] {
+        let path = out.join(folder);
+        if path.exists() {
+            std::fs::remove_dir_all(&path)
+                .with_context(|| format!("clearing {} of an earlier run", path.display()))?;
+        }
+    }
+    Ok(())
+}
+
 /// A loopback address no one listens on at the moment of asking.
 pub fn free_loopback_addr() -> Result<SocketAddr> {
     let listener = TcpListener::bind("127.0.0.1:0").context("finding a free loopback port")?;

@@ -131,7 +131,7 @@ pub fn run(options: LocalizeMemoryOptions) -> Result<()> {
     }
     let (work, temporary) = match &options.out {
         Some(dir) => {
-            prepare_out(dir)?;
+            deog_harness::prepare_run_folder(dir)?;
             (dir.clone(), None)
         }
         None => {
@@ -169,19 +169,6 @@ pub fn run(options: LocalizeMemoryOptions) -> Result<()> {
         std::fs::write(path, figures.json()?)
             .with_context(|| format!("writing {}", path.display()))?;
         eprintln!("figures written to {}", path.display());
-    }
-    Ok(())
-}
-
-/// Creates `out` and clears the server data and logs of an earlier run.
-fn prepare_out(out: &Path) -> Result<()> {
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    for folder in ["server-data", "logs"] {
-        let path = out.join(folder);
-        if path.exists() {
-            std::fs::remove_dir_all(&path)
-                .with_context(|| format!("clearing {} of an earlier run", path.display()))?;
-        }
     }
     Ok(())
 }

@@ -237,10 +237,7 @@ impl LocalizerMemoryFigures {
 
     /// The figures as pretty-printed JSON, ending with a newline.
     pub fn json(&self) -> Result<String> {
-        let mut text =
-            serde_json::to_string_pretty(&self.record()).context("assembling the JSON")?;
-        text.push('\n');
-        Ok(text)
+        deog_evaluation::json::pretty_json(&self.record()).context("assembling the JSON")
     }
 }
 

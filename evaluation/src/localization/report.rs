@@ -7,6 +7,8 @@ use std::fmt::Write as _;
 use deog_grid::Pose2;
 use serde::Serialize;
 
+use crate::json::pretty_json;
+
 use super::{AxisStats, ErrorStats, Kidnap, LocalizationReport, METRES_PER_INCH};
 
 /// Inches per metre.
@@ -347,10 +349,8 @@ fn kidnap_record(k: &Kidnap) -> KidnapRecord {
     }
 }
 
-/// Pretty JSON with a closing newline. Serialising plain data (numbers,
-/// strings, options; non-finite numbers become `null`) cannot fail.
+/// [`pretty_json`] of a record of plain data (numbers, strings, options),
+/// which cannot fail.
 pub(crate) fn pretty(value: &impl Serialize) -> String {
-    let mut text = serde_json::to_string_pretty(value).unwrap_or_default();
-    text.push('\n');
-    text
+    pretty_json(value).unwrap_or_default()
 }
