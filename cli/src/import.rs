@@ -99,6 +99,8 @@ fn import_frames(args: &ImportArgs, robot: &str) -> Result<()> {
                 odometry: Some(pose),
                 true_pose: (args.pose == PoseSource::True).then_some(pose),
                 ranges: line.ranges.clone(),
+                rig: String::new(),
+                reference_pose: None,
             }
         })
         .collect();

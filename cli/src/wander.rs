@@ -169,6 +169,8 @@ pub fn run(args: WanderArgs) -> Result<()> {
                         odometry: state.odometry,
                         true_pose: state.true_pose,
                         ranges: state.ranges.clone(),
+                        rig: String::new(),
+                        reference_pose: None,
                     };
                     if frames.send(frame).await.is_err() {
                         break 'run;

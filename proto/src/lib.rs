@@ -5,6 +5,8 @@
 //!   and `RobotService` (the simulator), with tonic clients and servers.
 //! - [`names`]: what the API accepts as a robot or map name or a client id,
 //!   the one rule every service and client checks.
+//! - [`rig`]: sensor rigs to and from the wire, and what a frame that names
+//!   no rig means.
 //! - [`FILE_DESCRIPTOR_SET`]: the encoded descriptors, for the gRPC reflection
 //!   service.
 
@@ -15,6 +17,7 @@ pub mod v1 {
 }
 
 pub mod names;
+pub mod rig;
 
 /// The encoded `FileDescriptorSet` of every deog proto file.
 pub const FILE_DESCRIPTOR_SET: &[u8] =

@@ -6,8 +6,10 @@ use crate::error::ClientError;
 use crate::tile_cache::TileCache;
 use crate::updates::{UpdateSender, UpdateSenderConfig};
 use deog_grid::{CellBox, ClampLimits, Resolution, Tile, TileKey, TileMap, TileSize};
+use deog_proto::rig::{frame_rig_name, rig_from_wire, rig_to_wire};
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_client::MapServiceClient;
+use deog_rig::Rig;
 use tokio_stream::StreamExt;
 
 /// A connection to the map server; cheap to clone.
@@ -247,6 +249,50 @@ impl MapClient {
             .await?
             .into_inner()
             .robots)
+    }
+
+    /// Stores `rig` on the server, so that consumers of this robot's frames
+    /// read them with its geometry. A built-in rig, or the same rig stored
+    /// before, is accepted as it is; a different rig under a known name is
+    /// refused (ALREADY_EXISTS).
+    pub async fn put_rig(&self, rig: &Rig) -> Result<(), ClientError> {
+        let raw = self.raw.clone();
+        let wire = rig_to_wire(rig);
+        with_retry(&self.config.retry, || {
+            let (mut raw, wire) = (raw.clone(), wire.clone());
+            async move { raw.put_rig(wire).await }
+        })
+        .await?;
+        Ok(())
+    }
+
+    /// The rig a frame's `rig` field names (empty: the Scout's), as the
+    /// server knows it.
+    pub async fn rig(&self, frame_rig: &str) -> Result<Rig, ClientError> {
+        let name = frame_rig_name(frame_rig).to_owned();
+        let raw = self.raw.clone();
+        let wire = with_retry(&self.config.retry, || {
+            let (mut raw, name) = (raw.clone(), name.clone());
+            async move { raw.get_rig(pb::RigRef { name }).await }
+        })
+        .await?
+        .into_inner();
+        rig_from_wire(&wire).map_err(|e| ClientError::wire("rig", e.to_string()))
+    }
+
+    /// Every rig the server knows.
+    pub async fn rigs(&self) -> Result<Vec<Rig>, ClientError> {
+        let wires = self
+            .raw
+            .clone()
+            .list_rigs(pb::ListRigsRequest {})
+            .await?
+            .into_inner()
+            .rigs;
+        wires
+            .iter()
+            .map(|w| rig_from_wire(w).map_err(|e| ClientError::wire("rigs", e.to_string())))
+            .collect()
     }
 
     /// Stores a pose estimate.

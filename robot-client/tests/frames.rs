@@ -22,6 +22,8 @@ fn frame(sequence: u64) -> pb::SonarFrame {
         odometry: Some(pose_to_wire(Pose2::new(sequence as f64, 0.0, 0.5))),
         true_pose: None,
         ranges: vec![1.0; 16],
+        rig: String::new(),
+        reference_pose: None,
     }
 }
 

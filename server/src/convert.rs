@@ -260,6 +260,12 @@ pub fn sonar_frame(field: &str, frame: &pb::SonarFrame, limits: &Limits) -> Resu
     if frame.true_pose.is_some() {
         pose(&format!("{field}.true_pose"), frame.true_pose.as_ref())?;
     }
+    if frame.reference_pose.is_some() {
+        pose(
+            &format!("{field}.reference_pose"),
+            frame.reference_pose.as_ref(),
+        )?;
+    }
     if frame.ranges.is_empty() || frame.ranges.len() > limits.max_ranges_per_frame {
         return Err(StoreError::invalid(
             format!("{field}.ranges"),

@@ -30,6 +30,22 @@ pub enum StoreError {
     /// A map with this name exists already.
     #[error("map {0:?} already exists")]
     MapExists(String),
+    /// No rig has this name.
+    #[error("rig {0:?} is not known to the server: store it with PutRig first (a --rig FILE does)")]
+    RigNotFound(String),
+    /// A different rig has this name.
+    #[error("a different rig called {0:?} is known to the server: give yours another name")]
+    RigExists(String),
+    /// A frame names a rig the server does not know.
+    #[error(
+        "{field}: rig {rig:?} is not known to the server: store it with PutRig first (a --rig FILE does)"
+    )]
+    UnknownRig {
+        /// Path of the field, e.g. `frames[3].rig`.
+        field: String,
+        /// The name.
+        rig: String,
+    },
     /// The server is shutting down and takes no more writes.
     #[error("the map server is shutting down")]
     ShuttingDown,
@@ -80,7 +96,9 @@ impl From<StoreError> for Status {
             StoreError::InvalidArgument { .. } => Code::InvalidArgument,
             StoreError::TooLarge { .. } => Code::ResourceExhausted,
             StoreError::MapNotFound(_) => Code::NotFound,
-            StoreError::MapExists(_) => Code::AlreadyExists,
+            StoreError::MapExists(_) | StoreError::RigExists(_) => Code::AlreadyExists,
+            StoreError::RigNotFound(_) => Code::NotFound,
+            StoreError::UnknownRig { .. } => Code::FailedPrecondition,
             StoreError::ShuttingDown => Code::Unavailable,
             StoreError::Backend(_) | StoreError::Corrupt { .. } => Code::Internal,
         };

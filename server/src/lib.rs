@@ -9,6 +9,8 @@
 //!   after one flush per group.
 //! - [`events`]: bounded broadcast channels for watchers and subscribers.
 //! - [`convert`]: wire messages to checked domain values; request [`Limits`].
+//! - [`rigs`]: [`RigRegistry`], the rigs frames may name (built in or
+//!   stored), against which every published frame is checked.
 //! - [`service`]: the thin `MapService` handlers.
 //! - [`auth`]: the optional bearer-token check.
 //! - [`connection`]: accepted connections the server can cut when a
@@ -22,6 +24,7 @@ pub mod connection;
 pub mod convert;
 pub mod error;
 pub mod events;
+pub mod rigs;
 pub mod serve;
 pub mod service;
 pub mod store;
@@ -29,5 +32,6 @@ pub mod writer;
 
 pub use convert::Limits;
 pub use error::StoreError;
+pub use rigs::RigRegistry;
 pub use serve::{MAP_SERVICE_NAME, ServeError, ServerConfig, TlsIdentity, serve};
 pub use store::{SledConfig, SledStore, Store};

@@ -4,6 +4,7 @@ use crate::auth::BearerAuth;
 use crate::connection;
 use crate::convert::Limits;
 use crate::events::Events;
+use crate::rigs::RigRegistry;
 use crate::service::MapServer;
 use crate::store::Store;
 use crate::writer::Writer;
@@ -82,6 +83,9 @@ pub enum ServeError {
     /// The writer thread could not be started.
     #[error("could not start the writer thread: {0}")]
     Writer(#[from] std::io::Error),
+    /// The stored rigs could not be read.
+    #[error("reading the stored rigs: {0}")]
+    Rigs(#[from] crate::error::StoreError),
 }
 
 /// Serves the map service, health and reflection on `listener` until
@@ -93,11 +97,13 @@ pub async fn serve<S: Store>(
     config: ServerConfig,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), ServeError> {
+    let rigs = Arc::new(RigRegistry::load(store.as_ref())?);
     let events = Arc::new(Events::new(config.event_buffer));
     let writer = Writer::start(store.clone(), events.clone(), config.write_queue)?;
     let stop_streams = CancellationToken::new();
     let service = MapServer::new(
         store,
+        rigs,
         writer.handle(),
         events,
         config.limits,

@@ -9,6 +9,7 @@
 use crate::convert::{self, Limits};
 use crate::error::StoreError;
 use crate::events::{Events, MapEvent};
+use crate::rigs::RigRegistry;
 use crate::store::{MapRecord, Store, TileRange};
 use crate::writer::{Batch, EncodedFrame, WriterHandle};
 use deog_proto::v1 as pb;
@@ -29,6 +30,7 @@ type ResponseStream<T> = ReceiverStream<Result<T, Status>>;
 /// The map service over store `S`.
 pub struct MapServer<S> {
     store: Arc<S>,
+    rigs: Arc<RigRegistry>,
     writer: WriterHandle,
     events: Arc<Events>,
     limits: Limits,
@@ -48,6 +50,7 @@ impl<S> Clone for MapServer<S> {
     fn clone(&self) -> Self {
         Self {
             store: self.store.clone(),
+            rigs: self.rigs.clone(),
             writer: self.writer.clone(),
             events: self.events.clone(),
             limits: self.limits,
@@ -61,6 +64,7 @@ impl<S: Store> MapServer<S> {
     /// The service; `shutdown` ends its long-lived streams.
     pub fn new(
         store: Arc<S>,
+        rigs: Arc<RigRegistry>,
         writer: WriterHandle,
         events: Arc<Events>,
         limits: Limits,
@@ -69,6 +73,7 @@ impl<S: Store> MapServer<S> {
     ) -> Self {
         Self {
             store,
+            rigs,
             writer,
             events,
             limits,
@@ -114,6 +119,28 @@ impl<S: Store> MapServer<S> {
             sequence: batch.sequence,
             deltas,
         })
+    }
+
+    /// Refuses a frame whose rig is unknown or reads another count of
+    /// ranges.
+    fn check_rig(&self, field: &str, frame: &pb::SonarFrame) -> Result<(), StoreError> {
+        let name = deog_proto::rig::frame_rig_name(&frame.rig);
+        let rig = self.rigs.get(name).ok_or_else(|| StoreError::UnknownRig {
+            field: format!("{field}.rig"),
+            rig: name.to_owned(),
+        })?;
+        if rig.readings() != frame.ranges.len() {
+            return Err(StoreError::invalid(
+                format!("{field}.ranges"),
+                format!(
+                    "rig {} reads {} ranges per frame, the frame has {}",
+                    rig.name(),
+                    rig.readings(),
+                    frame.ranges.len()
+                ),
+            ));
+        }
+        Ok(())
     }
 
     /// Runs `produce` on a blocking thread, streaming what it sends.
@@ -490,7 +517,9 @@ impl<S: Store> MapService for MapServer<S> {
         }
         let mut inputs = Vec::with_capacity(request.frames.len());
         for (i, frame) in request.frames.iter().enumerate() {
-            convert::sonar_frame(&format!("frames[{i}]"), frame, &self.limits)?;
+            let field = format!("frames[{i}]");
+            convert::sonar_frame(&field, frame, &self.limits)?;
+            self.check_rig(&field, frame)?;
             inputs.push(EncodedFrame {
                 robot: frame.robot.clone(),
                 sequence: frame.sequence,
@@ -601,6 +630,35 @@ impl<S: Store> MapService for MapServer<S> {
             })
             .collect();
         Ok(Response::new(pb::ListRobotsResponse { robots }))
+    }
+
+    async fn put_rig(&self, request: Request<pb::Rig>) -> Result<Response<pb::Rig>, Status> {
+        let wire = request.into_inner();
+        self.limits.check_size("Rig", &wire)?;
+        let (store, rigs) = (self.store.clone(), self.rigs.clone());
+        let rig = tokio::task::spawn_blocking(move || rigs.put(store.as_ref(), &wire))
+            .await
+            .map_err(|_| Status::internal("rig writer failed"))??;
+        Ok(Response::new(deog_proto::rig::rig_to_wire(&rig)))
+    }
+
+    async fn get_rig(&self, request: Request<pb::RigRef>) -> Result<Response<pb::Rig>, Status> {
+        let name = request.into_inner().name;
+        let rig = self.rigs.get(&name).ok_or(StoreError::RigNotFound(name))?;
+        Ok(Response::new(deog_proto::rig::rig_to_wire(&rig)))
+    }
+
+    async fn list_rigs(
+        &self,
+        _request: Request<pb::ListRigsRequest>,
+    ) -> Result<Response<pb::ListRigsResponse>, Status> {
+        let rigs = self
+            .rigs
+            .list()
+            .iter()
+            .map(|rig| deog_proto::rig::rig_to_wire(rig))
+            .collect();
+        Ok(Response::new(pb::ListRigsResponse { rigs }))
     }
 
     async fn publish_pose(

@@ -66,7 +66,9 @@ fn frame(robot: &str, sequence: u64) -> pb::SonarFrame {
             theta: 0.5,
         }),
         true_pose: None,
-        ranges: vec![1.0; 64],
+        ranges: vec![1.0; 16],
+        rig: String::new(),
+        reference_pose: None,
     }
 }
 
@@ -496,6 +498,32 @@ async fn frames_with_bad_numbers_are_refused_and_none_of_the_request_is_stored()
             with(&|f| f.ranges = vec![1.0; 5000]),
             Code::InvalidArgument,
             "frames[1].ranges",
+        ),
+        (
+            with(&|f| f.ranges.push(1.0)),
+            Code::InvalidArgument,
+            "frames[1].ranges: rig scout reads 16 ranges per frame, the frame has 17",
+        ),
+        (
+            with(&|f| f.rig = "laser180".into()),
+            Code::InvalidArgument,
+            "frames[1].ranges: rig laser180 reads 180 ranges per frame, the frame has 16",
+        ),
+        (
+            with(&|f| f.rig = "no-such-rig".into()),
+            Code::FailedPrecondition,
+            "frames[1].rig: rig \"no-such-rig\" is not known",
+        ),
+        (
+            with(&|f| {
+                f.reference_pose = Some(pb::Pose2 {
+                    x: 0.0,
+                    y: f64::NAN,
+                    theta: 0.0,
+                })
+            }),
+            Code::InvalidArgument,
+            "frames[1].reference_pose.y",
         ),
         (
             with(&|f| f.ranges[7] = f64::NAN),

@@ -22,6 +22,8 @@ fn frame(robot: &str, sequence: u64) -> pb::SonarFrame {
             theta: 0.1,
         }),
         ranges: (0..16).map(|i| 1.0 + f64::from(i) * 0.1).collect(),
+        rig: String::new(),
+        reference_pose: None,
     }
 }
 
@@ -272,4 +274,116 @@ async fn poses_are_stored_read_by_range_and_watched() {
     .await;
     assert_eq!(read.len(), 4);
     assert_eq!(read[1], better);
+}
+
+fn laser_rig(name: &str, beams: u32) -> pb::Rig {
+    pb::Rig {
+        name: name.into(),
+        body_radius_m: 0.25,
+        sensors: vec![pb::RangeSensor {
+            mount: Some(pb::Pose2 {
+                x: 0.1,
+                y: 0.0,
+                theta: 0.0,
+            }),
+            kind: Some(pb::range_sensor::Kind::Laser(pb::PlanarLaser {
+                first_angle_rad: -1.0,
+                angle_step_rad: 0.01,
+                beam_count: beams,
+            })),
+            min_range_m: 0.05,
+            max_range_m: 8.0,
+            no_echo_m: 8.0,
+            no_echo_zero: true,
+        }],
+    }
+}
+
+#[tokio::test]
+async fn rigs_are_built_in_or_stored_once_under_their_name_and_survive_a_restart() {
+    let server = TestServer::start().await;
+    let mut client = server.client().await;
+    let names = |rigs: Vec<pb::Rig>| rigs.into_iter().map(|r| r.name).collect::<Vec<_>>();
+    let listed = client
+        .list_rigs(pb::ListRigsRequest {})
+        .await
+        .unwrap()
+        .into_inner()
+        .rigs;
+    assert_eq!(names(listed), ["scout", "pioneer3dx", "laser180"]);
+
+    let mine = laser_rig("mine", 201);
+    let stored = client.put_rig(mine.clone()).await.unwrap().into_inner();
+    assert_eq!(stored, mine);
+    // The same rig again is harmless; a different one under the name is not.
+    client.put_rig(mine.clone()).await.unwrap();
+    let status = client.put_rig(laser_rig("mine", 200)).await.unwrap_err();
+    assert_eq!(status.code(), tonic::Code::AlreadyExists, "{status:?}");
+    let status = client.put_rig(laser_rig("scout", 16)).await.unwrap_err();
+    assert_eq!(status.code(), tonic::Code::AlreadyExists, "{status:?}");
+    let mut bad = laser_rig("bad", 10);
+    bad.sensors[0].max_range_m = -1.0;
+    let status = client.put_rig(bad).await.unwrap_err();
+    assert_eq!(status.code(), tonic::Code::InvalidArgument, "{status:?}");
+    assert!(status.message().contains("max_range_m"), "{status:?}");
+    let status = client
+        .get_rig(pb::RigRef {
+            name: "nothing".into(),
+        })
+        .await
+        .unwrap_err();
+    assert_eq!(status.code(), tonic::Code::NotFound, "{status:?}");
+
+    // A frame of the stored rig is taken, with its reference pose.
+    let mut laser_frame = frame("lidar-bot", 1);
+    laser_frame.rig = "mine".into();
+    laser_frame.ranges = vec![2.5; 201];
+    laser_frame.true_pose = None;
+    laser_frame.reference_pose = Some(pb::Pose2 {
+        x: 3.0,
+        y: -1.0,
+        theta: 0.25,
+    });
+    client
+        .publish_frames(pb::PublishFramesRequest {
+            frames: vec![laser_frame.clone()],
+        })
+        .await
+        .unwrap();
+
+    let path = server.path.clone();
+    let dir = server.stop().await;
+    let server = TestServer::start_at(path, Default::default()).await;
+    let mut client = server.client().await;
+    let listed = client
+        .list_rigs(pb::ListRigsRequest {})
+        .await
+        .unwrap()
+        .into_inner()
+        .rigs;
+    assert_eq!(names(listed), ["scout", "pioneer3dx", "laser180", "mine"]);
+    let got = client
+        .get_rig(pb::RigRef {
+            name: "mine".into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(got, mine);
+    let read = collect(
+        client
+            .read_frames(pb::ReadFramesRequest {
+                robot: "lidar-bot".into(),
+                from_sequence: 0,
+                to_sequence: 0,
+                limit: 0,
+            })
+            .await
+            .unwrap()
+            .into_inner(),
+    )
+    .await;
+    assert_eq!(read, vec![laser_frame]);
+    drop(server);
+    drop(dir);
 }

@@ -287,6 +287,8 @@ pub fn wander_frames(robot: &str, seed: u64, count: usize) -> Vec<deog_proto::v1
             odometry: Some(pose(state.odometry)),
             true_pose: Some(pose(state.true_pose)),
             ranges: state.ranges.clone(),
+            rig: String::new(),
+            reference_pose: None,
         });
     }
     frames

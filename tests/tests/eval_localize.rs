@@ -62,6 +62,8 @@ async fn publish(client: &MapClient) {
             odometry: Some(truth(s.min(60))),
             true_pose: (s <= 60).then(|| truth(s)),
             ranges: vec![2.0; 16],
+            rig: String::new(),
+            reference_pose: None,
         })
         .collect();
     let (stored, _) = client.publish_frames(frames).await.expect("frames");

@@ -154,6 +154,8 @@ async fn eval_map_scores_a_perfect_patch_one_and_counts_each_mistake() {
             odometry: Some(start),
             true_pose: Some(start),
             ranges: vec![2.0; 16],
+            rig: String::new(),
+            reference_pose: None,
         }])
         .await
         .expect("frame");

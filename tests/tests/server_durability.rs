@@ -86,6 +86,8 @@ async fn acknowledged_updates_and_frames_survive_sigkill() {
                 }),
                 true_pose: None,
                 ranges: vec![1.0; 16],
+                rig: String::new(),
+                reference_pose: None,
             })
             .collect(),
     })

@@ -1,7 +1,7 @@
 //! The storage contract of the map server, and its embedded default.
 //!
 //! A [`Store`] keeps maps (a record and its tiles and client cursors),
-//! robots' frames and localizers' poses. It knows nothing of gRPC: frames and
+//! robots' frames, localizers' poses and the rigs frames name. It knows nothing of gRPC: frames and
 //! poses arrive as opaque encoded bytes. Atomicity is per call: one
 //! [`MapWrite`] lands whole or not at all, and [`Store::flush`] makes every
 //! earlier write durable. The group-commit writer builds on exactly that.
@@ -111,6 +111,12 @@ pub trait Store: Send + Sync + 'static {
         to: u64,
         visit: &mut dyn FnMut(u64, &[u8]) -> bool,
     ) -> Result<(), StoreError>;
+
+    /// Every stored rig, encoded, by name.
+    fn rigs(&self) -> Result<Vec<(String, Vec<u8>)>, StoreError>;
+    /// Stores an encoded rig under `name`, replacing any earlier one; the
+    /// service decides whether that is allowed. Called from any thread.
+    fn put_rig(&self, name: &str, bytes: Vec<u8>) -> Result<(), StoreError>;
 
     /// Makes every earlier write durable.
     fn flush(&self) -> Result<(), StoreError>;

@@ -4,7 +4,8 @@
 //! client cursors under `c<client>` and tiles under `t<key>` (the key's 8
 //! sortable bytes, so a range of x is a range of keys). Frames live in the
 //! tree `frames` under `f<robot>\0<sequence>` with a summary per robot under
-//! `r<robot>`; poses in `poses` under `<robot>\0<sequence>`. Names never hold
+//! `r<robot>`; poses in `poses` under `<robot>\0<sequence>`; rigs in `rigs`
+//! under their name. Names never hold
 //! a zero byte (the service checks), and sequences are big-endian, so a
 //! robot's frames sort by sequence.
 
@@ -45,6 +46,7 @@ pub struct SledStore {
     db: sled::Db,
     frames: sled::Tree,
     poses: sled::Tree,
+    rigs: sled::Tree,
     maps: RwLock<HashMap<String, sled::Tree>>,
 }
 
@@ -67,6 +69,7 @@ impl SledStore {
             .open()?;
         let frames = db.open_tree("frames")?;
         let poses = db.open_tree("poses")?;
+        let rigs = db.open_tree("rigs")?;
         let mut maps = HashMap::new();
         for name in db.tree_names() {
             let Some(map) = std::str::from_utf8(&name)
@@ -88,6 +91,7 @@ impl SledStore {
             db,
             frames,
             poses,
+            rigs,
             maps: RwLock::new(maps),
         })
     }
@@ -354,6 +358,20 @@ impl Store for SledStore {
             pose_key(robot, to),
             visit,
         )
+    }
+
+    fn rigs(&self) -> Result<Vec<(String, Vec<u8>)>, StoreError> {
+        let mut out = Vec::new();
+        for entry in self.rigs.iter() {
+            let (key, value) = entry?;
+            out.push((String::from_utf8_lossy(&key).into_owned(), value.to_vec()));
+        }
+        Ok(out)
+    }
+
+    fn put_rig(&self, name: &str, bytes: Vec<u8>) -> Result<(), StoreError> {
+        self.rigs.insert(name.as_bytes(), bytes)?;
+        Ok(())
     }
 
     fn flush(&self) -> Result<(), StoreError> {

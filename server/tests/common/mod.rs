@@ -231,6 +231,12 @@ impl<S: Store> Store for CountingStore<S> {
     ) -> Result<(), StoreError> {
         self.inner.read_poses(robot, from, to, visit)
     }
+    fn rigs(&self) -> Result<Vec<(String, Vec<u8>)>, StoreError> {
+        self.inner.rigs()
+    }
+    fn put_rig(&self, name: &str, bytes: Vec<u8>) -> Result<(), StoreError> {
+        self.inner.put_rig(name, bytes)
+    }
     fn flush(&self) -> Result<(), StoreError> {
         self.inner.flush()?;
         self.flushes.fetch_add(1, Ordering::Relaxed);
