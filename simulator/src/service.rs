@@ -150,6 +150,7 @@ impl SimServer {
             sonar_ring_radius_m: deog_grid::SCOUT_RING_RADIUS_M,
             robot_radius_m: config.scout.radius,
             speed: self.shared.speed,
+            rig: Some(deog_proto::rig::rig_to_wire(&deog_rig::scout())),
         }
     }
 }
