@@ -5,6 +5,8 @@
 //! # Layout
 //! - [`cartographer`]: [`Cartographer`], one frame to per-tile deltas from
 //!   the chosen pose ([`PoseChoice`]).
+//! - [`estimates`]: [`EstimateBook`], which frames a localizer's converged
+//!   estimates place (mapping without ground truth).
 //! - [`sensors`]: the inverse sensor models behind
 //!   [`sensors::InverseSensorModel`]; the sonar ring's cones
 //!   ([`sensors::SonarCone`]) are one.
@@ -16,11 +18,13 @@
 
 pub mod cartographer;
 pub mod error;
+pub mod estimates;
 pub mod map_export;
 pub mod map_import;
 pub mod sensors;
 
 pub use cartographer::{Cartographer, FrameInput, PoseChoice, mapping_sonar_model};
 pub use error::MappingError;
+pub use estimates::{EstimateBook, EstimateLookup};
 pub use map_export::{ExportCounts, MapExport, export_map};
 pub use map_import::{ImportTarget, MapImport, image_origin_cell, import_map};
