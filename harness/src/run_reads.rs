@@ -1,5 +1,6 @@
 //! A run read back from the map server for judging: the map, where the
-//! robots started, and each robot's true poses beside its estimates.
+//! robots started, and each robot's true poses (or, for a recording, its
+//! reference poses) beside its estimates.
 
 use anyhow::{Context, Result};
 use deog_evaluation::localization::{EstimateSample, TruthSample};
@@ -32,7 +33,7 @@ pub async fn robot_starts(client: &MapClient) -> Result<Vec<Point2>> {
             .read_frames(&robot.robot, robot.first_sequence, robot.first_sequence)
             .await
             .with_context(|| format!("reading the first frame of robot {}", robot.robot))?;
-        match first.first().and_then(|f| f.true_pose) {
+        match first.first().and_then(|f| f.true_pose.or(f.reference_pose)) {
             Some(p) => seeds.push(Point2::new(p.x, p.y)),
             None => {
                 tracing::warn!(robot = %robot.robot, "first frame has no true pose: not a seed")
@@ -70,18 +71,32 @@ pub async fn read_robot(
         .read_poses(name, from, to)
         .await
         .with_context(|| format!("reading the pose estimates of robot {name}"))?;
+    // A simulator's true pose where there is one; else a recording's
+    // reference pose (a corrected log's), the best truth a real robot has.
     let truth: Vec<TruthSample> = frames
         .iter()
         .filter_map(|f| {
             f.true_pose
+                .or(f.reference_pose)
                 .map(|p| TruthSample::new(f.sequence, f.time_s, pose_from_wire(p)))
         })
         .collect();
+    let by_reference = frames
+        .iter()
+        .filter(|f| f.true_pose.is_none() && f.reference_pose.is_some())
+        .count();
+    if by_reference > 0 {
+        tracing::info!(
+            robot = name,
+            frames = by_reference,
+            "frames judged against their reference pose (no true pose)"
+        );
+    }
     if truth.len() < frames.len() {
         tracing::info!(
             robot = name,
             skipped = frames.len() - truth.len(),
-            "frames without a true pose skipped"
+            "frames with neither a true nor a reference pose skipped"
         );
     }
     let mut maps: Vec<&str> = Vec::new();
