@@ -74,16 +74,19 @@ pub fn parse_rig(text: &str, origin: &str) -> Result<Rig, RigError> {
         reason: e.to_string().trim_end().to_owned(),
     })?;
     let mut sensors = Vec::new();
-    for (i, entry) in file.sensor.iter().enumerate() {
-        let entry = entry.over(&file.defaults);
+    for (i, own) in file.sensor.iter().enumerate() {
+        // Fields of the other kind are errors when the sensor sets them
+        // itself; from [defaults] (shared by sonars and lasers) they are
+        // ignored.
+        let entry = own.over(&file.defaults);
         let field = |f: &str| format!("sensor[{i}].{f}");
         let missing = |f: &str| RigError::invalid(&file.name, field(f), "is missing");
         let kind = match entry.kind.as_deref() {
             Some("sonar") => {
                 for (name, set) in [
-                    ("first_angle_deg", entry.first_angle_deg.is_some()),
-                    ("angle_step_deg", entry.angle_step_deg.is_some()),
-                    ("beam_count", entry.beam_count.is_some()),
+                    ("first_angle_deg", own.first_angle_deg.is_some()),
+                    ("angle_step_deg", own.angle_step_deg.is_some()),
+                    ("beam_count", own.beam_count.is_some()),
                 ] {
                     if set {
                         return Err(RigError::invalid(
@@ -101,7 +104,7 @@ pub fn parse_rig(text: &str, origin: &str) -> Result<Rig, RigError> {
                 }
             }
             Some("laser") => {
-                if entry.half_angle_deg.is_some() {
+                if own.half_angle_deg.is_some() {
                     return Err(RigError::invalid(
                         &file.name,
                         field("half_angle_deg"),
@@ -320,6 +323,18 @@ mod tests {
             let err = parse_rig(text, "t").unwrap_err().to_string();
             assert!(err.contains(expected), "{text:?}: {err}");
         }
+    }
+
+    #[test]
+    fn the_readme_example_is_a_valid_rig() {
+        let readme = include_str!("../../rigs/README.md");
+        let start = readme.find("```toml").expect("a TOML example") + "```toml".len();
+        let end = start + readme[start..].find("```").expect("its end");
+        let rig = parse_rig(&readme[start..end], "rigs/README.md").unwrap();
+        assert_eq!(rig.name(), "mybot");
+        assert_eq!(rig.sensors().len(), 1 + 1 + 8);
+        assert_eq!(rig.readings(), 1 + 361 + 8);
+        assert!(!rig.all_laser() && !rig.all_sonar());
     }
 
     #[test]
