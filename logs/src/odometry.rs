@@ -118,15 +118,16 @@ impl Chain {
     }
 }
 
-/// Moves chained poses so that the first sits at `start`, keeping every
-/// relative motion.
+/// Moves chained poses so that the first sits at `start` (exactly),
+/// keeping every relative motion.
 pub(crate) fn rebase(chained: &mut [Pose2], start: Pose2) {
-    let Some(&first) = chained.first() else {
+    let Some((first, rest)) = chained.split_first_mut() else {
         return;
     };
-    for pose in chained.iter_mut() {
-        *pose = start.compose(&relative(&first, pose));
+    for pose in rest {
+        *pose = start.compose(&relative(first, pose));
     }
+    *first = start;
 }
 
 #[cfg(test)]
