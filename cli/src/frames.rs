@@ -24,14 +24,21 @@ pub struct FramesArgs {
     pub connection: ConnectionArgs,
 }
 
+/// One frame: its rig, its best pose (true, else reference, else
+/// odometry, named) and its ranges.
 fn line(frame: &pb::SonarFrame) -> String {
-    let pose = frame.true_pose.or(frame.odometry).unwrap_or_default();
+    let (which, pose) = match (frame.true_pose, frame.reference_pose) {
+        (Some(p), _) => ("pose", p),
+        (None, Some(p)) => ("reference", p),
+        (None, None) => ("odometry", frame.odometry.unwrap_or_default()),
+    };
     let ranges: Vec<String> = frame.ranges.iter().map(|r| format!("{r:.2}")).collect();
     format!(
-        "{} #{} t={:.2}s pose=({:.3}, {:.3}, {:.3}) ranges=[{}]",
+        "{} #{} t={:.2}s rig={} {which}=({:.3}, {:.3}, {:.3}) ranges=[{}]",
         frame.robot,
         frame.sequence,
         frame.time_s,
+        deog_proto::rig::frame_rig_name(&frame.rig),
         pose.x,
         pose.y,
         pose.theta,

@@ -11,6 +11,7 @@ mod import;
 mod localize;
 mod map;
 mod pose_args;
+mod rig_args;
 mod server;
 mod sim;
 mod teleport;
