@@ -23,6 +23,32 @@ impl From<PoseSource> for PoseChoice {
     }
 }
 
+/// Which pose `deog map` builds the map from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MapPoseSource {
+    /// The simulator's true pose (the thesis's mapper used it).
+    True,
+    /// The robot's odometry.
+    Odometry,
+    /// A recording's reference pose (a corrected log's pose).
+    Reference,
+    /// The pose a localizer estimates for the robot on the map being
+    /// built, converged estimates only, matched by frame sequence: a robot
+    /// that localizes on a map keeps it current (lifelong mapping).
+    Estimate,
+}
+
+impl From<MapPoseSource> for PoseChoice {
+    fn from(source: MapPoseSource) -> Self {
+        match source {
+            MapPoseSource::True => PoseChoice::True,
+            MapPoseSource::Odometry => PoseChoice::Odometry,
+            MapPoseSource::Reference => PoseChoice::Reference,
+            MapPoseSource::Estimate => PoseChoice::Estimate,
+        }
+    }
+}
+
 /// `x,y,theta` in metres and radians.
 pub fn parse_pose(text: &str) -> Result<Pose2, String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();

@@ -38,6 +38,23 @@ pub enum PoseChoice {
     True,
     /// The robot's odometry.
     Odometry,
+    /// A recording's reference pose (a corrected log's).
+    Reference,
+    /// A localizer's converged estimate for the frame (see
+    /// [`crate::EstimateBook`]): mapping with no ground truth anywhere.
+    Estimate,
+}
+
+impl PoseChoice {
+    /// The field of a frame this choice reads, for messages.
+    pub fn field(self) -> &'static str {
+        match self {
+            PoseChoice::True => "true_pose",
+            PoseChoice::Odometry => "odometry",
+            PoseChoice::Reference => "reference_pose",
+            PoseChoice::Estimate => "estimate",
+        }
+    }
 }
 
 /// A frame as the cartographer needs it.
@@ -49,6 +66,10 @@ pub struct FrameInput<'a> {
     pub true_pose: Option<Pose2>,
     /// The odometry pose.
     pub odometry: Pose2,
+    /// The reference pose, if the frame has one.
+    pub reference_pose: Option<Pose2>,
+    /// The localizer's converged estimate for the frame, if there is one.
+    pub estimate: Option<Pose2>,
     /// One range per sonar, metres.
     pub ranges: &'a [f64],
 }
@@ -100,14 +121,23 @@ impl Cartographer {
         frame: &FrameInput<'_>,
         out: &mut Vec<TileDelta>,
     ) -> Result<usize, MappingError> {
+        let missing = |hint: &str| {
+            MappingError::invalid(
+                format!("frame {}.{}", frame.sequence, self.pose.field()),
+                format!("is missing; {hint}"),
+            )
+        };
         let pose = match self.pose {
             PoseChoice::True => frame.true_pose.ok_or_else(|| {
-                MappingError::invalid(
-                    format!("frame {}.true_pose", frame.sequence),
-                    "is missing; map from odometry (--pose odometry) for frames without one",
-                )
+                missing("map from odometry (--pose odometry) or a recording's reference pose (--pose reference) for frames without one")
             })?,
             PoseChoice::Odometry => frame.odometry,
+            PoseChoice::Reference => frame.reference_pose.ok_or_else(|| {
+                missing("only recordings with reference poses (a corrected CARMEN log) have one")
+            })?,
+            PoseChoice::Estimate => frame
+                .estimate
+                .ok_or_else(|| missing("no converged estimate for this frame"))?,
         };
         self.sensor
             .integrate(&pose, frame.ranges, out)
@@ -132,6 +162,8 @@ mod tests {
             sequence: 1,
             true_pose: Some(Pose2::new(0.0, 0.0, 0.0)),
             odometry: Pose2::new(10.0, 0.0, 0.0),
+            reference_pose: None,
+            estimate: None,
             ranges: &ranges,
         };
         let (mut a, mut b) = (Vec::new(), Vec::new());
@@ -151,6 +183,8 @@ mod tests {
             sequence: 7,
             true_pose: None,
             odometry: Pose2::new(0.0, 0.0, 0.0),
+            reference_pose: None,
+            estimate: None,
             ranges: &ranges,
         };
         let error = c.integrate(&no_true, &mut out).expect_err("no true pose");
@@ -160,6 +194,8 @@ mod tests {
             sequence: 8,
             true_pose: Some(Pose2::new(0.0, 0.0, 0.0)),
             odometry: Pose2::new(0.0, 0.0, 0.0),
+            reference_pose: None,
+            estimate: None,
             ranges: &short,
         };
         assert!(c.integrate(&bad, &mut out).is_err());
@@ -209,6 +245,8 @@ mod tests {
             sequence: 3,
             true_pose: None,
             odometry: Pose2::new(1.0, -1.0, 0.0),
+            reference_pose: None,
+            estimate: None,
             ranges: &[1.0],
         };
         assert_eq!(c.integrate(&frame, &mut out).expect("one cell"), 1);

@@ -63,6 +63,8 @@ pub(super) fn build_map(
                 sequence: state.sequence,
                 true_pose: Some(state.true_pose),
                 odometry: state.odometry,
+                reference_pose: None,
+                estimate: None,
                 ranges: &state.ranges,
             },
             &mut deltas,

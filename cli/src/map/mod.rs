@@ -3,6 +3,8 @@
 //! batches, each numbered by the last frame it holds, so that a restart
 //! resumes after the last frame the server applied and none is applied twice.
 
+mod estimates;
+
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
@@ -16,7 +18,8 @@ use deog_robot_client::{MapClient, UpdateSenderConfig};
 
 use crate::connection::ConnectionArgs;
 use crate::frame_queue::FrameQueue;
-use crate::pose_args::PoseSource;
+use crate::pose_args::MapPoseSource;
+use estimates::EstimateFollower;
 
 /// Options of `deog map`.
 #[derive(Debug, Args)]
@@ -29,8 +32,17 @@ pub struct MapArgs {
     #[arg(long, env = "DEOG_MAP")]
     pub map: String,
     /// The pose to map from.
-    #[arg(long, value_enum, default_value_t = PoseSource::True)]
-    pub pose: PoseSource,
+    #[arg(long, value_enum, default_value_t = MapPoseSource::True)]
+    pub pose: MapPoseSource,
+    /// With --pose estimate: the map whose estimates place the frames
+    /// (default: the map being built, which the localizer then keeps
+    /// current).
+    #[arg(long)]
+    pub estimate_map: Option<String>,
+    /// With --pose estimate: how long a frame waits for the localizer to
+    /// publish its estimate before it is skipped, seconds.
+    #[arg(long, default_value_t = 10.0)]
+    pub estimate_wait: f64,
     /// Start from this frame (frames the server already applied for this
     /// robot and map are skipped whatever this says).
     #[arg(long, default_value_t = 1)]
@@ -113,6 +125,12 @@ pub fn run(args: MapArgs) -> Result<()> {
             args.idle_exit
         );
     }
+    if !(args.estimate_wait.is_finite() && args.estimate_wait >= 0.0) {
+        bail!(
+            "--estimate-wait must be zero or positive, got {}",
+            args.estimate_wait
+        );
+    }
     let params = SonarModelParams {
         max_occupied: args.max_occupied,
         max_empty: args.max_empty,
@@ -175,6 +193,16 @@ pub fn run(args: MapArgs) -> Result<()> {
             .await
             .context("following the robot's frames")?;
         let mut queue = FrameQueue::spawn(frames, args.idle_exit);
+        let mut estimates = (args.pose == MapPoseSource::Estimate).then(|| {
+            let map = args.estimate_map.as_deref().unwrap_or(&args.map);
+            tracing::info!(robot = %args.robot, estimates_on = map, "mapping from the localizer's converged estimates");
+            EstimateFollower::new(
+                client.clone(),
+                &args.robot,
+                map,
+                std::time::Duration::from_secs_f64(args.estimate_wait),
+            )
+        });
 
         let shutdown = deog_harness::shutdown_signal();
         tokio::pin!(shutdown);
@@ -215,10 +243,22 @@ pub fn run(args: MapArgs) -> Result<()> {
                     break;
                 }
                 deltas.clear();
+                let estimate = match &mut estimates {
+                    Some(follower) => match follower.pose_for(frame.sequence).await? {
+                        Some(pose) => Some(pose),
+                        None => {
+                            last = frame.sequence;
+                            continue;
+                        }
+                    },
+                    None => None,
+                };
                 let input = FrameInput {
                     sequence: frame.sequence,
                     true_pose: frame.true_pose.map(pose_from_wire),
                     odometry: pose_or_origin(frame.odometry),
+                    reference_pose: frame.reference_pose.map(pose_from_wire),
+                    estimate,
                     ranges: &frame.ranges,
                 };
                 cells += cartographer.integrate(&input, &mut deltas)? as u64;
@@ -248,6 +288,12 @@ pub fn run(args: MapArgs) -> Result<()> {
         let seconds = began.map_or(0.0, |t| {
             (worked_until - t + closing.elapsed()).as_secs_f64()
         });
+        if let Some(follower) = &estimates {
+            println!(
+                "{}: {} frames skipped without a converged estimate, {} the localizer passed over or did not reach in time",
+                args.robot, follower.not_converged, follower.missed
+            );
+        }
         println!(
             "{} -> {}: {integrated} frames integrated ({:.0} frames/s), {cells} cell updates, {} batches applied, {} already applied, map version {}",
             args.robot,
