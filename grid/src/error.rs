@@ -62,6 +62,15 @@ pub enum GridError {
         /// Number of ranges received.
         got: usize,
     },
+    /// A reading of a frame that is not a range (NaN, negative, or
+    /// infinite where infinity does not mean no echo).
+    #[error("ranges[{index}] is {value}, not a range")]
+    BadReading {
+        /// The reading's index in the frame.
+        index: usize,
+        /// The value received.
+        value: f64,
+    },
 }
 
 /// Checks that `value` is finite.

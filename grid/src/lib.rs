@@ -13,7 +13,15 @@
 //! - [`sensor_ring`]: where a robot's sonars sit (the Scout's 16).
 //! - [`sector`]: rasterising a sonar cone, each cell once.
 //! - [`sonar_model`]: the analytical sonar model (thesis eqs. 3.1 to 3.4).
-//! - [`frame`]: a whole frame folded into per-tile delta batches.
+//! - [`segment_walk`]: every cell a line segment passes through, in order
+//!   (Amanatides and Woo).
+//! - [`ray_model`]: the inverse model of a laser's ray (OctoMap's hit and
+//!   miss).
+//! - [`frame`]: a sonar ring's frame folded into per-tile delta batches
+//!   through a dense scratch, and the one-delta-per-cell rule.
+//! - [`beam_frame`]: a frame of mixed beams (cones and rays, each with its
+//!   own mount and model) folded by the same rule through a per-tile
+//!   scratch (`tile_scratch`, private).
 //! - [`raycast`]: ray and cone casting on an occupancy view.
 //! - [`error`]: the crate's one error type.
 //!
@@ -41,25 +49,32 @@
 //! # Ok::<(), GridError>(())
 //! ```
 
+pub mod beam_frame;
 pub mod cell;
 pub mod error;
 pub mod frame;
 pub mod log_odds;
 pub mod pose;
+pub mod ray_model;
 pub mod raycast;
 pub mod sector;
+pub mod segment_walk;
 pub mod sensor_ring;
 pub mod sonar_model;
 pub mod tile;
 pub mod tile_key;
 pub mod tile_map;
+mod tile_scratch;
 
+pub use beam_frame::{BeamFrameIntegrator, BeamModel, BeamReading, FrameBeam};
 pub use cell::{CellBox, CellIndex, Resolution};
 pub use error::GridError;
 pub use frame::{FrameIntegrator, FrameStats};
 pub use log_odds::{ClampLimits, LOG_ODDS_SCALE, LogOdds};
 pub use pose::{Pose2, normalize_angle};
+pub use ray_model::{RayModel, RayModelParams};
 pub use raycast::{Occupancy, OccupancyThresholds, OccupancyView, cast_cone, cast_ray};
+pub use segment_walk::SegmentCells;
 pub use sensor_ring::{SCOUT_BODY_RADIUS_M, SCOUT_RING_RADIUS_M, SCOUT_SONAR_COUNT, SensorRing};
 pub use sonar_model::{Region, SonarModel, SonarModelParams};
 pub use tile::{Tile, TileDelta};

@@ -204,22 +204,48 @@ impl SonarModel {
     /// Checks a range and decides how far its cone reaches.
     pub fn reading(&self, range: f64) -> Result<Reading, GridError> {
         let range = within("range", range, 0.0, f64::MAX)?.max(self.params.min_range);
-        let p = &self.params;
-        Ok(if range >= p.max_range {
-            Reading {
-                range,
-                echo: false,
-                extent: p.no_echo_free_range.min(p.max_mapped_range),
-            }
+        Ok(if range >= self.params.max_range {
+            self.no_echo_at(range)
         } else {
-            Reading {
-                range,
-                echo: true,
-                extent: (range + p.region_i_tolerance)
-                    .min(p.max_range)
-                    .min(p.max_mapped_range),
-            }
+            self.echo_at(range)
         })
+    }
+
+    /// A reading already judged an echo (by a rig, say), at `range`
+    /// metres raised to the minimum range and lowered to the maximum: an
+    /// echo even at the maximum range, where [`Self::reading`] would say
+    /// no echo.
+    pub fn echo(&self, range: f64) -> Result<Reading, GridError> {
+        let p = &self.params;
+        let range = within("range", range, 0.0, f64::MAX)?.clamp(p.min_range, p.max_range);
+        Ok(self.echo_at(range))
+    }
+
+    /// A reading already judged no echo.
+    pub fn no_echo(&self) -> Reading {
+        self.no_echo_at(self.params.max_range)
+    }
+
+    #[inline]
+    fn echo_at(&self, range: f64) -> Reading {
+        let p = &self.params;
+        Reading {
+            range,
+            echo: true,
+            extent: (range + p.region_i_tolerance)
+                .min(p.max_range)
+                .min(p.max_mapped_range),
+        }
+    }
+
+    #[inline]
+    fn no_echo_at(&self, range: f64) -> Reading {
+        let p = &self.params;
+        Reading {
+            range,
+            echo: false,
+            extent: p.no_echo_free_range.min(p.max_mapped_range),
+        }
     }
 
     /// The region of a cell at distance `r` for `reading`; `None` past the cone.
@@ -533,6 +559,24 @@ mod tests {
     fn short_readings_count_as_the_minimum_range() {
         let m = model();
         assert_eq!(m.reading(0.01).unwrap().range, m.params().min_range);
+    }
+
+    #[test]
+    fn judged_readings_agree_with_raw_ones() {
+        let m = model();
+        for range in [0.0, 0.01, 0.5, 3.0, 10.0, 10.6] {
+            assert_eq!(m.echo(range).unwrap(), m.reading(range).unwrap(), "{range}");
+        }
+        let none = m.reading(50.0).unwrap();
+        assert_eq!(
+            (m.no_echo().echo, m.no_echo().extent),
+            (none.echo, none.extent)
+        );
+        // An echo at the maximum range stays an echo when judged so.
+        let edge = m.echo(20.0).unwrap();
+        assert!(edge.echo);
+        assert_eq!(edge.range, m.params().max_range);
+        assert!(m.echo(f64::NAN).is_err() && m.echo(-1.0).is_err());
     }
 
     #[test]

@@ -1,11 +1,14 @@
-//! The cartographer's step: one sonar frame to per-tile log-odds deltas,
-//! from the pose the user chose (the thesis maps from the simulator's true
-//! pose; a real robot has only its odometry).
+//! The cartographer's step: one frame of ranges to per-tile log-odds
+//! deltas, from the pose the user chose (the thesis maps from the
+//! simulator's true pose; a real robot has only its odometry).
 
-use deog_grid::{Pose2, Resolution, SensorRing, SonarModelParams, TileDelta, TileSize};
+use deog_grid::{
+    Pose2, RayModelParams, Resolution, SensorRing, SonarModelParams, TileDelta, TileSize,
+};
+use deog_rig::Rig;
 
 use crate::error::MappingError;
-use crate::sensors::{InverseSensorModel, SonarCone};
+use crate::sensors::{InverseSensorModel, RigBeams, SonarCone};
 
 /// The sonar model `deog map` builds maps with unless told otherwise: the
 /// thesis's equations with the figures that measured the best maps
@@ -70,7 +73,8 @@ pub struct FrameInput<'a> {
     pub reference_pose: Option<Pose2>,
     /// The localizer's converged estimate for the frame, if there is one.
     pub estimate: Option<Pose2>,
-    /// One range per sonar, metres.
+    /// One range per reading of the sensor (per sonar, per laser ray),
+    /// metres.
     pub ranges: &'a [f64],
 }
 
@@ -101,6 +105,23 @@ impl Cartographer {
     ) -> Result<Self, MappingError> {
         let sonar = SonarCone::new(SensorRing::scout(), params, resolution, tile_size)?;
         Ok(Self::with_sensor(pose, Box::new(sonar)))
+    }
+
+    /// A cartographer for `rig`'s frames: its sonars' cones mapped with
+    /// `sonar_params`, its lasers' rays with `ray_params`, each taking the
+    /// sensor's ranges (and a sonar its half-angle) from the rig
+    /// ([`RigBeams`]). For the Scout's rig the deltas are
+    /// [`Cartographer::with_model`]'s.
+    pub fn for_rig(
+        rig: &Rig,
+        pose: PoseChoice,
+        sonar_params: SonarModelParams,
+        ray_params: RayModelParams,
+        resolution: Resolution,
+        tile_size: TileSize,
+    ) -> Result<Self, MappingError> {
+        let beams = RigBeams::new(rig, sonar_params, ray_params, resolution, tile_size)?;
+        Ok(Self::with_sensor(pose, Box::new(beams)))
     }
 
     /// A cartographer that maps with `sensor` rather than the Scout's sonars.
@@ -200,6 +221,96 @@ mod tests {
         };
         assert!(c.integrate(&bad, &mut out).is_err());
         assert!(out.is_empty());
+    }
+
+    /// Frames with echoes near and far, short, at the maximum range and
+    /// past it, from poses around the origin.
+    fn scout_frames() -> Vec<(Pose2, Vec<f64>)> {
+        (0..6)
+            .map(|k| {
+                let k = f64::from(k);
+                let pose = Pose2::new(0.7 * k - 1.9, 0.3 - 0.45 * k, 1.1 * k - 2.0);
+                let ranges = (0..16u32)
+                    .map(|i| match (i + k as u32) % 5 {
+                        0 => 10.668,
+                        1 => 0.05,
+                        2 => 25.0,
+                        _ => 0.4 + 0.61 * f64::from(i) + 0.13 * k,
+                    })
+                    .collect();
+                (pose, ranges)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_scout_rig_maps_as_the_scout_ring() {
+        for params in [SonarModelParams::default(), crate::mapping_sonar_model()] {
+            let (res, size) = (Resolution::DEFAULT, TileSize::DEFAULT);
+            let mut ring =
+                Cartographer::with_model(res, size, PoseChoice::Odometry, params).expect("ring");
+            let rig = deog_rig::scout();
+            let mut by_rig = Cartographer::for_rig(
+                &rig,
+                PoseChoice::Odometry,
+                params,
+                RayModelParams::default(),
+                res,
+                size,
+            )
+            .expect("rig");
+            for (sequence, (pose, ranges)) in scout_frames().iter().enumerate() {
+                let frame = FrameInput {
+                    sequence: sequence as u64,
+                    true_pose: None,
+                    odometry: *pose,
+                    reference_pose: None,
+                    estimate: None,
+                    ranges,
+                };
+                let (mut a, mut b) = (Vec::new(), Vec::new());
+                let na = ring.integrate(&frame, &mut a).expect("ring frame");
+                let nb = by_rig.integrate(&frame, &mut b).expect("rig frame");
+                assert!(na > 0);
+                assert_eq!(na, nb, "frame {sequence}");
+                assert!(a == b, "frame {sequence}: the deltas differ");
+            }
+        }
+    }
+
+    #[test]
+    fn a_rig_frame_of_the_wrong_count_names_both_counts() {
+        let rig = deog_rig::built_in_rig("laser180").expect("laser180");
+        let mut c = Cartographer::for_rig(
+            &rig,
+            PoseChoice::Odometry,
+            SonarModelParams::default(),
+            RayModelParams::default(),
+            Resolution::DEFAULT,
+            TileSize::DEFAULT,
+        )
+        .expect("cartographer");
+        let ranges = [2.0; 179];
+        let frame = FrameInput {
+            sequence: 4,
+            true_pose: None,
+            odometry: Pose2::default(),
+            reference_pose: None,
+            estimate: None,
+            ranges: &ranges,
+        };
+        let mut out = Vec::new();
+        let error = c.integrate(&frame, &mut out).expect_err("179 of 180");
+        assert_eq!(
+            error.to_string(),
+            "frame 4: ranges: expected 180 readings, got 179"
+        );
+        assert!(out.is_empty());
+        let full = FrameInput {
+            ranges: &[2.0; 180],
+            ..frame
+        };
+        assert!(c.integrate(&full, &mut out).expect("180") > 0);
     }
 
     /// A sensor the cartographer knows nothing of: one reading, the

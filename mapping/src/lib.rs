@@ -8,8 +8,9 @@
 //! - [`estimates`]: [`EstimateBook`], which frames a localizer's converged
 //!   estimates place (mapping without ground truth).
 //! - [`sensors`]: the inverse sensor models behind
-//!   [`sensors::InverseSensorModel`]; the sonar ring's cones
-//!   ([`sensors::SonarCone`]) are one.
+//!   [`sensors::InverseSensorModel`]: the sonar ring's cones
+//!   ([`sensors::SonarCone`]) and any rig's cones and laser rays
+//!   ([`sensors::RigBeams`]).
 //! - [`map_export`]: [`export_map`], a map's tiles to a trinary map_server
 //!   image covering its observed cells ([`MapExport`]).
 //! - [`map_import`]: [`import_map`], a map_server image to tile deltas at

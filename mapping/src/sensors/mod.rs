@@ -1,16 +1,21 @@
 //! The cartographer's sensor side: an inverse sensor model turns one frame
 //! of readings, taken at a known pose, into log-odds evidence per cell.
 //! The cartographer ([`crate::Cartographer`]) only picks the pose and
-//! names the frame in errors; a new kind of sensor (a laser's rays) is a
-//! new file here implementing [`InverseSensorModel`], handed to
+//! names the frame in errors; a new kind of sensor is a new file here
+//! implementing [`InverseSensorModel`], handed to
 //! [`crate::Cartographer::with_sensor`].
 //!
 //! # Layout
 //! - [`sonar_cone`]: [`SonarCone`], the thesis's analytical sonar model
-//!   (eqs. 3.1 to 3.4) over each sonar's cone.
+//!   (eqs. 3.1 to 3.4) over each sonar's cone of a ring.
+//! - [`rig_beams`]: [`RigBeams`], any `deog_rig::Rig` beam by beam: its
+//!   sonars' cones with the sonar model, its lasers' rays with the ray
+//!   model, one frame folded together.
 
+pub mod rig_beams;
 pub mod sonar_cone;
 
+pub use rig_beams::RigBeams;
 pub use sonar_cone::SonarCone;
 
 use deog_grid::{GridError, Pose2, TileDelta};
