@@ -3,14 +3,15 @@
 //! batches, each numbered by the last frame it holds, so that a restart
 //! resumes after the last frame the server applied and none is applied twice.
 
+mod by_rig;
 mod estimates;
 
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use deog_grid::{Resolution, SonarModelParams, TileSize};
-use deog_mapping::{Cartographer, FrameInput, PoseChoice, mapping_sonar_model};
+use deog_grid::{RayModelParams, Resolution, SonarModelParams, TileSize};
+use deog_mapping::{FrameInput, PoseChoice, mapping_sonar_model};
 use deog_proto::names::check_robot_name;
 use deog_proto::v1 as pb;
 use deog_robot_client::convert::{pose_from_wire, pose_or_origin};
@@ -19,6 +20,8 @@ use deog_robot_client::{MapClient, UpdateSenderConfig};
 use crate::connection::ConnectionArgs;
 use crate::frame_queue::FrameQueue;
 use crate::pose_args::MapPoseSource;
+use crate::rig_args::{load_rig, publish_rig};
+use by_rig::{CartographerByRig, ModelSettings};
 use estimates::EstimateFollower;
 
 /// Options of `deog map`.
@@ -105,6 +108,27 @@ pub struct MapArgs {
     /// sonar's range, maps all).
     #[arg(long, default_value_t = mapping_sonar_model().max_mapped_range)]
     pub max_mapped_range: f64,
+    /// The rig the robot's frames come from (a built-in name or a rig
+    /// file): frames of another rig are refused. Without it, each frame is
+    /// mapped with the rig it names, as the map server keeps it.
+    #[arg(long)]
+    pub rig: Option<String>,
+    /// The laser ray model's belief in the cell an echo ends in
+    /// (OctoMap's prob_hit).
+    #[arg(long, default_value_t = RayModelParams::default().hit_probability)]
+    pub hit_probability: f64,
+    /// The laser ray model's belief in each cell a ray crosses (OctoMap's
+    /// prob_miss).
+    #[arg(long, default_value_t = RayModelParams::default().miss_probability)]
+    pub miss_probability: f64,
+    /// How far a laser beam with no return marks its ray free, metres (0:
+    /// beams without a return are ignored).
+    #[arg(long, default_value_t = RayModelParams::default().no_echo_free_range)]
+    pub ray_no_echo_free_range: f64,
+    /// How far a laser ray is mapped, metres: an echo farther than this
+    /// frees its ray out to here and adds no hit.
+    #[arg(long, default_value_t = RayModelParams::default().max_mapped_range)]
+    pub ray_max_mapped_range: f64,
     #[command(flatten)]
     pub connection: ConnectionArgs,
 }
@@ -145,6 +169,18 @@ pub fn run(args: MapArgs) -> Result<()> {
         "the sonar model's options (--max-occupied, --max-empty, --min-empty, --min-occupied, \
          --region-tolerance, --no-echo-free-range, --max-mapped-range)",
     )?;
+    let ray = RayModelParams {
+        hit_probability: args.hit_probability,
+        miss_probability: args.miss_probability,
+        no_echo_free_range: args.ray_no_echo_free_range,
+        max_mapped_range: args.ray_max_mapped_range,
+        ..RayModelParams::default()
+    };
+    let ray = ray.validate().context(
+        "the laser ray model's options (--hit-probability, --miss-probability, \
+         --ray-no-echo-free-range, --ray-max-mapped-range)",
+    )?;
+    let expected_rig = args.rig.as_deref().map(load_rig).transpose()?;
     let client_id = format!("carto/{}", args.robot);
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     runtime.block_on(async {
@@ -162,9 +198,17 @@ pub fn run(args: MapArgs) -> Result<()> {
             .with_context(|| format!("opening map {}", args.map))?;
         let resolution = Resolution::new(info.resolution_m)?;
         let tile_size = TileSize::new(info.tile_size)?;
-        let pose = PoseChoice::from(args.pose);
-        let mut cartographer = Cartographer::with_model(resolution, tile_size, pose, params)
-            .context("the sonar model's figures")?;
+        if let Some(rig) = &expected_rig {
+            publish_rig(&client, rig).await?;
+        }
+        let settings = ModelSettings {
+            pose: PoseChoice::from(args.pose),
+            sonar: params,
+            ray,
+            resolution,
+            tile_size,
+        };
+        let mut cartographers = CartographerByRig::new(client.clone(), settings, expected_rig);
         let mut sender = client
             .updates(
                 &args.map,
@@ -261,6 +305,7 @@ pub fn run(args: MapArgs) -> Result<()> {
                     estimate,
                     ranges: &frame.ranges,
                 };
+                let cartographer = cartographers.for_frame(&frame.rig, frame.sequence).await?;
                 cells += cartographer.integrate(&input, &mut deltas)? as u64;
                 for delta in deltas.drain(..) {
                     sender.push(delta).await?;
