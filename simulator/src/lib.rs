@@ -37,6 +37,9 @@ pub mod simulation;
 pub mod sonar;
 pub mod wander;
 
+/// The rigs the simulation's robots carry ([`SimConfig::rig`]), for
+/// callers that name one.
+pub use deog_rig;
 pub use error::SimError;
 pub use laser::{LaserParams, Lasers};
 pub use rig_sensors::RigSensors;
