@@ -4,7 +4,7 @@
 //! Any rig: each reading is first put in the terms the policy was made
 //! for, the Scout's ring, whose sensors sit just inside the body's edge
 //! ([`SENSOR_INSET_M`]) and face straight out. From the beam's mount and
-//! direction the echo's point on the robot is found; its bearing from the
+//! direction the echo's point in the robot's frame is found; its bearing from the
 //! robot's centre and its distance less the radius of such a ring are the
 //! reading's bearing and range. A Scout's readings pass unchanged, bit for
 //! bit; a Pioneer's off-centre sonars and a laser at the centre read as a
@@ -30,7 +30,7 @@ pub struct WanderParams {
     /// Turning rate in place, rad/s.
     pub turn_rate: f64,
     /// Clearance ahead below which the robot stops and turns, metres
-    /// (sonar range, measured from the sonar ring).
+    /// (a range as the policy's ring reads it: see the module docs).
     pub stop_distance: f64,
     /// Clearance ahead below which it slows down, metres.
     pub slow_distance: f64,
@@ -43,7 +43,8 @@ pub struct WanderParams {
     /// starts following that wall for a while: following a wall leads
     /// round corners and through doors, which random driving seldom finds.
     pub wall_follows_per_s: f64,
-    /// Distance kept from a followed wall, metres (sonar range).
+    /// Distance kept from a followed wall, metres (as the policy's ring
+    /// reads it).
     pub follow_distance: f64,
 }
 
@@ -563,6 +564,47 @@ mod tests {
                 b.command(&ranges, i % 50 == 0, 0.1).expect("b")
             );
         }
+    }
+
+    #[test]
+    fn the_scouts_rig_drives_as_its_bare_ring() {
+        let rig = deog_rig::scout();
+        let mut a = wanderer(9);
+        let mut b = Wanderer::for_rig(WanderParams::default(), &rig, 9).expect("wanderer");
+        for i in 0..300 {
+            let ranges: Vec<f64> = (0..16)
+                .map(|s| 0.2 + ((i * 7 + s * 3) % 40) as f64 * 0.27)
+                .collect();
+            assert_eq!(
+                a.command(&ranges, i % 60 == 0, 0.1).expect("a"),
+                b.command(&ranges, i % 60 == 0, 0.1).expect("b")
+            );
+        }
+    }
+
+    #[test]
+    fn a_laser_at_the_centre_reads_from_the_body_not_the_centre() {
+        let rig = deog_rig::load_rig_spec("laser180").expect("built in");
+        let mut w = Wanderer::for_rig(WanderParams::default(), &rig, 1).expect("wanderer");
+        // A wall 0.7 m ahead of the centre is 0.45 m ahead of the body:
+        // closer than the stop distance, so it stops and turns.
+        let ranges: Vec<f64> = rig
+            .beams()
+            .iter()
+            .map(|b| {
+                let c = b.mount.theta.cos();
+                if c > 0.01 { (0.7 / c).min(50.0) } else { 50.0 }
+            })
+            .collect();
+        let (v, omega) = w.command(&ranges, false, 0.1).expect("command");
+        assert_eq!(v, 0.0);
+        assert!(omega != 0.0);
+        // Nothing in range anywhere (every ray reads no echo): forward.
+        let mut w = Wanderer::for_rig(WanderParams::default(), &rig, 1).expect("wanderer");
+        let (v, _) = w.command(&[50.0; 180], false, 0.1).expect("command");
+        assert!(v > 0.0);
+        // Not a range for this rig.
+        assert!(w.command(&[-1.0; 180], false, 0.1).is_err());
     }
 
     #[test]
