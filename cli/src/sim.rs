@@ -1,7 +1,8 @@
-//! `deog sim`: the Scout simulator process.
+//! `deog sim`: the simulator process, every robot carrying one rig.
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
+use deog_simulator::deog_rig::{BUILT_IN_RIGS, Rig, RigError, load_rig_spec};
 use deog_simulator::serve::{SimServeConfig, serve_sim};
 use deog_simulator::simulation::{SimConfig, Simulation};
 use deog_simulator::sonar::Specular;
@@ -39,6 +40,11 @@ pub struct SimArgs {
     /// (more can be spawned over gRPC).
     #[arg(long, default_value_t = 0)]
     pub robots: usize,
+    /// The sensor rig every robot carries: a built-in name (scout,
+    /// pioneer3dx, laser180) or a rig file (.toml). Its body radius is the
+    /// robots'.
+    #[arg(long, env = "DEOG_RIG", default_value = deog_simulator::deog_rig::DEFAULT_RIG)]
+    pub rig: String,
     /// Sonar range noise, a fraction of the range (uniform ±).
     #[arg(long, default_value_t = 0.01)]
     pub sonar_noise: f64,
@@ -51,9 +57,12 @@ pub struct SimArgs {
     /// How much longer a specular echo comes back (with --specular long).
     #[arg(long, default_value_t = 1.5)]
     pub specular_factor: f64,
-    /// Probability that a reading is lost (reads the maximum range).
+    /// Probability that a sonar reading is lost (reads the maximum range).
     #[arg(long, default_value_t = 0.0)]
     pub dropout: f64,
+    /// Laser range noise: standard deviation, metres (Gaussian).
+    #[arg(long, default_value_t = 0.01)]
+    pub laser_noise: f64,
     /// Scale of the odometry noise (0 turns it off, 1 is the default model).
     #[arg(long, default_value_t = 1.0)]
     pub odometry_noise: f64,
@@ -62,9 +71,32 @@ pub struct SimArgs {
     pub max_message_bytes: usize,
 }
 
+/// The rig `--rig` names, or a one-line error naming it and listing the
+/// built-in rigs.
+pub fn load_rig(spec: &str) -> Result<Rig> {
+    load_rig_spec(spec).map_err(|error| {
+        let error = match error {
+            // Already lists the built-in names.
+            RigError::Unknown { .. } => error.to_string(),
+            other => {
+                let names: Vec<&str> = BUILT_IN_RIGS.iter().map(|(n, _)| *n).collect();
+                format!("{other} (built-in rigs: {})", names.join(", "))
+            }
+        };
+        // A TOML error spans lines (the line quoted, a caret under it).
+        let one_line = error.split_whitespace().collect::<Vec<_>>().join(" ");
+        anyhow::anyhow!("--rig {spec}: {one_line}")
+    })
+}
+
 /// The simulation's figures from the options.
 pub fn sim_config(args: &SimArgs) -> Result<SimConfig> {
-    let mut config = SimConfig::default();
+    let mut config = SimConfig {
+        rig: load_rig(&args.rig)?,
+        ..SimConfig::default()
+    };
+    config.laser.noise_sigma = args.laser_noise;
+    config.laser.validate().context("--laser-noise")?;
     config.sonar.noise_fraction = args.sonar_noise;
     config.sonar.dropout_probability = args.dropout;
     if !(0.0..=90.0).contains(&args.specular_angle) {
@@ -113,7 +145,14 @@ pub fn run(args: SimArgs) -> Result<()> {
             .await
             .with_context(|| format!("binding {}", args.listen))?;
         let addr = listener.local_addr()?;
-        tracing::info!(%addr, world = %sim.world().name(), speed = args.speed, robots = sim.robot_count(), "simulator listening");
+        let rig = sim.rig();
+        tracing::info!(
+            rig = %rig.name(),
+            readings = rig.readings(),
+            body_radius_m = rig.body_radius(),
+            "every robot carries this rig"
+        );
+        tracing::info!(%addr, world = %sim.world().name(), rig = %rig.name(), speed = args.speed, robots = sim.robot_count(), "simulator listening");
         serve_sim(sim, listener, serve_config, deog_harness::shutdown_signal()).await?;
         Ok(())
     })

@@ -1,17 +1,20 @@
 //! `deog wander`: drives one robot about its world at random without
-//! hitting anything, and publishes every sonar frame to the map server.
+//! hitting anything, and publishes every frame to the map server, naming
+//! the simulator's rig (stored on the map server first when it is not a
+//! built-in one).
 
 use std::io::Write as _;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use deog_grid::{Pose2, SensorRing};
+use deog_grid::Pose2;
 use deog_proto::names::check_robot_name;
 use deog_proto::v1 as pb;
 use deog_robot_client::convert::pose_or_origin;
 use deog_robot_client::{ClientConfig, MapClient, SimClient};
 use deog_simulator::data_file::{DataUnits, format_line};
+use deog_simulator::deog_rig::{self, Rig};
 use deog_simulator::{WanderParams, Wanderer};
 use tokio::sync::mpsc;
 
@@ -46,7 +49,8 @@ pub struct WanderArgs {
     /// Do not publish frames to the map server.
     #[arg(long)]
     pub no_publish: bool,
-    /// Also write the thesis's data file (`x y theta s1 ... s16` per line).
+    /// Also write the thesis's data file (`x y theta s1 ... s16` per line;
+    /// Scout rig only).
     #[arg(long)]
     pub data_file: Option<PathBuf>,
     /// Units of the data file.
@@ -79,7 +83,6 @@ pub fn run(args: WanderArgs) -> Result<()> {
         cruise_speed: args.speed,
         ..WanderParams::default()
     };
-    let mut wanderer = Wanderer::new(params, &SensorRing::scout(), args.seed)?;
     let mut data_file = match &args.data_file {
         Some(path) => Some(std::io::BufWriter::new(
             std::fs::File::create(path)
@@ -92,6 +95,15 @@ pub fn run(args: WanderArgs) -> Result<()> {
         let sim = SimClient::connect(ClientConfig::new(args.sim.clone()))
             .await
             .with_context(|| format!("connecting to the simulator at {}", args.sim))?;
+        let rig = sim_rig(&sim).await?;
+        tracing::info!(rig = %rig.name(), readings = rig.readings(), "the simulator's rig");
+        if data_file.is_some() && rig.name() != deog_rig::DEFAULT_RIG {
+            bail!(
+                "--data-file writes the Scout's 16 sonar readings; the simulator's rig is {}",
+                rig.name()
+            );
+        }
+        let mut wanderer = Wanderer::for_rig(params, &rig, args.seed)?;
         if args.spawn {
             let state = sim.spawn(&args.robot, args.start).await?;
             let p = pose_or_origin(state.true_pose);
@@ -104,6 +116,13 @@ pub fn run(args: WanderArgs) -> Result<()> {
             let map = MapClient::connect(config).await.with_context(|| {
                 format!("connecting to the map server at {}", args.connection.server)
             })?;
+            // The map server knows the built-in rigs; any other must be
+            // stored before a frame names it.
+            if !deog_rig::is_built_in(rig.name()) {
+                map.put_rig(&rig)
+                    .await
+                    .with_context(|| format!("storing rig {} on the map server", rig.name()))?;
+            }
             Some(spawn_publisher(map))
         };
         let mut states = spawn_state_reader(sim.watch(&args.robot).await?);
@@ -169,7 +188,7 @@ pub fn run(args: WanderArgs) -> Result<()> {
                         odometry: state.odometry,
                         true_pose: state.true_pose,
                         ranges: state.ranges.clone(),
-                        rig: String::new(),
+                        rig: rig.name().to_owned(),
                         reference_pose: None,
                     };
                     if frames.send(frame).await.is_err() {
@@ -212,6 +231,21 @@ pub fn run(args: WanderArgs) -> Result<()> {
         summary.published
     );
     Ok(())
+}
+
+/// The rig the simulator's robots carry; the Scout's from a simulator too
+/// old to say.
+async fn sim_rig(sim: &SimClient) -> Result<Rig> {
+    let world = sim
+        .world()
+        .await
+        .context("asking the simulator for its world")?;
+    match world.rig {
+        Some(wire) => {
+            deog_proto::rig::rig_from_wire(&wire).context("the simulator's rig (WorldInfo.rig)")
+        }
+        None => Ok(deog_rig::scout()),
+    }
 }
 
 type StateReader = (

@@ -105,7 +105,7 @@ pub fn robot_state(s: &RobotSnapshot) -> pb::RobotState {
             angular: s.velocity.1,
         }),
         bumper: s.bumper,
-        rig: deog_rig::DEFAULT_RIG.to_owned(),
+        rig: s.rig.to_string(),
     }
 }
 

@@ -402,7 +402,7 @@ fn advance(pose: Pose2, trans: f64, rot1: f64, rot2: f64) -> Pose2 {
 
 /// A standard normal deviate by Box–Muller: rand 0.9 itself has no normal
 /// distribution (rand_distr does), and two lines do not justify a crate.
-fn standard_normal<R: Rng + ?Sized>(rng: &mut R) -> f64 {
+pub(crate) fn standard_normal<R: Rng + ?Sized>(rng: &mut R) -> f64 {
     // 1 - [0, 1) is (0, 1]: the logarithm stays finite.
     let u1 = 1.0 - rng.random::<f64>();
     let u2: f64 = rng.random();

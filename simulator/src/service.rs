@@ -2,7 +2,7 @@
 //! it in real time (times `speed`).
 //!
 //! Watch policy: each robot has a bounded broadcast of its states, one per
-//! sonar firing. A watcher that falls behind skips to the newest states
+//! firing of its sensors. A watcher that falls behind skips to the newest states
 //! (a warning is logged); `GetState` is always current.
 
 use std::collections::HashMap;
@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 
 use deog_proto::v1 as pb;
 use deog_proto::v1::robot_service_server::RobotService;
+use deog_rig::SensorKind;
 use tokio::sync::{broadcast, mpsc};
 use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
@@ -100,7 +101,7 @@ impl SimServer {
     }
 
     /// Advances the simulation in real time until shutdown, every `tick` of
-    /// wall-clock time, and hands each sonar firing to the robot's watchers.
+    /// wall-clock time, and hands each firing to the robot's watchers.
     /// A tick never advances more than `max_step` of simulated time, so a
     /// stalled process slows the world rather than letting it jump.
     pub async fn run_clock(self, tick: Duration, max_step: Duration) {
@@ -134,7 +135,14 @@ impl SimServer {
     pub fn world_info(&self) -> pb::WorldInfo {
         let sim = self.sim();
         let (min, max) = sim.world().bounds();
-        let config = sim.config();
+        let rig = sim.rig();
+        // The sonar_* fields predate rigs: they describe the first sonar.
+        let sonars: Vec<_> = rig
+            .sensors()
+            .iter()
+            .filter(|s| matches!(s.kind, SensorKind::Sonar { .. }))
+            .collect();
+        let first = sonars.first().copied();
         pb::WorldInfo {
             name: sim.world().name().to_string(),
             bounds: Some(pb::WorldBox {
@@ -143,14 +151,17 @@ impl SimServer {
                 max_x: max.x,
                 max_y: max.y,
             }),
-            sonar_count: sim.sonar().len() as u32,
-            sonar_min_range_m: config.sonar.min_range,
-            sonar_max_range_m: config.sonar.max_range,
-            sonar_cone_rad: 2.0 * config.sonar.half_angle,
-            sonar_ring_radius_m: deog_grid::SCOUT_RING_RADIUS_M,
-            robot_radius_m: config.scout.radius,
+            sonar_count: sonars.len() as u32,
+            sonar_min_range_m: first.map_or(0.0, |s| s.min_range),
+            sonar_max_range_m: first.map_or(0.0, |s| s.max_range),
+            sonar_cone_rad: first.map_or(0.0, |s| match s.kind {
+                SensorKind::Sonar { half_angle } => 2.0 * half_angle,
+                SensorKind::Laser { .. } => 0.0,
+            }),
+            sonar_ring_radius_m: first.map_or(0.0, |s| s.mount.x.hypot(s.mount.y)),
+            robot_radius_m: rig.body_radius(),
             speed: self.shared.speed,
-            rig: Some(deog_proto::rig::rig_to_wire(&deog_rig::scout())),
+            rig: Some(deog_proto::rig::rig_to_wire(rig)),
         }
     }
 }

@@ -1,5 +1,5 @@
-//! A world with robots in it, advanced in fixed physics steps; every robot's
-//! sonar ring fires on a fixed period.
+//! A world with robots in it, advanced in fixed physics steps; every robot
+//! carries the simulation's rig, whose sensors fire on a fixed period.
 //!
 //! Each robot draws from its own random stream, seeded from the simulation's
 //! seed and the robot's name, so a robot's run does not depend on which other
@@ -7,28 +7,40 @@
 //! senses the static world only, which is what the maps are built of.
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
-use deog_grid::{Pose2, SensorRing};
+use deog_grid::Pose2;
+use deog_rig::Rig;
 use deog_world::{Point2, SegmentIndex, World};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::error::SimError;
+use crate::laser::LaserParams;
+use crate::rig_sensors::RigSensors;
 use crate::robot::{OdometryNoise, Robot, ScoutParams};
-use crate::sonar::{SonarParams, SonarRing};
+use crate::sonar::SonarParams;
 
 /// Figures of a simulation.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SimConfig {
     /// Physics step, seconds.
     pub step_s: f64,
-    /// Time between two firings of a robot's sonar ring, seconds (rounded
+    /// Time between two firings of a robot's sensors, seconds (rounded
     /// to whole physics steps).
     pub sonar_period_s: f64,
-    /// The robots' body and speed limits.
+    /// The sensors every robot carries, and its body radius; the Scout's
+    /// by default.
+    pub rig: Rig,
+    /// The robots' speed limits. The body radius is the rig's
+    /// ([`SimConfig::robot_params`]); `scout.radius` is not used.
     pub scout: ScoutParams,
-    /// The sonars' figures, noise and failure modes.
+    /// The sonars' noise, specular reflection and dropouts. Their range
+    /// limits and half-angle are each sonar's in the rig (for the Scout,
+    /// the same as these defaults).
     pub sonar: SonarParams,
+    /// The lasers' noise.
+    pub laser: LaserParams,
     /// Odometry error model.
     pub odometry: OdometryNoise,
 }
@@ -38,9 +50,22 @@ impl Default for SimConfig {
         Self {
             step_s: 0.01,
             sonar_period_s: 0.1,
+            rig: deog_rig::scout(),
             scout: ScoutParams::default(),
             sonar: SonarParams::default(),
+            laser: LaserParams::default(),
             odometry: OdometryNoise::default(),
+        }
+    }
+}
+
+impl SimConfig {
+    /// A robot's body and drive figures: `scout`'s limits with the rig's
+    /// body radius.
+    pub fn robot_params(&self) -> ScoutParams {
+        ScoutParams {
+            radius: self.rig.body_radius(),
+            ..self.scout
         }
     }
 }
@@ -56,7 +81,9 @@ pub struct RobotSnapshot {
     pub true_pose: Pose2,
     /// Where its odometry says it is.
     pub odometry: Pose2,
-    /// The latest ranges, metres, sonar 0 forward then counter-clockwise.
+    /// The rig the ranges come from (its name).
+    pub rig: Arc<str>,
+    /// The latest ranges, metres, one per beam of the rig, in its order.
     pub ranges: Vec<f64>,
     /// Number of the firing these ranges came from, from 1 (0: none yet).
     pub sequence: u64,
@@ -77,13 +104,15 @@ struct SimRobot {
 pub struct Simulation {
     world: World,
     index: SegmentIndex,
-    sonar: SonarRing,
+    sensors: RigSensors,
+    rig_name: Arc<str>,
+    robot_params: ScoutParams,
     config: SimConfig,
     seed: u64,
     robots: BTreeMap<String, SimRobot>,
     /// Physics steps so far: time is counted in steps so it does not drift.
     steps: u64,
-    /// Physics steps between two firings of the sonars.
+    /// Physics steps between two firings of the sensors.
     fire_every: u64,
     /// Time left over from the last advance, less than one physics step.
     carry_s: f64,
@@ -131,11 +160,15 @@ impl Simulation {
                 ),
             ));
         }
-        let sonar = SonarRing::new(SensorRing::scout(), config.sonar)?;
+        config.sonar.validate()?;
+        let sensors = RigSensors::new(config.rig.clone(), config.sonar, config.laser)?;
+        let robot_params = config.robot_params().validate()?;
         Ok(Self {
             index: SegmentIndex::new(world.walls()),
             world,
-            sonar,
+            sensors,
+            rig_name: Arc::from(config.rig.name()),
+            robot_params,
             config: config.clone(),
             seed,
             robots: BTreeMap::new(),
@@ -155,9 +188,14 @@ impl Simulation {
         &self.config
     }
 
-    /// The sonar ring every robot carries.
-    pub fn sonar(&self) -> &SonarRing {
-        &self.sonar
+    /// The sensors every robot carries.
+    pub fn sensors(&self) -> &RigSensors {
+        &self.sensors
+    }
+
+    /// The rig every robot carries.
+    pub fn rig(&self) -> &Rig {
+        self.sensors.rig()
     }
 
     /// Simulated seconds since the start.
@@ -168,12 +206,12 @@ impl Simulation {
     /// Whether a robot's body fits at `p`: in free space and at least its
     /// radius (plus a hair) from every wall.
     pub fn fits(&self, p: Point2) -> bool {
-        let radius = self.config.scout.radius;
+        let radius = self.robot_params.radius;
         self.world.is_free(p) && self.index.min_distance(p, radius + 0.05) > radius + 0.01
     }
 
     /// Places a robot named `name` at `pose`, or at a random free pose
-    /// (drawn from its own random stream) when `None`; its sonars fire at
+    /// (drawn from its own random stream) when `None`; its sensors fire at
     /// once so its first state has ranges.
     pub fn spawn(&mut self, name: &str, pose: Option<Pose2>) -> Result<RobotSnapshot, SimError> {
         if self.robots.contains_key(name) {
@@ -193,11 +231,11 @@ impl Simulation {
             }
             None => self.random_free_pose(&mut rng)?,
         };
-        let robot = Robot::new(pose, self.config.scout, self.config.odometry)?;
+        let robot = Robot::new(pose, self.robot_params, self.config.odometry)?;
         let mut entry = SimRobot {
             robot,
             rng,
-            ranges: vec![0.0; self.sonar.len()],
+            ranges: vec![0.0; self.sensors.readings()],
             sequence: 0,
         };
         self.fire(&mut entry)?;
@@ -244,14 +282,14 @@ impl Simulation {
             .robots
             .get(name)
             .ok_or_else(|| SimError::UnknownRobot(name.to_string()))?;
-        Ok(snapshot_of(name, entry, self.time_s()))
+        Ok(snapshot_of(name, entry, &self.rig_name, self.time_s()))
     }
 
     /// Every robot's state, by name.
     pub fn snapshots(&self) -> Vec<RobotSnapshot> {
         self.robots
             .iter()
-            .map(|(name, entry)| snapshot_of(name, entry, self.time_s()))
+            .map(|(name, entry)| snapshot_of(name, entry, &self.rig_name, self.time_s()))
             .collect()
     }
 
@@ -261,7 +299,7 @@ impl Simulation {
     }
 
     /// Advances the clock by `dt` seconds in physics steps (a remainder
-    /// shorter than a step waits for the next call); each time the sonars
+    /// shorter than a step waits for the next call); each time the sensors
     /// fire, pushes every robot's new state onto `fired`.
     pub fn advance(&mut self, dt: f64, fired: &mut Vec<RobotSnapshot>) -> Result<(), SimError> {
         if !(dt.is_finite() && dt >= 0.0) {
@@ -290,7 +328,7 @@ impl Simulation {
                     .step(step, &self.index, &self.world, &mut entry.rng);
                 if fire && result.is_ok() {
                     result = self.fire(&mut entry);
-                    fired.push(snapshot_of(&name, &entry, now));
+                    fired.push(snapshot_of(&name, &entry, &self.rig_name, now));
                 }
                 self.robots.insert(name, entry);
                 result?;
@@ -301,7 +339,7 @@ impl Simulation {
 
     fn fire(&self, entry: &mut SimRobot) -> Result<(), SimError> {
         let pose = entry.robot.true_pose();
-        self.sonar
+        self.sensors
             .fire(&self.index, &pose, &mut entry.rng, &mut entry.ranges)?;
         entry.sequence += 1;
         Ok(())
@@ -317,7 +355,7 @@ impl Simulation {
             );
             // A little more room than the body needs, so the first moves
             // are free.
-            if self.fits(p) && self.index.min_distance(p, 1.0) > self.config.scout.radius + 0.2 {
+            if self.fits(p) && self.index.min_distance(p, 1.0) > self.robot_params.radius + 0.2 {
                 let theta = rng.random_range(-std::f64::consts::PI..std::f64::consts::PI);
                 return Ok(Pose2::new(p.x, p.y, theta));
             }
@@ -329,10 +367,11 @@ impl Simulation {
     }
 }
 
-fn snapshot_of(name: &str, entry: &SimRobot, time_s: f64) -> RobotSnapshot {
+fn snapshot_of(name: &str, entry: &SimRobot, rig: &Arc<str>, time_s: f64) -> RobotSnapshot {
     RobotSnapshot {
         name: name.to_string(),
         time_s,
+        rig: Arc::clone(rig),
         true_pose: entry.robot.true_pose(),
         odometry: entry.robot.odometry(),
         ranges: entry.ranges.clone(),
@@ -396,6 +435,33 @@ mod tests {
         assert_ne!(alone, run(4, &["a"]));
         let sequences: Vec<u64> = alone.iter().map(|s| s.sequence).collect();
         assert_eq!(sequences, (2..=201).collect::<Vec<_>>());
+    }
+
+    /// FNV-1a over the bits of every range and pose of a run.
+    fn fingerprint(run: &[RobotSnapshot]) -> u64 {
+        let mut h = 0xcbf2_9ce4_8422_2325u64;
+        for s in run {
+            let p = s.true_pose;
+            for v in s.ranges.iter().chain([p.x, p.y, p.theta].iter()) {
+                for b in v.to_bits().to_le_bytes() {
+                    h = (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
+                }
+            }
+        }
+        h
+    }
+
+    #[test]
+    fn the_scouts_readings_for_a_seed_are_unchanged() {
+        // Recorded before rigs came to the simulator: the Scout's frames
+        // must stay the same to the last bit.
+        let run = run(3, &["a"]);
+        assert_eq!(
+            fingerprint(&run),
+            16961497543682628086,
+            "{:?}",
+            run[57].ranges
+        );
     }
 
     #[test]

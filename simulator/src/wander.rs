@@ -1,10 +1,21 @@
-//! The wanderer's policy: from one frame of sonar ranges to a velocity
-//! command that keeps a round robot moving about without touching anything.
+//! The wanderer's policy: from one frame of ranges to a velocity command
+//! that keeps a round robot moving about without touching anything.
+//!
+//! Any rig: each reading is first put in the terms the policy was made
+//! for, the Scout's ring, whose sensors sit just inside the body's edge
+//! ([`SENSOR_INSET_M`]) and face straight out. From the beam's mount and
+//! direction the echo's point in the robot's frame is found; its bearing from the
+//! robot's centre and its distance less the radius of such a ring are the
+//! reading's bearing and range. A Scout's readings pass unchanged, bit for
+//! bit; a Pioneer's off-centre sonars and a laser at the centre read as a
+//! ring of their own would. A sector no beam looks into counts as blocked,
+//! so a front-only laser never backs blindly.
 //!
 //! Pure and seeded: the `deog wander` process feeds it each frame and sends
 //! the command it returns.
 
-use deog_grid::{SensorRing, normalize_angle};
+use deog_grid::{Pose2, SCOUT_BODY_RADIUS_M, SCOUT_RING_RADIUS_M, SensorRing, normalize_angle};
+use deog_rig::{Beam, Reading, Rig};
 use rand::Rng;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -19,7 +30,7 @@ pub struct WanderParams {
     /// Turning rate in place, rad/s.
     pub turn_rate: f64,
     /// Clearance ahead below which the robot stops and turns, metres
-    /// (sonar range, measured from the sonar ring).
+    /// (a range as the policy's ring reads it: see the module docs).
     pub stop_distance: f64,
     /// Clearance ahead below which it slows down, metres.
     pub slow_distance: f64,
@@ -32,7 +43,8 @@ pub struct WanderParams {
     /// starts following that wall for a while: following a wall leads
     /// round corners and through doors, which random driving seldom finds.
     pub wall_follows_per_s: f64,
-    /// Distance kept from a followed wall, metres (sonar range).
+    /// Distance kept from a followed wall, metres (as the policy's ring
+    /// reads it).
     pub follow_distance: f64,
 }
 
@@ -64,6 +76,26 @@ const OPENING_CREEP_S: f64 = 1.8;
 /// make every door look shut.
 const NEAR_DIAGONAL_M: f64 = 0.25;
 
+/// How far inside the body's edge the policy's sensors sit, metres: the
+/// Scout's ring (0.2 m) inside its body (0.205 m).
+pub const SENSOR_INSET_M: f64 = SCOUT_BODY_RADIUS_M - SCOUT_RING_RADIUS_M;
+
+/// Two readings are neighbours, for judging an opening, within this angle
+/// of each other: the Scout's sonar spacing, 22.5°, and a hair.
+const NEIGHBOUR_RAD: f64 = std::f64::consts::PI / 8.0 + 1e-6;
+
+/// One reading's geometry, robot frame.
+#[derive(Debug, Clone, Copy)]
+struct Sensor {
+    mount: Pose2,
+    /// For a sensor that faces straight away from the centre (or sits on
+    /// it): its bearing and what its range is off the policy's ring, so
+    /// its reading converts without rounding.
+    radial: Option<(f64, f64)>,
+    /// The beam, when the rig is known: what its readings mean.
+    beam: Option<Beam>,
+}
+
 /// What the wanderer is doing.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Mode {
@@ -94,15 +126,38 @@ enum Mode {
 #[derive(Debug, Clone)]
 pub struct Wanderer {
     params: WanderParams,
-    /// Robot-frame bearing of each sonar, radians.
+    sensors: Vec<Sensor>,
+    /// The policy's ring radius: body radius less [`SENSOR_INSET_M`].
+    ring_radius: f64,
+    /// This frame's robot-frame bearing of each echo, radians.
     bearings: Vec<f64>,
+    /// This frame's ranges, as the policy's ring reads them.
+    ranges: Vec<f64>,
     mode: Mode,
     rng: ChaCha8Rng,
 }
 
 impl Wanderer {
-    /// A wanderer for a robot with `ring`, seeded.
+    /// A wanderer for a robot of the Scout's body with sensors at `ring`'s
+    /// mounts, taking readings as they are (no no-echo convention), seeded.
     pub fn new(params: WanderParams, ring: &SensorRing, seed: u64) -> Result<Self, SimError> {
+        let sensors = ring.mounts().iter().map(|&m| (m, None)).collect();
+        Self::build(params, sensors, SCOUT_BODY_RADIUS_M, seed)
+    }
+
+    /// A wanderer for a robot carrying `rig`, seeded: readings are judged
+    /// by their beams (a no-echo reading counts as the beam's max range).
+    pub fn for_rig(params: WanderParams, rig: &Rig, seed: u64) -> Result<Self, SimError> {
+        let sensors = rig.beams().iter().map(|b| (b.mount, Some(*b))).collect();
+        Self::build(params, sensors, rig.body_radius(), seed)
+    }
+
+    fn build(
+        params: WanderParams,
+        mounts: Vec<(Pose2, Option<Beam>)>,
+        body_radius: f64,
+        seed: u64,
+    ) -> Result<Self, SimError> {
         let positive = |field: &str, v: f64| {
             if v.is_finite() && v > 0.0 {
                 Ok(())
@@ -145,40 +200,55 @@ impl Wanderer {
                 ),
             ));
         }
+        let ring_radius = body_radius - SENSOR_INSET_M;
+        let sensors: Vec<Sensor> = mounts
+            .into_iter()
+            .map(|(mount, beam)| {
+                let distance = mount.x.hypot(mount.y);
+                let facing_out = distance < 1e-9
+                    || normalize_angle(mount.y.atan2(mount.x) - mount.theta).abs() < 1e-9;
+                let radial = facing_out.then(|| {
+                    let offset = distance - ring_radius;
+                    // On the ring to rounding: exactly on it.
+                    let offset = if offset.abs() < 1e-9 { 0.0 } else { offset };
+                    (normalize_angle(mount.theta), offset)
+                });
+                Sensor {
+                    mount,
+                    radial,
+                    beam,
+                }
+            })
+            .collect();
+        let n = sensors.len();
         Ok(Self {
             params,
-            bearings: ring
-                .mounts()
-                .iter()
-                .map(|m| normalize_angle(m.theta))
-                .collect(),
+            sensors,
+            ring_radius,
+            bearings: vec![0.0; n],
+            ranges: vec![0.0; n],
             mode: Mode::Cruise,
             rng: ChaCha8Rng::seed_from_u64(seed),
         })
     }
 
     /// The command (linear m/s, angular rad/s) for the next `dt` seconds,
-    /// given this frame's ranges (one per sonar) and the bumper.
+    /// given this frame's ranges (one per beam, in the rig's order) and the
+    /// bumper.
     pub fn command(
         &mut self,
         ranges: &[f64],
         bumper: bool,
         dt: f64,
     ) -> Result<(f64, f64), SimError> {
-        if ranges.len() != self.bearings.len() {
+        if ranges.len() != self.sensors.len() {
             return Err(SimError::invalid(
                 "ranges",
                 format!(
                     "expected {} readings, got {}",
-                    self.bearings.len(),
+                    self.sensors.len(),
                     ranges.len()
                 ),
-            ));
-        }
-        if let Some(bad) = ranges.iter().find(|r| !r.is_finite() || **r < 0.0) {
-            return Err(SimError::invalid(
-                "ranges",
-                format!("must be finite and not negative, got {bad}"),
             ));
         }
         if !(dt.is_finite() && dt > 0.0) {
@@ -187,16 +257,60 @@ impl Wanderer {
                 format!("must be positive, got {dt}"),
             ));
         }
+        self.convert(ranges)?;
+        let ranges = std::mem::take(&mut self.ranges);
+        let result = self.decide(&ranges, bumper, dt);
+        self.ranges = ranges;
+        result
+    }
+
+    /// Puts this frame's readings in the policy's terms: `self.bearings`
+    /// and `self.ranges`.
+    fn convert(&mut self, ranges: &[f64]) -> Result<(), SimError> {
+        for (i, (sensor, &range)) in self.sensors.iter().zip(ranges).enumerate() {
+            let bad = || {
+                SimError::invalid(
+                    format!("ranges[{i}]"),
+                    format!("must be a range, got {range}"),
+                )
+            };
+            let range = match &sensor.beam {
+                None if range.is_finite() && range >= 0.0 => range,
+                None => return Err(bad()),
+                Some(beam) => match beam.classify(range).ok_or_else(bad)? {
+                    Reading::Echo(r) => r,
+                    Reading::NoEcho => beam.max_range,
+                },
+            };
+            let (bearing, reading) = match sensor.radial {
+                Some((bearing, offset)) => (bearing, range + offset),
+                None => {
+                    let m = &sensor.mount;
+                    let (sin, cos) = m.theta.sin_cos();
+                    let (x, y) = (m.x + range * cos, m.y + range * sin);
+                    (y.atan2(x), x.hypot(y) - self.ring_radius)
+                }
+            };
+            self.bearings[i] = bearing;
+            self.ranges[i] = reading.max(0.0);
+        }
+        Ok(())
+    }
+
+    fn decide(&mut self, ranges: &[f64], bumper: bool, dt: f64) -> Result<(f64, f64), SimError> {
         let p = self.params;
-        // Clearance within a sector: the shortest reading of the sonars
-        // whose bearing lies in [from, to] (radians, robot frame).
+        // Clearance within a sector: the shortest reading of the beams
+        // whose bearing lies in [from, to] (radians, robot frame); 0 when
+        // no beam looks there.
         let clearance = |from: f64, to: f64| {
-            self.bearings
+            let seen = self
+                .bearings
                 .iter()
                 .zip(ranges)
                 .filter(|(b, _)| **b >= from - 1e-9 && **b <= to + 1e-9)
                 .map(|(_, r)| *r)
-                .fold(f64::INFINITY, f64::min)
+                .fold(f64::INFINITY, f64::min);
+            if seen == f64::INFINITY { 0.0 } else { seen }
         };
         let ahead = clearance(-0.45, 0.45);
         let front_wide = clearance(-0.8, 0.8);
@@ -356,7 +470,7 @@ impl Wanderer {
         }
     }
 
-    /// The reading of the sonar pointing most nearly square to `side` (+1
+    /// The reading of the beam pointing most nearly square to `side` (+1
     /// left, -1 right).
     fn abeam(&self, ranges: &[f64], side: f64) -> f64 {
         let target = side * std::f64::consts::FRAC_PI_2;
@@ -368,19 +482,23 @@ impl Wanderer {
     }
 
     /// The bearing (robot frame, radians) of an opening to turn toward:
-    /// each sonar scores the shortest reading of itself and its two
-    /// neighbours (an opening as wide as the robot shows in all three);
-    /// one of the directions scoring within 80% of the best is picked at
-    /// random, so the robot does not always leave a place the same way.
+    /// each beam scores the shortest reading of itself and its neighbours
+    /// within [`NEIGHBOUR_RAD`] (on the Scout, the sonars either side: an
+    /// opening as wide as the robot shows in all three); one of the
+    /// directions scoring within 80% of the best is picked at random, so
+    /// the robot does not always leave a place the same way.
     fn open_bearing(&mut self, ranges: &[f64]) -> f64 {
         let n = ranges.len();
+        let bearings = &self.bearings;
         let score = |i: usize| {
-            ranges[(i + n - 1) % n]
-                .min(ranges[i])
-                .min(ranges[(i + 1) % n])
+            (0..n)
+                .filter(|&j| normalize_angle(bearings[j] - bearings[i]).abs() <= NEIGHBOUR_RAD)
+                .map(|j| ranges[j])
+                .fold(f64::INFINITY, f64::min)
         };
-        let best = (0..n).map(score).fold(0.0, f64::max);
-        let candidates: Vec<usize> = (0..n).filter(|&i| score(i) >= 0.8 * best).collect();
+        let scores: Vec<f64> = (0..n).map(score).collect();
+        let best = scores.iter().copied().fold(0.0, f64::max);
+        let candidates: Vec<usize> = (0..n).filter(|&i| scores[i] >= 0.8 * best).collect();
         let pick = candidates[self.rng.random_range(0..candidates.len())];
         self.bearings[pick]
     }
@@ -446,6 +564,47 @@ mod tests {
                 b.command(&ranges, i % 50 == 0, 0.1).expect("b")
             );
         }
+    }
+
+    #[test]
+    fn the_scouts_rig_drives_as_its_bare_ring() {
+        let rig = deog_rig::scout();
+        let mut a = wanderer(9);
+        let mut b = Wanderer::for_rig(WanderParams::default(), &rig, 9).expect("wanderer");
+        for i in 0..300 {
+            let ranges: Vec<f64> = (0..16)
+                .map(|s| 0.2 + ((i * 7 + s * 3) % 40) as f64 * 0.27)
+                .collect();
+            assert_eq!(
+                a.command(&ranges, i % 60 == 0, 0.1).expect("a"),
+                b.command(&ranges, i % 60 == 0, 0.1).expect("b")
+            );
+        }
+    }
+
+    #[test]
+    fn a_laser_at_the_centre_reads_from_the_body_not_the_centre() {
+        let rig = deog_rig::load_rig_spec("laser180").expect("built in");
+        let mut w = Wanderer::for_rig(WanderParams::default(), &rig, 1).expect("wanderer");
+        // A wall 0.7 m ahead of the centre is 0.45 m ahead of the body:
+        // closer than the stop distance, so it stops and turns.
+        let ranges: Vec<f64> = rig
+            .beams()
+            .iter()
+            .map(|b| {
+                let c = b.mount.theta.cos();
+                if c > 0.01 { (0.7 / c).min(50.0) } else { 50.0 }
+            })
+            .collect();
+        let (v, omega) = w.command(&ranges, false, 0.1).expect("command");
+        assert_eq!(v, 0.0);
+        assert!(omega != 0.0);
+        // Nothing in range anywhere (every ray reads no echo): forward.
+        let mut w = Wanderer::for_rig(WanderParams::default(), &rig, 1).expect("wanderer");
+        let (v, _) = w.command(&[50.0; 180], false, 0.1).expect("command");
+        assert!(v > 0.0);
+        // Not a range for this rig.
+        assert!(w.command(&[-1.0; 180], false, 0.1).is_err());
     }
 
     #[test]

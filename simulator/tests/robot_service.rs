@@ -45,7 +45,11 @@ impl Sim {
     }
 
     async fn start_with(config: SimServeConfig) -> Self {
-        let sim = Simulation::new(room(), SimConfig::default(), 7).expect("simulation");
+        Self::start_sim(SimConfig::default(), config).await
+    }
+
+    async fn start_sim(sim_config: SimConfig, config: SimServeConfig) -> Self {
+        let sim = Simulation::new(room(), sim_config, 7).expect("simulation");
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
             .await
             .expect("bind");
@@ -498,4 +502,83 @@ async fn a_teleport_to_a_non_finite_pose_is_refused_and_the_robot_stays() {
     }
     assert_eq!(start.true_pose, pose(2.0, 2.0, 0.5));
     sim.stop().await;
+}
+
+#[tokio::test]
+async fn world_info_and_robot_states_carry_the_rig() {
+    for name in ["scout", "pioneer3dx", "laser180"] {
+        let rig = deog_rig::load_rig_spec(name).expect("built in");
+        let config = SimConfig {
+            rig: rig.clone(),
+            ..SimConfig::default()
+        };
+        let sim = Sim::start_sim(
+            config,
+            SimServeConfig {
+                speed: 20.0,
+                ..SimServeConfig::default()
+            },
+        )
+        .await;
+        let mut client = sim.client.clone();
+        let world = client
+            .get_world(pb::GetWorldRequest {})
+            .await
+            .expect("world")
+            .into_inner();
+        let wire = world.rig.clone().expect("the rig is described");
+        assert_eq!(wire, deog_proto::rig::rig_to_wire(&rig), "{name}");
+        assert_eq!(
+            deog_proto::rig::rig_from_wire(&wire).expect("valid"),
+            rig,
+            "{name}"
+        );
+        assert_eq!(world.robot_radius_m, rig.body_radius(), "{name}");
+        let (count, max_range) = match name {
+            "scout" => (16, 10.668),
+            "pioneer3dx" => (16, 5.0),
+            _ => (0, 0.0),
+        };
+        assert_eq!(world.sonar_count, count, "{name}");
+        assert_eq!(world.sonar_max_range_m, max_range, "{name}");
+        if name == "scout" {
+            assert_eq!(world.sonar_ring_radius_m, 0.2);
+            assert_eq!(world.sonar_cone_rad, 30f64.to_radians());
+        }
+
+        let spawned = client
+            .spawn(pb::SpawnRequest {
+                name: "r".into(),
+                pose: pose(2.0, 2.0, 0.0),
+            })
+            .await
+            .expect("spawn")
+            .into_inner();
+        assert_eq!(spawned.rig, name);
+        assert_eq!(spawned.ranges.len(), rig.readings(), "{name}");
+        rig.check_frame(&spawned.ranges)
+            .expect("readings fit the rig");
+        let mut watch = client
+            .watch_state(pb::RobotRef { name: "r".into() })
+            .await
+            .expect("watch")
+            .into_inner();
+        for _ in 0..3 {
+            let state = tokio::time::timeout(Duration::from_secs(10), watch.message())
+                .await
+                .expect("a state in time")
+                .expect("stream")
+                .expect("a state");
+            assert_eq!(state.rig, name);
+            assert_eq!(state.ranges.len(), rig.readings());
+        }
+        let listed = client
+            .list_robots(pb::ListSimRobotsRequest {})
+            .await
+            .expect("list")
+            .into_inner()
+            .robots;
+        assert_eq!(listed[0].rig, name);
+        sim.stop().await;
+    }
 }

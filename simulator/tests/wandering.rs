@@ -1,7 +1,9 @@
 //! The wanderer, run against the simulation in-process for simulated
-//! minutes in each world: it keeps moving, explores, and hits nothing.
+//! minutes in each world: it keeps moving, explores, and hits nothing,
+//! with the Scout's sonar ring, the Pioneer's sonar arrays or a laser.
 
 use deog_grid::SensorRing;
+use deog_rig::{Rig, load_rig_spec};
 use deog_simulator::simulation::{SimConfig, Simulation};
 use deog_simulator::{WanderParams, Wanderer};
 use deog_world::load_world;
@@ -12,14 +14,45 @@ fn world(name: &str) -> deog_world::World {
     load_world(std::path::Path::new(&path)).expect("world loads")
 }
 
-/// Wanders for `seconds` of simulated time; returns (bumps, distance m,
-/// distinct 1 m squares visited).
+/// What a wandering run did.
+#[derive(Debug)]
+struct Run {
+    /// Times the bumper went on.
+    bumps: u32,
+    /// Firings with the bumper on.
+    bumped_frames: u32,
+    /// Firings in all.
+    frames: u32,
+    /// Metres driven.
+    distance: f64,
+    /// Distinct 1 m squares visited.
+    squares: usize,
+}
+
+/// Wanders a Scout for `seconds` of simulated time; returns (bumps,
+/// distance m, distinct 1 m squares visited).
 fn wander(world_name: &str, seed: u64, seconds: f64) -> (u32, f64, usize) {
-    let mut sim = Simulation::new(world(world_name), SimConfig::default(), seed).expect("sim");
-    let first = sim.spawn("w", None).expect("spawn");
-    let mut wanderer =
+    let wanderer =
         Wanderer::new(WanderParams::default(), &SensorRing::scout(), seed).expect("wanderer");
+    let run = wander_with(world_name, deog_rig::scout(), wanderer, seed, seconds);
+    (run.bumps, run.distance, run.squares)
+}
+
+/// Wanders a robot carrying `rig` for `seconds` of simulated time.
+fn wander_rig(world_name: &str, rig: Rig, seed: u64, seconds: f64) -> Run {
+    let wanderer = Wanderer::for_rig(WanderParams::default(), &rig, seed).expect("wanderer");
+    wander_with(world_name, rig, wanderer, seed, seconds)
+}
+
+fn wander_with(world_name: &str, rig: Rig, mut wanderer: Wanderer, seed: u64, seconds: f64) -> Run {
+    let config = SimConfig {
+        rig,
+        ..SimConfig::default()
+    };
+    let mut sim = Simulation::new(world(world_name), config, seed).expect("sim");
+    let first = sim.spawn("w", None).expect("spawn");
     let (mut bumps, mut distance, mut last) = (0, 0.0, first.true_pose);
+    let (mut frames, mut bumped_frames) = (0, 0);
     let mut squares = HashSet::new();
     let mut was_bumped = false;
     let mut fired = Vec::new();
@@ -38,13 +71,21 @@ fn wander(world_name: &str, seed: u64, seconds: f64) -> (u32, f64, usize) {
         if state.bumper && !was_bumped {
             bumps += 1;
         }
+        frames += 1;
+        bumped_frames += u32::from(state.bumper);
         was_bumped = state.bumper;
         let p = state.true_pose;
         distance += (p.x - last.x).hypot(p.y - last.y);
         last = p;
         squares.insert((p.x.floor() as i64, p.y.floor() as i64));
     }
-    (bumps, distance, squares.len())
+    Run {
+        bumps,
+        bumped_frames,
+        frames,
+        distance,
+        squares: squares.len(),
+    }
 }
 
 #[test]
@@ -64,5 +105,35 @@ fn ten_minutes_in_map1_and_the_office_without_a_bump() {
         assert_eq!(bumps, 0, "{name}");
         assert!(distance > 100.0, "{name}: drove only {distance:.1} m");
         assert!(squares > 30, "{name}: visited only {squares} squares");
+    }
+}
+
+#[test]
+fn the_scouts_wandering_is_unchanged() {
+    // Recorded before the wanderer learned other rigs: the Scout's runs
+    // (and so the seeded benchmarks built on them) stay the same.
+    let (bumps, distance, squares) = wander("office", 5, 120.0);
+    assert_eq!(
+        (bumps, distance.to_bits(), squares),
+        (0, 4629756235604547707, 28),
+        "{distance}"
+    );
+}
+
+#[test]
+fn a_pioneer_and_a_laser_robot_wander_the_office_without_sticking_to_walls() {
+    for name in ["pioneer3dx", "laser180"] {
+        for seed in [1, 2] {
+            let rig = load_rig_spec(name).expect("built in");
+            let run = wander_rig("office", rig, seed, 300.0);
+            eprintln!("{name} seed {seed}: {run:?}");
+            assert_eq!(run.bumps, 0, "{name} seed {seed}: {run:?}");
+            assert!(
+                run.bumped_frames * 100 <= run.frames,
+                "{name} seed {seed}: bumper on too often: {run:?}"
+            );
+            assert!(run.distance > 50.0, "{name} seed {seed}: {run:?}");
+            assert!(run.squares > 20, "{name} seed {seed}: {run:?}");
+        }
     }
 }
