@@ -23,7 +23,8 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
 
-/// deog: a shared, dynamically expanding occupancy-grid map for sonar robots.
+/// deog: a shared, dynamically expanding occupancy-grid map for robots with
+/// sonars or lasers.
 #[derive(Debug, Parser)]
 #[command(version, about)]
 struct Cli {
@@ -41,10 +42,11 @@ enum Command {
     /// Runs the map server: maps, frames and poses in an embedded store,
     /// served over gRPC.
     Server(server::ServerArgs),
-    /// Runs the Scout simulator: a world and its robots, driven over gRPC.
+    /// Runs the simulator: a world and its robots (Scouts, or any rig),
+    /// driven over gRPC.
     Sim(sim::SimArgs),
-    /// Drives one simulated robot about at random and publishes its sonar
-    /// frames to the map server.
+    /// Drives one simulated robot about at random and publishes its frames
+    /// to the map server.
     Wander(wander::WanderArgs),
     /// Lists the robots whose frames the map server holds, or prints one
     /// robot's frames (--follow: as they arrive).
@@ -59,8 +61,9 @@ enum Command {
     /// Carries a simulated robot to another pose without telling its
     /// odometry: the kidnapped-robot test.
     Teleport(teleport::TeleportArgs),
-    /// Imports recorded data into the map server: a wanderer data file as
-    /// a robot's frames (--robot), or a map_server map as a map (--map).
+    /// Imports recorded data into the map server: a wanderer data file or a
+    /// CARMEN log (--carmen) as a robot's frames (--robot), or a map_server
+    /// map as a map (--map).
     Import(import::ImportArgs),
     /// Exports a map, even one still being built, to map_server files
     /// (PGM + YAML) and a PNG.
