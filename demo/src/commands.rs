@@ -57,6 +57,8 @@ pub(crate) fn sim(plan: &DemoPlan, addresses: &Addresses) -> Vec<OsString> {
         &plan.schedule.speed.to_string(),
         "--seed",
         &plan.seed.to_string(),
+        "--rig",
+        &plan.rig_spec,
     ])
 }
 
@@ -150,7 +152,7 @@ mod tests {
         );
         assert_eq!(
             line(&sim(&plan, &addresses)),
-            "sim --world map2 --listen 127.0.0.1:5002 --speed 4 --seed 2"
+            "sim --world map2 --listen 127.0.0.1:5002 --speed 4 --seed 2 --rig scout"
         );
         assert_eq!(
             line(&wander(&plan, robot, &addresses)),

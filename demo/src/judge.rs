@@ -55,7 +55,9 @@ pub(crate) async fn judge(client: &MapClient, plan: &DemoPlan, out: &Path) -> Re
         map: &map,
         world: &plan.world,
         seeds: &seeds,
-        robot_radius_m: DEFAULT_ROBOT_RADIUS_M,
+        // The Scout's figure for the Scout, so its figures stay; a larger
+        // robot reaches less.
+        robot_radius_m: DEFAULT_ROBOT_RADIUS_M.max(plan.rig.body_radius()),
     };
     let quality = map_quality(&input).context("judging the map against the world")?;
     let (map_yaml, map_png) = write_map_files(&map, out)?;

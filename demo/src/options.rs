@@ -17,6 +17,10 @@ pub struct DemoOptions {
     /// a .toml world or a ROS map_server .yaml map.
     #[arg(long, default_value = "map2")]
     pub world: String,
+    /// The rig every robot carries: a built-in name (scout, pioneer3dx,
+    /// laser180) or a rig file.
+    #[arg(long, default_value = deog_simulator::deog_rig::DEFAULT_RIG)]
+    pub rig: String,
     /// Robots in the world, each with its wanderer, cartographer and
     /// localizer (1 to 8).
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=i64::from(MAX_ROBOTS)))]

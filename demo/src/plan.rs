@@ -5,7 +5,8 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
+use deog_simulator::deog_rig::{Rig, load_rig_spec};
 use deog_world::{World, load_world_spec};
 
 use crate::options::{DemoOptions, MAX_ROBOTS, Schedule};
@@ -13,7 +14,7 @@ use crate::options::{DemoOptions, MAX_ROBOTS, Schedule};
 /// One robot of the demo.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub(crate) struct PlannedRobot {
-    /// Its name: `scout-1`, `scout-2`, ...
+    /// Its name: its rig's and its number, `scout-1`, `scout-2`, ...
     pub name: String,
     /// The seed of its wanderer and its localizer.
     pub seed: u64,
@@ -26,6 +27,10 @@ pub(crate) struct DemoPlan {
     pub world_spec: String,
     /// That world, loaded: the kidnap and the map's judging use it.
     pub world: World,
+    /// The rig as the user named it, handed on to the simulator.
+    pub rig_spec: String,
+    /// That rig, loaded: the map's judging takes the robots' size from it.
+    pub rig: Rig,
     /// The robots, in order; the first is the one kidnapped.
     pub robots: Vec<PlannedRobot>,
     /// Seed of the simulator and the kidnap.
@@ -49,15 +54,18 @@ impl DemoPlan {
             bail!("--robots must be 1 to {MAX_ROBOTS}, got {}", options.robots);
         }
         let world = load_world_spec(&options.world)?;
+        let rig = load_rig_spec(&options.rig).context("--rig")?;
         Ok(Self {
             world_spec: options.world.clone(),
             world,
+            rig_spec: options.rig.clone(),
             robots: (1..=options.robots)
                 .map(|i| PlannedRobot {
-                    name: format!("scout-{i}"),
+                    name: format!("{}-{i}", rig.name()),
                     seed: robot_seed(options.seed, i),
                 })
                 .collect(),
+            rig,
             seed: options.seed,
             schedule,
             out: options.out.clone(),
