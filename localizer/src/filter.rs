@@ -214,7 +214,8 @@ impl Mcl {
     }
 
     /// A filter that scores its particles with `sensor` rather than the
-    /// sonar ring and beam model the settings name.
+    /// sonar ring and beam model the settings name: any rig's model as
+    /// [`crate::sensors::SensorChoice::build`] makes it, or one of its own.
     pub fn with_sensor(
         settings: FilterSettings,
         sensor: Box<dyn SensorModel>,

@@ -378,44 +378,47 @@ fn endpoint_tiles(
     let settings = map.settings();
     let inv_res = 1.0 / settings.resolution.metres();
     let shift = settings.tile_size.cells().trailing_zeros();
-    let cells = f64::from(i32::MIN)..f64::from(i32::MAX);
-    let tile_of = |x: f64, y: f64| -> Option<(i64, i64)> {
-        let (cx, cy) = (x * inv_res, y * inv_res);
-        // A cast, not `floor` (a library call on baseline x86-64).
-        let floor = |v: f64| {
-            let t = v as i64;
-            t - i64::from((t as f64) > v)
-        };
-        (cells.contains(&cx) && cells.contains(&cy))
-            .then(|| (floor(cx) >> shift, floor(cy) >> shift))
-    };
     // Every endpoint lies within `radius` of its particle.
     let radius = endpoints.iter().map(|e| e.x.hypot(e.y)).fold(0.0, f64::max);
+    // A particle this near the origin has every endpoint in a cell the
+    // grid can index; one farther off is passed over (its endpoints read
+    // as unknown).
+    let far = f64::from(i32::MAX) / inv_res - radius - 1.0;
+    let usable = |p: &&Pose2| p.x.abs() < far && p.y.abs() < far;
     let (mut lo_x, mut lo_y, mut hi_x, mut hi_y) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
-    for p in particles {
+    for p in particles.iter().filter(usable) {
         lo_x = lo_x.min(p.x);
         lo_y = lo_y.min(p.y);
         hi_x = hi_x.max(p.x);
         hi_y = hi_y.max(p.y);
     }
+    if lo_x > hi_x {
+        return Vec::new();
+    }
+    // The tile under a point, as the field window finds it: the cell,
+    // then its tile.
+    let tile_of = |x: f64, y: f64| {
+        (
+            floor_i64(x * inv_res) >> shift,
+            floor_i64(y * inv_res) >> shift,
+        )
+    };
     let mut counts = TileCounts::new(
         tile_of(lo_x - radius, lo_y - radius),
         tile_of(hi_x + radius, hi_y + radius),
     );
-    for p in particles {
+    for p in particles.iter().filter(usable) {
         let (sin, cos) = p.theta.sin_cos();
         // Neighbouring beams mostly end in the same tile: count a tile
         // once per run of them.
-        let mut last = None;
+        let mut last = (i64::MIN, i64::MIN);
         for e in endpoints {
             let x = p.x + cos * e.x - sin * e.y;
             let y = p.y + sin * e.x + cos * e.y;
-            let Some(tile) = tile_of(x, y) else {
-                continue;
-            };
-            if last != Some(tile) {
+            let tile = tile_of(x, y);
+            if tile != last {
                 counts.add(tile);
-                last = Some(tile);
+                last = tile;
             }
         }
     }
@@ -441,20 +444,21 @@ enum TileCounts {
 }
 
 impl TileCounts {
-    fn new(lo: Option<(i64, i64)>, hi: Option<(i64, i64)>) -> Self {
-        if let (Some(lo), Some(hi)) = (lo, hi) {
-            let (width, height) = (hi.0 - lo.0 + 1, hi.1 - lo.1 + 1);
-            if width > 0 && height > 0 && width.saturating_mul(height) <= DENSE_TILE_GRID {
-                return Self::Grid {
-                    min: lo,
-                    width,
-                    counts: vec![0; (width * height) as usize],
-                };
+    /// Counts of the tiles from `lo` to `hi`.
+    fn new(lo: (i64, i64), hi: (i64, i64)) -> Self {
+        let (width, height) = (hi.0 - lo.0 + 1, hi.1 - lo.1 + 1);
+        if width > 0 && height > 0 && width.saturating_mul(height) <= DENSE_TILE_GRID {
+            Self::Grid {
+                min: lo,
+                width,
+                counts: vec![0; (width * height) as usize],
             }
+        } else {
+            Self::Map(HashMap::new())
         }
-        Self::Map(HashMap::new())
     }
 
+    /// One more meeting with `tile`.
     #[inline]
     fn add(&mut self, tile: (i64, i64)) {
         match self {
@@ -470,6 +474,7 @@ impl TileCounts {
         }
     }
 
+    /// The tiles met, with their counts.
     fn into_counts(self) -> Vec<(TileKey, u32)> {
         let key = |(x, y): (i64, i64)| TileKey::new(x as i32, y as i32);
         match self {
@@ -485,4 +490,12 @@ impl TileCounts {
             Self::Map(map) => map.into_iter().map(|(t, n)| (key(t), n)).collect(),
         }
     }
+}
+
+/// `v.floor()` as an integer, without the library call `floor` compiles to
+/// on baseline x86-64 (no SSE4.1); saturates far outside the i64 range.
+#[inline(always)]
+fn floor_i64(v: f64) -> i64 {
+    let t = v as i64;
+    t - i64::from((t as f64) > v)
 }

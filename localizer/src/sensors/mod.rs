@@ -2,9 +2,9 @@
 //! particle's pose, given the map. The filter ([`crate::filter::Mcl`])
 //! knows nothing of cones or beams; it asks a [`SensorModel`] to score its
 //! particles, as amcl keeps `sensors/` apart from `pf/` and
-//! `motion_model/`. A new kind of sensor (a laser's beams, a likelihood
-//! field) is a new file here implementing the trait, handed to
-//! [`crate::filter::Mcl::with_sensor`].
+//! `motion_model/`. A new kind of sensor (a laser's beam model, say) is a
+//! new file here implementing the trait, handed to
+//! [`crate::filter::Mcl::with_sensor`] (or built by [`SensorChoice`]).
 //!
 //! A model also says which tiles a frame needs
 //! ([`SensorModel::tiles_needed`]) and which of them, with their
