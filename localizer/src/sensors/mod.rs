@@ -99,9 +99,9 @@ pub trait SensorModel: std::fmt::Debug + Send {
 
     /// Each particle's log-likelihood of `readings` (tempered as the model
     /// says), pushed onto `out` in the particles' order. `tiles` are the
-    /// tiles the particles' sensors fall in ([`crate::filter::Mcl::tiles_needed`]);
-    /// whatever the model derives from them it builds in `map`. Returns how
-    /// many such tables it built. The frame has passed
+    /// tiles the frame needs ([`Self::tiles_needed`]); whatever the model
+    /// derives from them (range tables, distance fields) it builds in
+    /// `map`. Returns how many such tables it built. The frame has passed
     /// [`Self::check_frame`].
     fn score_particles(
         &mut self,
