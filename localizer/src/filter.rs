@@ -7,7 +7,7 @@
 //! the last correction once the robot has moved far enough to be worth a
 //! sensor update (turning or driving a little between frames would
 //! otherwise count the same scene many times over). Then the caller makes
-//! sure the map holds the tiles [`Mcl::tiles_needed`] names, and
+//! sure the map holds the tiles [`Mcl::tiles_for_frame`] names, and
 //! [`Mcl::correct`] weighs every particle by its sonar frame:
 //! - weights multiply by the tempered beam likelihood (see
 //!   [`crate::beam_model`]), so each cluster's weight multiplies by its
@@ -52,13 +52,6 @@ use crate::local_map::LocalMap;
 use crate::motion::{MotionNoise, OdometryMove};
 use crate::sampling::{KldSettings, systematic_resample};
 use crate::sensors::{SensorModel, SonarCone};
-
-/// Up to this many tiles, a correction reads every tile of the particles'
-/// bounding box rather than finding the tiles under each particle. A
-/// tracking filter's box is a few tiles; a spread one's covers tiles with
-/// no particle in them (walls, the unknown beyond them), whose range
-/// tables would cost more to build than finding the tiles does.
-const BOUNDING_BOX_TILES: i64 = 4;
 
 /// Every setting of the filter.
 #[derive(Debug, Clone, PartialEq)]
@@ -221,7 +214,8 @@ impl Mcl {
     }
 
     /// A filter that scores its particles with `sensor` rather than the
-    /// sonar ring and beam model the settings name.
+    /// sonar ring and beam model the settings name: any rig's model as
+    /// [`crate::sensors::SensorChoice::build`] makes it, or one of its own.
     pub fn with_sensor(
         settings: FilterSettings,
         sensor: Box<dyn SensorModel>,
@@ -260,12 +254,13 @@ impl Mcl {
     /// Global localization: the most particles the settings allow, spread
     /// uniformly over the known-free cells the map holds, all headings.
     ///
-    /// Every particle must be scored against a range table each frame, so
-    /// the tiles with free cells must fit in the cache's budget: a map
-    /// larger than that is refused rather than rebuilt tile by tile every
-    /// frame.
+    /// Every particle must be scored against the sensor's tables (range
+    /// tables, distance fields) each frame, so the tiles with free cells
+    /// must fit in the cache's budget ([`SensorModel::tile_capacity`]): a
+    /// map larger than that is refused rather than rebuilt tile by tile
+    /// every frame.
     pub fn start_global(&mut self, map: &LocalMap) -> Result<(), LocalizerError> {
-        let (tiles, capacity) = (map.free_tile_count(), map.table_capacity());
+        let (tiles, capacity) = (map.free_tile_count(), self.sensor.tile_capacity(map));
         if tiles > capacity {
             return Err(LocalizerError::MapLargerThanCache { tiles, capacity });
         }
@@ -372,67 +367,33 @@ impl Mcl {
         Ok(true)
     }
 
-    /// The tiles whose range tables the next correction reads: those under
-    /// every particle's sonars, or the [`LocalMap::table_capacity`] of them
-    /// under the most.
+    /// The tiles under the particles' sensors: those within the sensor's
+    /// reach of every particle, or the [`SensorModel::tile_capacity`] of
+    /// them under the most ([`crate::sensors::tiles_within_reach`]). What
+    /// the sonar reads whatever its frame; a sensor whose tiles depend on
+    /// the frame is asked through [`Self::tiles_for_frame`].
     pub fn tiles_needed(&self, map: &LocalMap) -> Vec<TileKey> {
-        let reach = self.sensor.reach();
-        let res = map.settings().resolution;
-        // Usually the particles' bounding box is small: take its tiles.
-        let (mut lo_x, mut lo_y, mut hi_x, mut hi_y) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
-        for p in &self.particles {
-            lo_x = lo_x.min(p.x);
-            lo_y = lo_y.min(p.y);
-            hi_x = hi_x.max(p.x);
-            hi_y = hi_y.max(p.y);
-        }
-        if let (Ok(lo), Ok(hi)) = (
-            res.cell_of(lo_x - reach, lo_y - reach),
-            res.cell_of(hi_x + reach, hi_y + reach),
-        ) {
-            let (a, b) = (map.tile_of(lo), map.tile_of(hi));
-            let count =
-                (i64::from(b.x) - i64::from(a.x) + 1) * (i64::from(b.y) - i64::from(a.y) + 1);
-            if count <= BOUNDING_BOX_TILES {
-                return (a.y..=b.y)
-                    .flat_map(|y| (a.x..=b.x).map(move |x| TileKey::new(x, y)))
-                    .collect();
-            }
-        }
-        // Spread particles: only the tiles under them.
-        let mut keys = HashSet::new();
-        let mut last = None;
-        for p in &self.particles {
-            for (x, y) in reach_corners(p, reach) {
-                if let Ok(cell) = res.cell_of(x, y) {
-                    let key = map.tile_of(cell);
-                    if last != Some(key) {
-                        keys.insert(key);
-                        last = Some(key);
-                    }
-                }
-            }
-        }
-        let capacity = map.table_capacity();
-        if keys.len() > capacity {
-            // More tables than the cache holds: those under the most
-            // particles' sonars. Particles elsewhere read as inside a wall
-            // and die out at the next resampling.
-            let mut uses: HashMap<TileKey, usize> = HashMap::with_capacity(keys.len());
-            for p in &self.particles {
-                for (x, y) in reach_corners(p, reach) {
-                    if let Ok(cell) = res.cell_of(x, y) {
-                        *uses.entry(map.tile_of(cell)).or_default() += 1;
-                    }
-                }
-            }
-            let mut ranked: Vec<(usize, TileKey)> = uses.into_iter().map(|(k, n)| (n, k)).collect();
-            ranked.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
-            keys = ranked.into_iter().take(capacity).map(|(_, k)| k).collect();
-        }
-        let mut keys: Vec<TileKey> = keys.into_iter().collect();
-        keys.sort();
-        keys
+        crate::sensors::tiles_within_reach(
+            map,
+            &self.particles,
+            self.sensor.reach(),
+            self.sensor.tile_capacity(map),
+        )
+    }
+
+    /// The tiles the next correction reads for a frame of `readings`, as
+    /// the sensor model says ([`SensorModel::tiles_needed`]): for the sonar,
+    /// [`Self::tiles_needed`]; for the likelihood field, the tiles its
+    /// echoes' endpoints fall in.
+    pub fn tiles_for_frame(&self, map: &LocalMap, readings: &[f64]) -> Vec<TileKey> {
+        self.sensor.tiles_needed(map, &self.particles, readings)
+    }
+
+    /// The tiles, sorted, the map must fetch before the tiles `needed`
+    /// ([`Self::tiles_for_frame`]) can be scored
+    /// ([`SensorModel::missing_tiles`]).
+    pub fn missing_tiles(&self, map: &LocalMap, needed: &[TileKey]) -> Vec<TileKey> {
+        self.sensor.missing_tiles(map, needed)
     }
 
     /// The sensor model's half of [`Self::correct`]: every particle's
@@ -446,7 +407,7 @@ impl Mcl {
                 "the filter has no particles: start it first".into(),
             ));
         }
-        let keys = self.tiles_needed(map);
+        let keys = self.tiles_for_frame(map, ranges);
         self.scratch_log.clear();
         self.sensor
             .score_particles(map, &keys, &self.particles, ranges, &mut self.scratch_log)
@@ -578,7 +539,7 @@ impl Mcl {
                 .cluster
                 .map(|c| c.pose)
                 .or_else(|| self.particles.first().copied());
-            let max_tiles = (map.table_capacity() / 2).max(1);
+            let max_tiles = (self.sensor.tile_capacity(map) / 2).max(1);
             match around.map(|p| res.cell_of(p.x, p.y)) {
                 Some(Ok(cell)) => map.free_cells_near(cell, max_tiles),
                 _ => Vec::new(),
@@ -742,17 +703,6 @@ impl Mcl {
             lost_score: self.injection_share(),
         })
     }
-}
-
-/// The corners of the square of half-side `reach` about a particle: every
-/// sonar sits inside it.
-fn reach_corners(p: &Pose2, reach: f64) -> [(f64, f64); 4] {
-    [
-        (p.x - reach, p.y - reach),
-        (p.x + reach, p.y + reach),
-        (p.x - reach, p.y + reach),
-        (p.x + reach, p.y - reach),
-    ]
 }
 
 /// A pose uniformly inside `cell`, any heading.

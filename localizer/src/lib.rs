@@ -1,4 +1,4 @@
-//! Monte Carlo Localization of a sonar robot on a deog map.
+//! Monte Carlo Localization of a robot with sonars or lasers on a deog map.
 //!
 //! Everything here is pure and synchronous: the `deog localize` process
 //! fetches tiles and frames over the network and feeds them in.
@@ -9,13 +9,19 @@
 //!   process and the bench; tiles come from a [`step::TileSource`].
 //! - [`filter`]: [`filter::Mcl`], the particle filter (augmented MCL,
 //!   KLD-sampling, clusters kept through resampling).
-//! - [`sensors`]: the sensor side behind [`sensors::SensorModel`]; the
-//!   sonar ring ([`sensors::SonarCone`]) is one implementation.
+//! - [`sensors`]: the sensor side behind [`sensors::SensorModel`]: the
+//!   sonar ring's beam model ([`sensors::SonarCone`]), the likelihood
+//!   field of any rig ([`sensors::LikelihoodField`]), and
+//!   [`sensors::SensorChoice`] between them.
 //! - [`motion`]: the odometry motion model.
 //! - [`local_map`]: [`local_map::LocalMap`], the cache of the server's
-//!   tiles and their expected-range tables within a memory budget.
+//!   tiles, their expected-range tables and their distance fields within
+//!   a memory budget.
 //! - [`range_table`]: per-tile expected sonar ranges, and the plain
-//!   reference they are checked against.
+//!   reference they are checked against; the occupancy raster and its
+//!   exact distance transform both kinds of table are built from.
+//! - [`distance_field`]: per-tile distances to the nearest occupied cell,
+//!   a byte a cell, for the likelihood field.
 //! - [`beam_model`]: the likelihood of a measured range given the
 //!   expected one.
 //! - [`sampling`], [`cluster`], [`gaussian`]: resampling and the KLD
@@ -25,6 +31,7 @@
 
 pub mod beam_model;
 pub mod cluster;
+pub mod distance_field;
 pub mod error;
 pub mod filter;
 pub mod gaussian;

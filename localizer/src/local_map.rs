@@ -1,6 +1,6 @@
 //! The localizer's piece of the map: occupancy tiles fetched from the map
 //! server as the particles need them, and each tile's expected-range table
-//! built lazily from them, all within a memory budget.
+//! and distance field built lazily from them, all within a memory budget.
 //!
 //! The map server owns the map; this is a cache of it. Tiles come in
 //! through [`LocalMap::insert_tile`] (the network edge fetches them) and go
@@ -8,7 +8,11 @@
 //! fetches [`LocalMap::stale_tiles`] again. A tile's range table reads the
 //! occupied cells of every tile within the sonar's range of it, so a tile
 //! whose occupied cells changed drops the tables of its neighbours too;
-//! they are rebuilt when a particle next needs them. A map being built
+//! they are rebuilt when a particle next needs them. A tile's distance
+//! field ([`crate::distance_field`], for the likelihood field) reads the
+//! tiles within its maximum distance, and is dropped and rebuilt by the
+//! same rule; fields are small (a byte a cell) and live in the same
+//! budget, least recently used first out. A map being built
 //! changes all the time, but mostly in its log-odds, its free cells and
 //! the one-cell ragged edges of its walls, none of which moves an expected
 //! range by more than a cell: the tables stay until a tile's occupied
@@ -28,6 +32,7 @@ use deog_grid::{
 };
 use rand::Rng;
 
+use crate::distance_field::{DistanceField, FieldSpec, FieldWindow};
 use crate::error::LocalizerError;
 use crate::range_table::{ConeGeometry, NO_ECHO, OccupancyRaster, RangeTable, fill_table};
 
@@ -75,6 +80,8 @@ struct MapTile {
     cells: Option<Box<[u8]>>,
     free_cells: u32,
     ranges: Option<RangeTable>,
+    /// Its distance field, for [`LocalMap::field_spec`].
+    field: Option<DistanceField>,
     last_used: u64,
     /// The server changed it since it was fetched.
     stale: bool,
@@ -92,6 +99,11 @@ pub struct CacheStats {
     pub tables_dropped: u64,
     /// Occupancy tiles dropped by eviction.
     pub tiles_evicted: u64,
+    /// Distance fields built.
+    pub fields_built: u64,
+    /// Distance fields dropped, by eviction or because their
+    /// neighbourhood changed.
+    pub fields_dropped: u64,
 }
 
 /// The cached part of one map.
@@ -111,6 +123,10 @@ pub struct LocalMap {
     /// `bytes`): megabytes of it allocated and freed on the heap at every
     /// batch would leave the allocator holding pieces of them.
     raster: Option<OccupancyRaster>,
+    /// How the held distance fields were built; `None` before the first.
+    field_spec: Option<FieldSpec>,
+    /// Tiles a distance field reads beyond its own on every side.
+    field_margin_tiles: i32,
 }
 
 impl LocalMap {
@@ -131,6 +147,8 @@ impl LocalMap {
             stats: CacheStats::default(),
             spare: Vec::new(),
             raster: None,
+            field_spec: None,
+            field_margin_tiles: 0,
         })
     }
 
@@ -227,6 +245,7 @@ impl LocalMap {
                         cells: Some(cells),
                         free_cells,
                         ranges: None,
+                        field: None,
                         last_used: now,
                         stale: false,
                         reference,
@@ -253,7 +272,7 @@ impl LocalMap {
         }
     }
 
-    /// Every held tile goes stale and every table is dropped (after the
+    /// Every held tile goes stale and every table and field is dropped (after the
     /// watch stream lost events, tiles never held may have changed too).
     pub fn all_changed(&mut self) {
         let keys: Vec<TileKey> = self.tiles.keys().copied().collect();
@@ -263,6 +282,10 @@ impl LocalMap {
                 if let Some(table) = tile.ranges.take() {
                     self.spare.push(table);
                     self.stats.tables_dropped += 1;
+                }
+                if let Some(field) = tile.field.take() {
+                    self.bytes -= field.bytes();
+                    self.stats.fields_dropped += 1;
                 }
             }
         }
@@ -410,6 +433,7 @@ impl LocalMap {
                     cells: None,
                     free_cells: 0,
                     ranges: None,
+                    field: None,
                     last_used: now,
                     stale: false,
                     reference: Box::default(),
@@ -520,7 +544,8 @@ impl LocalMap {
         }
     }
 
-    /// Drops least recently used tables, then tiles, outside `keep` until
+    /// Drops least recently used tables, then fields, then tiles, outside
+    /// `keep` until
     /// the cache fits its budget less the process's share (or nothing
     /// else can go).
     pub fn evict_to_budget(&mut self, keep: &HashSet<TileKey>) {
@@ -557,6 +582,18 @@ impl LocalMap {
                 self.stats.tables_dropped += 1;
             }
         }
+        // Fields are small and cheap to rebuild: next.
+        for (_, key) in &candidates {
+            if self.bytes <= limit {
+                return;
+            }
+            if let Some(t) = self.tiles.get_mut(key)
+                && let Some(field) = t.field.take()
+            {
+                self.bytes -= field.bytes();
+                self.stats.fields_dropped += 1;
+            }
+        }
         for (_, key) in &candidates {
             if self.bytes <= limit {
                 return;
@@ -570,6 +607,209 @@ impl LocalMap {
                 if let Some(table) = t.ranges {
                     self.bytes -= table.len() * std::mem::size_of::<u16>();
                 }
+                if let Some(field) = t.field {
+                    self.bytes -= field.bytes();
+                }
+            }
+        }
+    }
+
+    /// The spec the held distance fields were built with, once any was.
+    pub fn field_spec(&self) -> Option<FieldSpec> {
+        self.field_spec
+    }
+
+    /// The distance field of tile `key`, if built.
+    pub fn field(&self, key: TileKey) -> Option<&DistanceField> {
+        self.tiles.get(&key).and_then(|t| t.field.as_ref())
+    }
+
+    /// Tiles whose cells are needed, and not held, to build the distance
+    /// fields of `keys` with `spec` (each key and every tile within the
+    /// maximum distance of it), sorted.
+    pub fn missing_field_tiles(&self, keys: &[TileKey], spec: &FieldSpec) -> Vec<TileKey> {
+        let current = self.field_spec == Some(*spec);
+        let margin = self.field_margin_for(spec);
+        let mut missing = HashSet::new();
+        for &key in keys {
+            if current && self.tiles.get(&key).is_some_and(|t| t.field.is_some()) {
+                continue;
+            }
+            for near in tiles_around(key, margin) {
+                if self.tiles.get(&near).is_none_or(|t| t.cells.is_none()) {
+                    missing.insert(near);
+                }
+            }
+        }
+        let mut missing: Vec<TileKey> = missing.into_iter().collect();
+        missing.sort();
+        missing
+    }
+
+    /// Builds the distance fields `keys` lack with `spec`, from the tiles
+    /// held (tiles not held count as unknown), first dropping least
+    /// recently used tables and fields of other tiles as the budget
+    /// requires. A spec other than the held fields' drops them all first.
+    /// Returns how many were built.
+    pub fn ensure_fields(
+        &mut self,
+        keys: &[TileKey],
+        spec: &FieldSpec,
+    ) -> Result<usize, LocalizerError> {
+        let spec = spec.validate()?;
+        if self.field_spec != Some(spec) {
+            for tile in self.tiles.values_mut() {
+                if let Some(field) = tile.field.take() {
+                    self.bytes -= field.bytes();
+                    self.stats.fields_dropped += 1;
+                }
+            }
+            self.field_margin_tiles = self.field_margin_for(&spec);
+            self.field_spec = Some(spec);
+        }
+        let keep: HashSet<TileKey> = keys.iter().copied().collect();
+        let mut todo: Vec<TileKey> = keep
+            .iter()
+            .filter(|k| self.tiles.get(k).is_none_or(|t| t.field.is_none()))
+            .copied()
+            .collect();
+        todo.sort();
+        let count = todo.len();
+        let (size, res) = (self.settings.tile_size, self.settings.resolution);
+        let margin = spec.margin_cells(res);
+        let raster_cells = ((self.settings.budget_bytes / 8 * RASTER_EIGHTHS) as u64
+            / RASTER_BYTES_PER_CELL)
+            .min(MAX_RASTER_CELLS);
+        let mut remaining = todo.as_slice();
+        while let Some(first) = remaining.first() {
+            // Nearby tiles share one raster, as for the range tables.
+            let mut bounds = widen(size.cell_box(*first)?, margin);
+            let mut taken = 1;
+            for key in &remaining[1..] {
+                let candidate = bounds.union(&widen(size.cell_box(*key)?, margin));
+                if candidate.width() * candidate.height() > raster_cells {
+                    break;
+                }
+                bounds = candidate;
+                taken += 1;
+            }
+            let needed = (bounds.width() * bounds.height() * RASTER_BYTES_PER_CELL) as usize;
+            let held = self.raster.as_ref().map_or(0, OccupancyRaster::held_bytes);
+            self.make_room_for_fields(taken, needed.saturating_sub(held), &keep);
+            let raster = match self.raster.take() {
+                Some(mut raster) => {
+                    raster.refill(bounds, |cell| self.cell_state(cell) == OCCUPIED);
+                    raster
+                }
+                None => OccupancyRaster::new(bounds, |cell| self.cell_state(cell) == OCCUPIED),
+            };
+            self.bytes = self.bytes - held + raster.held_bytes();
+            for key in &remaining[..taken] {
+                // Checked when the batch was formed: cannot fail here.
+                let tile_box = size.cell_box(*key)?;
+                let cells = self.tiles.get(key).and_then(|t| t.cells.as_deref());
+                let field = DistanceField::build(&raster, tile_box, res, &spec, |i| {
+                    cells.is_none_or(|c| c[i] == UNKNOWN)
+                });
+                let now = self.tick();
+                self.bytes += field.bytes();
+                self.stats.fields_built += 1;
+                let tile = self.tiles.entry(*key).or_insert(MapTile {
+                    version: 0,
+                    cells: None,
+                    free_cells: 0,
+                    ranges: None,
+                    field: None,
+                    last_used: now,
+                    stale: false,
+                    reference: Box::default(),
+                });
+                tile.field = Some(field);
+                tile.last_used = now;
+            }
+            self.raster = Some(raster);
+            remaining = &remaining[taken..];
+        }
+        Ok(count)
+    }
+
+    /// A read-only view of the distance fields of the tiles in `keys`, for
+    /// scoring particles; a tile without a field reads as unknown. Marks
+    /// those tiles used.
+    pub fn field_window(&mut self, keys: &[TileKey]) -> FieldWindow<'_> {
+        let now = self.tick();
+        for k in keys {
+            if let Some(t) = self.tiles.get_mut(k) {
+                t.last_used = now;
+            }
+        }
+        let tiles = &self.tiles;
+        FieldWindow::new(
+            keys.iter().map(|k| {
+                (
+                    *k,
+                    tiles
+                        .get(k)
+                        .and_then(|t| t.field.as_ref())
+                        .map(|f| f.codes()),
+                )
+            }),
+            self.settings.resolution,
+            self.settings.tile_size,
+        )
+    }
+
+    /// How many distance fields a correction may need at once: half the
+    /// budget, counting each field with its tile's cells (at least one).
+    pub fn field_capacity(&self) -> usize {
+        let area = self.settings.tile_size.area();
+        let per_tile = 2 * area + area.div_ceil(64) * 8;
+        (self.settings.budget_bytes / 8 * TABLE_EIGHTHS / per_tile).max(1)
+    }
+
+    /// Tiles a field of `spec` reads beyond its own on every side.
+    fn field_margin_for(&self, spec: &FieldSpec) -> i32 {
+        let side = self.settings.tile_size.cells() as i32;
+        (spec.margin_cells(self.settings.resolution) + side - 1) / side
+    }
+
+    /// Makes room for `fields` new fields and `scratch` bytes beside them:
+    /// frees spare tables, then drops least recently used range tables,
+    /// then fields, outside `keep`, until it fits the budget or no such
+    /// table or field is left.
+    fn make_room_for_fields(&mut self, fields: usize, scratch: usize, keep: &HashSet<TileKey>) {
+        let fresh = fields * self.settings.tile_size.area() + scratch;
+        let limit = self.limit();
+        let fits = |map: &Self| map.bytes + fresh <= limit;
+        while !fits(self) && !self.spare.is_empty() {
+            self.free_spare();
+        }
+        if fits(self) {
+            return;
+        }
+        let mut candidates: Vec<(u64, TileKey)> = self
+            .tiles
+            .iter()
+            .filter(|(k, t)| (t.ranges.is_some() || t.field.is_some()) && !keep.contains(k))
+            .map(|(k, t)| (t.last_used, *k))
+            .collect();
+        candidates.sort();
+        for (_, key) in &candidates {
+            if fits(self) {
+                return;
+            }
+            if let Some(table) = self.tiles.get_mut(key).and_then(|t| t.ranges.take()) {
+                self.bytes -= table.len() * std::mem::size_of::<u16>();
+                self.stats.tables_dropped += 1;
+            }
+        }
+        for (_, key) in &candidates {
+            if fits(self) {
+                return;
+            }
+            if let Some(field) = self.tiles.get_mut(key).and_then(|t| t.field.take()) {
+                self.bytes -= field.bytes();
+                self.stats.fields_dropped += 1;
             }
         }
     }
@@ -686,14 +926,10 @@ impl LocalMap {
     }
 
     fn neighbourhood(&self, key: TileKey) -> impl Iterator<Item = TileKey> + use<> {
-        let m = self.margin_tiles;
-        (-m..=m).flat_map(move |dy| {
-            (-m..=m).filter_map(move |dx| {
-                Some(TileKey::new(key.x.checked_add(dx)?, key.y.checked_add(dy)?))
-            })
-        })
+        tiles_around(key, self.margin_tiles)
     }
 
+    /// Drops the range tables and distance fields that read tile `key`.
     fn drop_tables_near(&mut self, key: TileKey) {
         let near: Vec<TileKey> = self.neighbourhood(key).collect();
         for k in near {
@@ -702,6 +938,16 @@ impl LocalMap {
             {
                 self.spare.push(table);
                 self.stats.tables_dropped += 1;
+            }
+        }
+        if self.field_spec.is_some() {
+            for k in tiles_around(key, self.field_margin_tiles) {
+                if let Some(t) = self.tiles.get_mut(&k)
+                    && let Some(field) = t.field.take()
+                {
+                    self.bytes -= field.bytes();
+                    self.stats.fields_dropped += 1;
+                }
             }
         }
     }
@@ -761,6 +1007,15 @@ fn occupied_moved(reference: &[u64], cells: &[u8], side: usize) -> bool {
         }
     }
     false
+}
+
+/// The tiles within `m` tiles of `key` (a square), `key` among them.
+fn tiles_around(key: TileKey, m: i32) -> impl Iterator<Item = TileKey> {
+    (-m..=m).flat_map(move |dy| {
+        (-m..=m).filter_map(move |dx| {
+            Some(TileKey::new(key.x.checked_add(dx)?, key.y.checked_add(dy)?))
+        })
+    })
 }
 
 fn widen(b: CellBox, by: i32) -> CellBox {

@@ -183,6 +183,15 @@ impl OccupancyRaster {
         self.bounds
     }
 
+    /// The distance from `cell`'s centre to the nearest occupied cell's
+    /// centre within the raster, in cells (exact; very large when none
+    /// is); `None` outside the raster.
+    pub fn distance_cells(&self, cell: CellIndex) -> Option<f32> {
+        let x = i64::from(cell.x) - i64::from(self.bounds.min.x);
+        let y = i64::from(cell.y) - i64::from(self.bounds.min.y);
+        self.slot(x, y).map(|s| self.distance[s])
+    }
+
     /// The unit normal of the nearest wall seen from free cell `(x, y)`:
     /// the distance field's gradient by central differences; `None` where
     /// it vanishes (a corner's diagonal, or cells at the raster's edge).

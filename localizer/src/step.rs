@@ -1,7 +1,9 @@
 //! One frame through the localizer, the same for the `deog localize`
 //! process and for `deog bench localize`: apply the map changes the server
 //! reported (at most every refresh period), predict, fetch the tiles the
-//! particles need, correct, and evict what the cache cannot hold.
+//! frame needs (as its sensor model says: under the particles for a sonar,
+//! where the endpoints fall for a likelihood field), correct, and evict
+//! what the cache cannot hold.
 //!
 //! The map server is behind [`TileSource`]: the process fetches over the
 //! network, the bench from a map in memory. The step itself does no I/O.
@@ -188,8 +190,8 @@ impl Localizer {
             report.tiles_fetched += fetch_into(tiles, &refetch, &mut self.map)?;
         }
         if self.mcl.predict(odometry)? {
-            let needed = self.mcl.tiles_needed(&self.map);
-            let missing = self.map.missing_tiles(needed.iter().copied());
+            let needed = self.mcl.tiles_for_frame(&self.map, readings);
+            let missing = self.mcl.missing_tiles(&self.map, &needed);
             report.tiles_fetched += fetch_into(tiles, &missing, &mut self.map)?;
             let started = Instant::now();
             let correction = self.mcl.correct(&mut self.map, readings)?;

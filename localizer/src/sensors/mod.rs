@@ -2,17 +2,35 @@
 //! particle's pose, given the map. The filter ([`crate::filter::Mcl`])
 //! knows nothing of cones or beams; it asks a [`SensorModel`] to score its
 //! particles, as amcl keeps `sensors/` apart from `pf/` and
-//! `motion_model/`. A new kind of sensor (a laser's beams, a likelihood
-//! field) is a new file here implementing the trait, handed to
-//! [`crate::filter::Mcl::with_sensor`].
+//! `motion_model/`. A new kind of sensor (a laser's beam model, say) is a
+//! new file here implementing the trait, handed to
+//! [`crate::filter::Mcl::with_sensor`] (or built by [`SensorChoice`]).
+//!
+//! A model also says which tiles a frame needs
+//! ([`SensorModel::tiles_needed`]) and which of them, with their
+//! neighbours, the map must fetch ([`SensorModel::missing_tiles`]): a
+//! sonar reads the tiles under its cones, a likelihood field the tiles
+//! where a laser's endpoints fall, up to 50 m away.
 //!
 //! # Layout
 //! - [`sonar_cone`]: [`SonarCone`], a ring of sonars, each reading the
 //!   nearest echo in its cone: expected ranges from the map's range tables,
 //!   scored by the beam model ([`crate::beam_model`]).
+//! - [`likelihood_field`]: [`LikelihoodField`], any rig's echoes judged by
+//!   how far their endpoints fall from the nearest occupied cell, over the
+//!   map's distance fields.
+//! - [`choice`]: [`SensorChoice`], which of the two a rig is scored with.
+//! - [`reach`]: [`tiles_within_reach`], the tiles under the particles'
+//!   sensors (what a sonar frame needs).
 
+pub mod choice;
+pub mod likelihood_field;
+pub mod reach;
 pub mod sonar_cone;
 
+pub use choice::SensorChoice;
+pub use likelihood_field::{LikelihoodField, LikelihoodFieldParams};
+pub use reach::tiles_within_reach;
 pub use sonar_cone::SonarCone;
 
 use deog_grid::{Pose2, TileKey};
@@ -33,6 +51,31 @@ pub trait SensorModel: std::fmt::Debug + Send {
     /// tempering): the filter takes the mean likelihood per observation,
     /// so that its scale does not depend on the sensor.
     fn observations(&self) -> f64;
+
+    /// The tiles a frame of `readings` needs scored at `particles`: what
+    /// [`Self::score_particles`] is handed and the cache keeps. By default
+    /// the tiles within [`Self::reach`] of the particles
+    /// ([`tiles_within_reach`]). Called before the frame is checked: a
+    /// reading that is not a range is passed over, not refused.
+    fn tiles_needed(&self, map: &LocalMap, particles: &[Pose2], readings: &[f64]) -> Vec<TileKey> {
+        let _ = readings;
+        tiles_within_reach(map, particles, self.reach(), map.table_capacity())
+    }
+
+    /// The tiles, sorted, the map must fetch before `needed` can be scored:
+    /// by default those the range tables of `needed` read and the map does
+    /// not hold ([`LocalMap::missing_tiles`]).
+    fn missing_tiles(&self, map: &LocalMap, needed: &[TileKey]) -> Vec<TileKey> {
+        map.missing_tiles(needed.iter().copied())
+    }
+
+    /// How many tiles' tables one correction may need at once within the
+    /// map's budget: global localization is refused on a map with more
+    /// tiles of free space, and recovery searches half as many. By default
+    /// [`LocalMap::table_capacity`] (range tables).
+    fn tile_capacity(&self, map: &LocalMap) -> usize {
+        map.table_capacity()
+    }
 
     /// Refuses a frame that cannot be scored: the wrong number of
     /// readings, or a reading that is not a range (NaN or negative;
@@ -56,9 +99,9 @@ pub trait SensorModel: std::fmt::Debug + Send {
 
     /// Each particle's log-likelihood of `readings` (tempered as the model
     /// says), pushed onto `out` in the particles' order. `tiles` are the
-    /// tiles the particles' sensors fall in ([`crate::filter::Mcl::tiles_needed`]);
-    /// whatever the model derives from them it builds in `map`. Returns how
-    /// many such tables it built. The frame has passed
+    /// tiles the frame needs ([`Self::tiles_needed`]); whatever the model
+    /// derives from them (range tables, distance fields) it builds in
+    /// `map`. Returns how many such tables it built. The frame has passed
     /// [`Self::check_frame`].
     fn score_particles(
         &mut self,
