@@ -27,13 +27,19 @@ pub fn import(args: &ImportArgs, robot: &str, file: &Path) -> Result<()> {
     };
     log.check_rig(source, &rig)?;
     let scans: Vec<_> = log.scans_from(source).collect();
+    // A log's clock can step back (the Intel log's does, four times);
+    // frames keep file order, and their times never go back.
+    let mut clock = f64::NEG_INFINITY;
     let frames: Vec<pb::SonarFrame> = scans
         .iter()
         .enumerate()
         .map(|(i, scan)| pb::SonarFrame {
             robot: robot.to_owned(),
             sequence: args.first_sequence + i as u64,
-            time_s: scan.time_s,
+            time_s: {
+                clock = clock.max(scan.time_s);
+                clock
+            },
             odometry: Some(pose_to_wire(scan.odometry)),
             true_pose: None,
             ranges: scan.ranges.clone(),

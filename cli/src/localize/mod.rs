@@ -21,6 +21,10 @@ use deog_robot_client::{MapClient, TileChange, TileWatch};
 
 use crate::connection::ConnectionArgs;
 use crate::frame_queue::FrameQueue;
+use crate::rig_args::{load_rig, publish_rig};
+use deog_localizer::sensors::{LikelihoodFieldParams, SensorChoice};
+use deog_proto::rig::frame_rig_name;
+use deog_rig::{BeamShape, Rig};
 
 /// Options of `deog localize`.
 #[derive(Debug, Args)]
@@ -72,6 +76,32 @@ pub struct LocalizeArgs {
     /// cells, as laser-built map_server maps.
     #[arg(long, default_value_t = ConeGeometry::default().surface_depth)]
     pub surface_depth: f64,
+    /// The rig the robot's frames come from (a built-in name or a rig
+    /// file): frames of another rig are refused. Without it, the rig the
+    /// first frame names, as the map server keeps it.
+    #[arg(long)]
+    pub rig: Option<String>,
+    /// The sensor model: beam (expected ranges over each sonar's cone;
+    /// sonar rigs) or likelihood-field (each echo's endpoint against the
+    /// distance to the nearest wall; any rig). Default: beam for a rig of
+    /// sonars only, likelihood-field otherwise.
+    #[arg(long)]
+    pub sensor: Option<SensorChoice>,
+    /// Likelihood field: σ of an echo's distance from the nearest wall,
+    /// metres.
+    #[arg(long, default_value_t = LikelihoodFieldParams::default().sigma_hit)]
+    pub field_sigma: f64,
+    /// Likelihood field: the most echoes of a frame scored, evenly spread.
+    #[arg(long, default_value_t = LikelihoodFieldParams::default().max_beams)]
+    pub field_beams: usize,
+    /// Likelihood field: the exponent τ on the product of the scored
+    /// echoes' likelihoods.
+    #[arg(long, default_value_t = LikelihoodFieldParams::default().tempering)]
+    pub field_tempering: f64,
+    /// Scales the motion model's four noise figures (α1 to α4): above 1 for
+    /// odometry worse than the simulator's.
+    #[arg(long, default_value_t = 1.0)]
+    pub motion_noise_scale: f64,
     /// Seed of the filter's random draws.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -86,6 +116,33 @@ pub struct LocalizeArgs {
     pub refresh_s: f64,
     #[command(flatten)]
     pub connection: ConnectionArgs,
+}
+
+/// The cone the range tables are built for: the rig's sonars' (they must
+/// agree) for the beam model; the default otherwise, whose tables the
+/// likelihood field never builds.
+fn sonar_cone(rig: &Rig, choice: SensorChoice) -> Result<ConeGeometry> {
+    let default = ConeGeometry::default();
+    if choice != SensorChoice::Beam {
+        return Ok(default);
+    }
+    let mut cones = rig.beams().iter().filter_map(|b| match b.shape {
+        BeamShape::Cone { half_angle } => Some((half_angle, b.max_range)),
+        BeamShape::Ray => None,
+    });
+    let Some((half_angle, max_range)) = cones.next() else {
+        return Ok(default);
+    };
+    ensure!(
+        cones.all(|c| c == (half_angle, max_range)),
+        "the beam model needs every sonar of rig {} to share one cone and range: use --sensor likelihood-field",
+        rig.name()
+    );
+    Ok(ConeGeometry {
+        half_angle,
+        max_range,
+        ..default
+    })
 }
 
 /// Runs `deog localize`.
@@ -116,6 +173,12 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         "--cache-mb must be in [16, 1048576] MiB, got {}",
         args.cache_mb
     );
+    ensure!(
+        args.motion_noise_scale.is_finite() && (0.0..=100.0).contains(&args.motion_noise_scale),
+        "--motion-noise-scale must be in [0, 100], got {}",
+        args.motion_noise_scale
+    );
+    let expected_rig = args.rig.as_deref().map(load_rig).transpose()?;
     let mut settings = FilterSettings {
         seed: args.seed,
         ..FilterSettings::default()
@@ -123,7 +186,19 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     settings.kld.max_particles = args.max_particles;
     settings.kld.min_particles = args.min_particles;
     settings.beam.tempering = args.tempering;
-    let mut mcl = Mcl::new(settings).context("the filter's settings")?;
+    let noise = settings.motion;
+    settings.motion.rot_per_rot = noise.rot_per_rot * args.motion_noise_scale;
+    settings.motion.rot_per_trans = noise.rot_per_trans * args.motion_noise_scale;
+    settings.motion.trans_per_trans = noise.trans_per_trans * args.motion_noise_scale;
+    settings.motion.trans_per_rot = noise.trans_per_rot * args.motion_noise_scale;
+    let field = LikelihoodFieldParams {
+        sigma_hit: args.field_sigma,
+        max_beams: args.field_beams,
+        tempering: args.field_tempering,
+        ..LikelihoodFieldParams::default()
+    }
+    .validate()
+    .context("the likelihood field's options (--field-sigma, --field-beams, --field-tempering)")?;
     // One thread: the filter is sequential, and its allocations then come
     // from one arena of the allocator, not one per worker thread each
     // holding memory the others freed. The loop is synchronous and waits
@@ -141,6 +216,51 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     let info = runtime
         .block_on(client.map_info(&args.map))
         .with_context(|| format!("opening map {}", args.map))?;
+    if let Some(rig) = &expected_rig {
+        runtime.block_on(publish_rig(&client, rig))?;
+    }
+    // The rig is the first frame's: wait for it before building the filter.
+    let frames = runtime
+        .block_on(client.subscribe_frames(&args.robot, args.from))
+        .context("following the robot's frames")?;
+    let mut queue = FrameQueue::spawn(frames, args.idle_exit);
+    let mut shutdown = Box::pin(deog_harness::shutdown_signal());
+    tracing::info!(robot = %args.robot, from = args.from, "waiting for the robot's first frame");
+    let first = runtime.block_on(async {
+        tokio::select! {
+            () = &mut shutdown => Ok(None),
+            frame = queue.next() => frame,
+        }
+    })?;
+    let Some(first) = first else {
+        println!("{} on {}: no frame arrived", args.robot, args.map);
+        return Ok(());
+    };
+    let first_rig_field = first.rig.clone();
+    let rig_name = frame_rig_name(&first.rig).to_owned();
+    if let Some(rig) = &expected_rig {
+        ensure!(
+            rig.name() == rig_name,
+            "frame {} comes from rig {rig_name}, not {} (--rig)",
+            first.sequence,
+            rig.name()
+        );
+    }
+    let rig = runtime
+        .block_on(client.rig(&rig_name))
+        .with_context(|| format!("reading rig {rig_name} of frame {}", first.sequence))?;
+    let choice = args.sensor.unwrap_or(if rig.all_sonar() {
+        SensorChoice::Beam
+    } else {
+        SensorChoice::LikelihoodField
+    });
+    let cone = sonar_cone(&rig, choice)?;
+    settings.beam.max_range = cone.max_range;
+    let sensor = choice
+        .build(&rig, settings.beam, field)
+        .with_context(|| format!("the {choice} model for rig {}", rig.name()))?;
+    tracing::info!(rig = rig.name(), readings = rig.readings(), sensor = %choice, "localizing with the frames' rig");
+    let mut mcl = Mcl::with_sensor(settings, sensor).context("the filter's settings")?;
     let resolution = Resolution::new(info.resolution_m)?;
     let tile_size = TileSize::new(info.tile_size)?;
     let map = LocalMap::new(MapSettings {
@@ -150,7 +270,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         geometry: ConeGeometry {
             specular_max_incidence: args.specular_angle.map(f64::to_radians),
             surface_depth: args.surface_depth,
-            ..ConeGeometry::default()
+            ..cone
         },
         budget_bytes: args.cache_mb << 20,
     })?;
@@ -209,20 +329,26 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             localizer
         }
     };
-    let frames = runtime
-        .block_on(client.subscribe_frames(&args.robot, args.from))
-        .context("following the robot's frames")?;
-    let mut queue = FrameQueue::spawn(frames, args.idle_exit);
-    let mut shutdown = Box::pin(deog_harness::shutdown_signal());
     let (mut processed, mut corrections, mut last_sequence) = (0u64, 0u64, 0u64);
+    let mut first = Some(first);
     loop {
-        let next = runtime.block_on(async {
-            tokio::select! {
-                () = &mut shutdown => Ok(None),
-                frame = queue.next() => frame,
-            }
-        });
+        let next = match first.take() {
+            Some(frame) => Ok(Some(frame)),
+            None => runtime.block_on(async {
+                tokio::select! {
+                    () = &mut shutdown => Ok(None),
+                    frame = queue.next() => frame,
+                }
+            }),
+        };
         let Some(frame) = next? else { break };
+        if frame.rig != first_rig_field {
+            bail!(
+                "frame {} comes from rig {}, the robot's earlier frames from {rig_name}: restart the localizer for the new rig",
+                frame.sequence,
+                frame_rig_name(&frame.rig)
+            );
+        }
         if frame.sequence <= last_sequence {
             continue;
         }
