@@ -123,7 +123,7 @@ def main():
         import numpy  # noqa: F401
         import octomap
     except ImportError as e:
-        print(f"{e}: pip install octomap-python numpy", file=sys.stderr)
+        print(e, file=sys.stderr)
         return MISSING_EXIT
     if args.probe:
         print(json.dumps(versions()))

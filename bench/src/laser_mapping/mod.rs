@@ -112,7 +112,7 @@ impl LaserMappingOptions {
     fn check_log(&self) -> Result<(), OptionError> {
         require(self.log.is_file(), "--log", || {
             format!(
-                "--log {}: no such file (the default is relative to the repository's root: run from there, or give --log)",
+                "--log {}: no such file (a relative path is taken from the working directory; the default's is the repository's root)",
                 self.log.display()
             )
         })
