@@ -1,8 +1,8 @@
 //! deog's release benchmarks, one module a benchmark, each the library
 //! half of a `deog bench` subcommand: its options (clap-derived, so the
 //! binary only parses them and calls [`map_server::run`],
-//! [`localize::run`] or [`localize_memory::run`]), their checks, the run,
-//! and the figures it prints and writes. What each measures, and the
+//! [`localize::run`], [`localize_memory::run`] or [`laser_mapping::run`]),
+//! their checks, the run, and the figures it prints and writes. What each measures, and the
 //! figures of record, are in BENCHMARKS.md.
 //!
 //! This is orchestration, used by the binary and by nothing else: like
@@ -21,9 +21,15 @@
 //! - [`localize_memory`]: `deog bench localize-memory`, the localizer's
 //!   memory against its cache setting, with the real processes, on a
 //!   generated city far larger than the cache.
+//! - [`laser_mapping`]: `deog bench laser-mapping`, deog's laser mapping
+//!   beside OctoMap's on the same scans of a real CARMEN log: scans and
+//!   cell updates per second on each side, their ratio, and how alike the
+//!   two final maps are. OctoMap runs in `bench/octomap_insert.py`, a child
+//!   Python process.
 //! - [`option_error`]: [`OptionError`], an option out of its range or
 //!   options that do not go together.
 
+pub mod laser_mapping;
 pub mod localize;
 pub mod localize_memory;
 pub mod map_server;

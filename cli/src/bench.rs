@@ -3,6 +3,7 @@
 
 use anyhow::Result;
 use clap::{Args, Subcommand};
+use deog_bench::laser_mapping::LaserMappingOptions;
 use deog_bench::localize::LocalizeOptions;
 use deog_bench::localize_memory::LocalizeMemoryOptions;
 use deog_bench::map_server::MapServerOptions;
@@ -26,6 +27,10 @@ enum BenchTarget {
     /// The localizer's memory against its cache setting, with the real
     /// processes, on a generated city map at least 100 times the cache.
     LocalizeMemory(LocalizeMemoryOptions),
+    /// deog's laser mapping beside OctoMap's (a Python child process) on
+    /// the same scans of a real CARMEN log: scans/s, cell updates/s, their
+    /// ratio and how alike the two maps come out.
+    LaserMapping(LaserMappingOptions),
 }
 
 /// Runs `deog bench`.
@@ -34,5 +39,6 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchTarget::MapServer(options) => deog_bench::map_server::run(options),
         BenchTarget::Localize(options) => deog_bench::localize::run(options),
         BenchTarget::LocalizeMemory(options) => deog_bench::localize_memory::run(options),
+        BenchTarget::LaserMapping(options) => deog_bench::laser_mapping::run(options),
     }
 }
