@@ -82,11 +82,29 @@ pub struct LikelihoodFieldParams {
     /// An endpoint in unknown space scores as one this far from an
     /// occupied cell, metres.
     pub unknown_distance: f64,
+    /// Beam skipping (amcl's `do_beamskip`): a beam whose endpoint lies
+    /// within `beam_skip_distance` of a wall for fewer than this share of
+    /// the particles is left out of the frame, for every particle: it most
+    /// likely met something the map does not hold (a person, a moved box),
+    /// and scoring it would pull the filter off the pose the other beams
+    /// agree on. 0 scores every beam.
+    pub beam_skip_threshold: f64,
+    /// How near a wall an endpoint must fall to agree with the map,
+    /// metres (amcl's `beam_skip_distance`).
+    pub beam_skip_distance: f64,
+    /// When more than this share of the beams would be left out, none is
+    /// (the particles disagree with most beams: the filter is searching,
+    /// not tracking; amcl's `beam_skip_error_threshold`).
+    pub beam_skip_error_threshold: f64,
 }
 
 impl Default for LikelihoodFieldParams {
-    /// amcl's defaults for the likelihood field (z_hit 0.95, z_rand 0.05,
-    /// σ 0.2 m, 2 m, 60 beams); τ 1/30; unknown space at two σ.
+    /// amcl's figures for the likelihood field (z_hit 0.95, z_rand 0.05,
+    /// σ 0.2 m, 2 m, 60 beams) and its beam skipping (0.3 of the
+    /// particles within 0.5 m, unless over 0.9 of the beams would go);
+    /// τ 1/30; unknown space at two σ. On the real laser logs, whose
+    /// odometry is far worse, 180 beams at τ 0.5 tracked best
+    /// (BENCHMARKS.md, real logs).
     fn default() -> Self {
         Self {
             z_hit: 0.95,
@@ -96,6 +114,9 @@ impl Default for LikelihoodFieldParams {
             max_beams: 60,
             tempering: 1.0 / 30.0,
             unknown_distance: 0.4,
+            beam_skip_threshold: 0.3,
+            beam_skip_distance: 0.5,
+            beam_skip_error_threshold: 0.9,
         }
     }
 }
@@ -119,6 +140,19 @@ impl LikelihoodFieldParams {
             self.unknown_distance,
             0.0,
             self.max_distance,
+        )?;
+        within("beam_skip_threshold", self.beam_skip_threshold, 0.0, 1.0)?;
+        within(
+            "beam_skip_distance",
+            self.beam_skip_distance,
+            0.0,
+            self.max_distance,
+        )?;
+        within(
+            "beam_skip_error_threshold",
+            self.beam_skip_error_threshold,
+            0.0,
+            1.0,
         )?;
         Ok(self)
     }
@@ -160,6 +194,9 @@ pub struct LikelihoodField {
     table_of: Vec<usize>,
     /// The last frame's echoes scored.
     echoes: usize,
+    /// Field codes of every endpoint for every particle, while beams are
+    /// judged for skipping.
+    codes: Vec<u8>,
 }
 
 /// An echo's endpoint in the robot's frame, metres, and its beam's table.
@@ -203,6 +240,7 @@ impl LikelihoodField {
             .collect();
         Ok(Self {
             echoes: scored.len(),
+            codes: Vec::new(),
             rig,
             params,
             spec,
@@ -248,14 +286,19 @@ impl LikelihoodField {
             .collect()
     }
 
-    /// Scores `particles` over `window`, pushing onto `out`.
+    /// Scores `particles` over `window`, pushing onto `out`; returns how
+    /// many of the endpoints were scored (the rest skipped, see
+    /// [`LikelihoodFieldParams::beam_skip_threshold`]).
     fn score_over(
-        &self,
+        &mut self,
         window: &impl FieldCodes,
         endpoints: &[Endpoint],
         particles: &[Pose2],
         out: &mut Vec<f64>,
-    ) {
+    ) -> usize {
+        if self.params.beam_skip_threshold > 0.0 && particles.len() > 1 {
+            return self.score_skipping(window, endpoints, particles, out);
+        }
         let beams: Vec<(f64, f64, &CodeTable)> = endpoints
             .iter()
             .map(|e| (e.x, e.y, &self.tables[e.table]))
@@ -272,6 +315,60 @@ impl LikelihoodField {
             }
             out.push(f64::from(sum) * to_nats);
         }
+        endpoints.len()
+    }
+
+    /// As [`Self::score_over`] with beam skipping: a first pass finds each
+    /// endpoint's field code for every particle and counts, per beam, the
+    /// particles that put it near a wall; the second sums the beams enough
+    /// particles agree on.
+    fn score_skipping(
+        &mut self,
+        window: &impl FieldCodes,
+        endpoints: &[Endpoint],
+        particles: &[Pose2],
+        out: &mut Vec<f64>,
+    ) -> usize {
+        let n = endpoints.len();
+        let near = self.spec.code_of(self.params.beam_skip_distance);
+        self.codes.clear();
+        self.codes.reserve(particles.len() * n);
+        let mut agree = vec![0u32; n];
+        for p in particles {
+            let (sin, cos) = p.theta.sin_cos();
+            for (e, count) in endpoints.iter().zip(agree.iter_mut()) {
+                let code = window.code_at(p.x + cos * e.x - sin * e.y, p.y + sin * e.x + cos * e.y);
+                *count += u32::from(code <= near);
+                self.codes.push(code);
+            }
+        }
+        let least = self.params.beam_skip_threshold * particles.len() as f64;
+        let mut keep: Vec<bool> = agree.iter().map(|&a| f64::from(a) >= least).collect();
+        let kept = keep.iter().filter(|&&k| k).count();
+        let skipped = n - kept;
+        if skipped as f64 > self.params.beam_skip_error_threshold * n as f64 {
+            keep.fill(true);
+        }
+        let beams: Vec<(bool, &CodeTable)> = endpoints
+            .iter()
+            .zip(&keep)
+            .map(|(e, &k)| (k, &self.tables[e.table]))
+            .collect();
+        let to_nats = self.params.tempering / TABLE_SCALE;
+        out.reserve(particles.len());
+        for codes in self.codes.chunks_exact(n.max(1)).take(particles.len()) {
+            let mut sum = 0i32;
+            for (&code, &(k, table)) in codes.iter().zip(&beams) {
+                if k {
+                    sum += table[usize::from(code)];
+                }
+            }
+            out.push(f64::from(sum) * to_nats);
+        }
+        if n == 0 {
+            out.extend(std::iter::repeat_n(0.0, particles.len()));
+        }
+        keep.iter().filter(|&&k| k).count()
     }
 }
 
@@ -341,10 +438,11 @@ impl SensorModel for LikelihoodField {
         let endpoints = self.endpoints(readings);
         self.echoes = endpoints.len();
         let built = map.ensure_fields(tiles, &self.spec)?;
-        match map.field_window(tiles) {
+        let scored = match map.field_window(tiles) {
             FieldWindow::Dense(window) => self.score_over(&window, &endpoints, particles, out),
             FieldWindow::Sparse(window) => self.score_over(&window, &endpoints, particles, out),
-        }
+        };
+        self.echoes = scored;
         Ok(built)
     }
 

@@ -1,0 +1,182 @@
+//! Mapping with no ground truth in the loop: a laser robot localizes on a
+//! map built before a box was moved, and `deog map --pose estimate` maps
+//! its frames from the localizer's converged estimates, so the box shows
+//! up in the shared map where it now stands.
+
+use deog_grid::{CellIndex, TileMap};
+use deog_robot_client::{ClientConfig, MapClient};
+use deog_tests::{ServerProcess, run_deog, succeeded};
+
+/// A 10 x 8 m room with a table, a pillar and one box.
+fn world(name: &str, box_min: [f64; 2]) -> String {
+    format!(
+        "name = \"{name}\"\n\
+         boundary = [[0.0, 0.0], [10.0, 0.0], [10.0, 8.0], [0.0, 8.0]]\n\
+         [[obstacle]]\nrect = {{ min = [1.0, 5.5], max = [3.0, 6.5] }}\n\
+         [[obstacle]]\ncircle = {{ center = [7.5, 2.0], radius = 0.3, sides = 12 }}\n\
+         [[obstacle]]\nname = \"box\"\nrect = {{ min = [{}, {}], max = [{}, {}] }}\n",
+        box_min[0],
+        box_min[1],
+        box_min[0] + 1.0,
+        box_min[1] + 1.0
+    )
+}
+
+/// Of the cells just inside the faces of the 1 m box whose corner is
+/// `min`, the share the map holds occupied.
+fn box_faces_occupied(map: &TileMap, min: [f64; 2]) -> f64 {
+    let res = map.resolution();
+    let (mut faces, mut occupied) = (0, 0);
+    for i in 2..18 {
+        let along = 0.05 * f64::from(i) + 0.025;
+        for (x, y) in [
+            (min[0] + along, min[1] + 0.025),
+            (min[0] + along, min[1] + 0.975),
+            (min[0] + 0.025, min[1] + along),
+            (min[0] + 0.975, min[1] + along),
+        ] {
+            let cell = res.cell_of(x, y).unwrap();
+            faces += 1;
+            // Within a cell of the face: a wall's cells may stand one off.
+            let near = (-1..=1).any(|d| {
+                map.get(CellIndex::new(cell.x + d, cell.y))
+                    .or(map.get(CellIndex::new(cell.x, cell.y + d)))
+                    .is_some_and(|b| b.probability() > 0.5)
+            });
+            occupied += usize::from(near);
+        }
+    }
+    occupied as f64 / faces as f64
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_moved_box_appears_in_the_shared_map_through_the_localizers_estimates() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (before, after) = ([4.0, 2.0], [6.0, 5.0]);
+    let world_before = dir.path().join("before.toml");
+    let world_after = dir.path().join("after.toml");
+    std::fs::write(&world_before, world("before", before)).unwrap();
+    std::fs::write(&world_after, world("after", after)).unwrap();
+    let server = ServerProcess::start(&dir.path().join("data"), &[]).await;
+    let client = MapClient::connect(ClientConfig::new(server.url()))
+        .await
+        .unwrap();
+
+    // The map, built with the box where it was.
+    let sim = ServerProcess::start_sim(
+        world_before.to_str().unwrap(),
+        &["--speed", "20", "--seed", "5", "--rig", "laser180"],
+    )
+    .await;
+    let env = [
+        ("DEOG_SERVER", server.addr.to_string()),
+        ("DEOG_SIM", sim.addr.to_string()),
+    ];
+    succeeded(&run_deog(
+        &[
+            "wander",
+            "--robot",
+            "mapper",
+            "--spawn",
+            "--seed",
+            "3",
+            "--duration",
+            "120",
+        ],
+        &env,
+    ));
+    succeeded(&run_deog(
+        &["map", "--robot", "mapper", "--map", "m", "--idle-exit", "2"],
+        &env,
+    ));
+    drop(sim);
+    let (_, map) = client.download("m").await.unwrap();
+    let was = box_faces_occupied(&map, before);
+    let is = box_faces_occupied(&map, after);
+    assert!(
+        was > 0.5 && is < 0.1,
+        "before the move: {was:.2} where it was, {is:.2} where it goes"
+    );
+
+    // The box moved; another robot drives the room. Its localizer tracks
+    // it on the shared map from where it starts, and its cartographer maps
+    // its frames from the estimates alone.
+    let sim = ServerProcess::start_sim(
+        world_after.to_str().unwrap(),
+        &["--speed", "20", "--seed", "6", "--rig", "laser180"],
+    )
+    .await;
+    let env = [
+        ("DEOG_SERVER", server.addr.to_string()),
+        ("DEOG_SIM", sim.addr.to_string()),
+    ];
+    succeeded(&run_deog(
+        &[
+            "wander",
+            "--robot",
+            "worker",
+            "--spawn",
+            "--seed",
+            "8",
+            "--duration",
+            "120",
+        ],
+        &env,
+    ));
+    // Its frames as a real robot's would be: no true pose anywhere.
+    let mut frames = client.read_frames("worker", 1, 0).await.unwrap();
+    let start = frames[0].true_pose.unwrap();
+    for frame in &mut frames {
+        frame.robot = "blind".into();
+        frame.true_pose = None;
+    }
+    client.publish_frames(frames).await.unwrap();
+    let initial = format!("--initial-pose={},{},{}", start.x, start.y, start.theta);
+    succeeded(&run_deog(
+        &[
+            "localize",
+            "--robot",
+            "blind",
+            "--map",
+            "m",
+            "--from",
+            "1",
+            &initial,
+            "--initial-std-xy",
+            "0.05",
+            "--initial-std-theta",
+            "0.05",
+            "--idle-exit",
+            "2",
+        ],
+        &env,
+    ));
+    let out = succeeded(&run_deog(
+        &[
+            "map",
+            "--robot",
+            "blind",
+            "--map",
+            "m",
+            "--pose",
+            "estimate",
+            "--idle-exit",
+            "2",
+            "--estimate-wait",
+            "1",
+        ],
+        &env,
+    ));
+    assert!(out.contains("frames integrated"), "{out}");
+    let (_, map) = client.download("m").await.unwrap();
+    let was = box_faces_occupied(&map, before);
+    let is = box_faces_occupied(&map, after);
+    assert!(
+        is > 0.5,
+        "after the move, the box's new place: {is:.2}\n{out}"
+    );
+    assert!(
+        was < 0.5,
+        "after the move, the box's old place: {was:.2}\n{out}"
+    );
+}
