@@ -46,6 +46,17 @@ fn line(frame: &pb::SonarFrame) -> String {
     )
 }
 
+/// Prints one line; false once the reader has gone (a closed pipe, as
+/// `deog frames | head` closes it), which ends the listing quietly.
+fn print(text: &str) -> Result<bool> {
+    use std::io::Write as _;
+    match writeln!(std::io::stdout().lock(), "{text}") {
+        Ok(()) => Ok(true),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(false),
+        Err(e) => Err(e).context("writing to standard output"),
+    }
+}
+
 /// Runs the listing.
 pub fn run(args: FramesArgs) -> Result<()> {
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
@@ -70,7 +81,9 @@ pub fn run(args: FramesArgs) -> Result<()> {
         };
         if !args.follow {
             for frame in map.read_frames(robot, args.from, 0).await? {
-                println!("{}", line(&frame));
+                if !print(&line(&frame))? {
+                    break;
+                }
             }
             return Ok(());
         }
@@ -81,7 +94,9 @@ pub fn run(args: FramesArgs) -> Result<()> {
             tokio::select! {
                 () = &mut shutdown => return Ok(()),
                 frame = frames.message() => match frame? {
-                    Some(frame) => println!("{}", line(&frame)),
+                    Some(frame) => if !print(&line(&frame))? {
+                        return Ok(());
+                    },
                     None => return Ok(()),
                 },
             }
