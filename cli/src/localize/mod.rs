@@ -191,6 +191,9 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     settings.motion.rot_per_trans = noise.rot_per_trans * args.motion_noise_scale;
     settings.motion.trans_per_trans = noise.trans_per_trans * args.motion_noise_scale;
     settings.motion.trans_per_rot = noise.trans_per_rot * args.motion_noise_scale;
+    // The filter is built once the first frame names the rig; its
+    // settings are checked now, before anything waits.
+    let mut settings = settings.validate().context("the filter's settings")?;
     let field = LikelihoodFieldParams {
         sigma_hit: args.field_sigma,
         max_beams: args.field_beams,
