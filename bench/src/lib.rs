@@ -1,9 +1,10 @@
 //! deog's release benchmarks, one module a benchmark, each the library
 //! half of a `deog bench` subcommand: its options (clap-derived, so the
 //! binary only parses them and calls [`map_server::run`],
-//! [`localize::run`], [`localize_memory::run`] or [`laser_mapping::run`]),
-//! their checks, the run, and the figures it prints and writes. What each measures, and the
-//! figures of record, are in BENCHMARKS.md.
+//! [`localize::run`], [`localize_memory::run`], [`laser_mapping::run`] or
+//! [`real::run`]), their checks, the run, and the figures it prints and
+//! writes. What each measures, and the figures of record, are in
+//! BENCHMARKS.md.
 //!
 //! This is orchestration, used by the binary and by nothing else: like
 //! deog-harness, whose processes and `/proc` sampling it uses, it reports
@@ -26,6 +27,10 @@
 //!   cell updates per second on each side, their ratio, and how alike the
 //!   two final maps are. OctoMap runs in `bench/octomap_insert.py`, a child
 //!   Python process.
+//! - [`real`]: `deog bench real`, the whole real-data recipe on one CARMEN
+//!   log with the real processes: the reference map from the log's
+//!   reference poses, tracking over the whole log and seeded global
+//!   starts, judged against the reference poses.
 //! - [`option_error`]: [`OptionError`], an option out of its range or
 //!   options that do not go together.
 
@@ -34,5 +39,6 @@ pub mod localize;
 pub mod localize_memory;
 pub mod map_server;
 pub mod option_error;
+pub mod real;
 
 pub use option_error::OptionError;

@@ -7,6 +7,7 @@ use deog_bench::laser_mapping::LaserMappingOptions;
 use deog_bench::localize::LocalizeOptions;
 use deog_bench::localize_memory::LocalizeMemoryOptions;
 use deog_bench::map_server::MapServerOptions;
+use deog_bench::real::RealOptions;
 
 /// Options of `deog bench`.
 #[derive(Debug, Args)]
@@ -31,6 +32,10 @@ enum BenchTarget {
     /// the same scans of a real CARMEN log: scans/s, cell updates/s, their
     /// ratio and how alike the two maps come out.
     LaserMapping(LaserMappingOptions),
+    /// The real-data recipe on one CARMEN log, with the real processes:
+    /// the reference map, tracking over the whole log and seeded global
+    /// starts, judged against the log's reference poses.
+    Real(RealOptions),
 }
 
 /// Runs `deog bench`.
@@ -40,5 +45,6 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchTarget::Localize(options) => deog_bench::localize::run(options),
         BenchTarget::LocalizeMemory(options) => deog_bench::localize_memory::run(options),
         BenchTarget::LaserMapping(options) => deog_bench::laser_mapping::run(options),
+        BenchTarget::Real(options) => deog_bench::real::run(options),
     }
 }

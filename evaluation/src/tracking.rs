@@ -17,8 +17,14 @@ pub struct Tracking {
     pub within: u64,
     /// Mean position error, metres.
     pub mean_m: f64,
+    /// Root mean square of the position error, metres.
+    pub rms_m: f64,
     /// Largest position error, metres.
     pub max_m: f64,
+    /// Mean absolute heading error, radians (each in [0, π]).
+    pub mean_abs_heading_rad: f64,
+    /// Largest absolute heading error, radians.
+    pub max_abs_heading_rad: f64,
     /// Runs of consecutive estimates outside the bounds.
     pub lost_stretches: u64,
     /// The longest such run: its first frame's time and its length,
@@ -43,7 +49,7 @@ pub struct LostStretch {
 /// sequence) and sums up the errors; estimates without one are skipped.
 pub fn track(truth: &[TruthSample], estimates: &[EstimateSample], params: &EvalParams) -> Tracking {
     let mut t = Tracking::default();
-    let mut sum = 0.0;
+    let (mut sum, mut square_sum, mut heading_sum) = (0.0, 0.0, 0.0);
     // The current run outside the bounds: (start time, last time, count).
     let mut lost: Option<(f64, f64, u64)> = None;
     let close = |lost: &mut Option<(f64, f64, u64)>, t: &mut Tracking| {
@@ -68,7 +74,10 @@ pub fn track(truth: &[TruthSample], estimates: &[EstimateSample], params: &EvalP
         let within = position <= params.converge_m && heading <= params.converge_rad;
         t.paired += 1;
         sum += position;
+        square_sum += position * position;
+        heading_sum += heading;
         t.max_m = t.max_m.max(position);
+        t.max_abs_heading_rad = t.max_abs_heading_rad.max(heading);
         if within {
             t.within += 1;
             close(&mut lost, &mut t);
@@ -81,7 +90,10 @@ pub fn track(truth: &[TruthSample], estimates: &[EstimateSample], params: &EvalP
     }
     close(&mut lost, &mut t);
     if t.paired > 0 {
-        t.mean_m = sum / t.paired as f64;
+        let n = t.paired as f64;
+        t.mean_m = sum / n;
+        t.rms_m = (square_sum / n).sqrt();
+        t.mean_abs_heading_rad = heading_sum / n;
     }
     t
 }
@@ -119,6 +131,23 @@ mod tests {
         approx::assert_relative_eq!(lost.duration_s, 0.2, epsilon = 1e-12);
         approx::assert_relative_eq!(t.mean_m, 3.0 / 9.0, epsilon = 1e-12);
         approx::assert_relative_eq!(t.max_m, 1.0, epsilon = 1e-12);
+        approx::assert_relative_eq!(t.rms_m, (3.0f64 / 9.0).sqrt(), epsilon = 1e-12);
         assert!(t.last_within);
+    }
+
+    #[test]
+    fn heading_errors_are_taken_across_the_wrap() {
+        let truth: Vec<TruthSample> = (1..=2)
+            .map(|s| TruthSample::new(s, s as f64, Pose2::new(0.0, 0.0, 3.1)))
+            .collect();
+        // 0.1 rad on one side, and 0.2 rad across ±π on the other.
+        let estimates = [
+            EstimateSample::new(1, Pose2::new(0.0, 0.0, 3.0)),
+            EstimateSample::new(2, Pose2::new(0.0, 0.0, 3.3 - 2.0 * std::f64::consts::PI)),
+        ];
+        let t = track(&truth, &estimates, &EvalParams::default());
+        approx::assert_relative_eq!(t.mean_abs_heading_rad, 0.15, epsilon = 1e-9);
+        approx::assert_relative_eq!(t.max_abs_heading_rad, 0.2, epsilon = 1e-9);
+        approx::assert_relative_eq!(t.rms_m, 0.0);
     }
 }
