@@ -69,6 +69,11 @@ pub(super) async fn bench(options: &RealOptions) -> Result<RealFigures> {
                 &scans.to_string(),
                 "--idle-exit",
                 IDLE_EXIT_S,
+                // One frame a batch: the server clamps each batch's sum,
+                // so batches cut by arrival timing would make the map
+                // differ from run to run.
+                "--batch-frames",
+                "1",
             ]),
             &mut shutdown,
         )
