@@ -119,7 +119,7 @@ async fn a_moved_box_appears_in_the_shared_map_through_the_localizers_estimates(
             "--seed",
             "8",
             "--duration",
-            "120",
+            "240",
         ],
         &env,
     ));
@@ -171,6 +171,7 @@ async fn a_moved_box_appears_in_the_shared_map_through_the_localizers_estimates(
     let (_, map) = client.download("m").await.unwrap();
     let was = box_faces_occupied(&map, before);
     let is = box_faces_occupied(&map, after);
+    eprintln!("box faces occupied after the move: new place {is:.2}, old place {was:.2}");
     assert!(
         is > 0.5,
         "after the move, the box's new place: {is:.2}\n{out}"
