@@ -65,9 +65,14 @@ pub struct EvalMapArgs {
     #[arg(long)]
     pub png: Option<PathBuf>,
     /// The robots' radius, metres: free space closer to a wall than this is
-    /// not counted as reachable.
-    #[arg(long, default_value_t = DEFAULT_ROBOT_RADIUS_M)]
-    pub robot_radius: f64,
+    /// not counted as reachable. Default: the --rig's body radius, or the
+    /// Scout's (0.205 m).
+    #[arg(long)]
+    pub robot_radius: Option<f64>,
+    /// The rig the robots carried (a built-in name or a rig file): its
+    /// body radius is the default --robot-radius.
+    #[arg(long)]
+    pub rig: Option<String>,
     #[command(flatten)]
     pub connection: ConnectionArgs,
 }
@@ -125,6 +130,11 @@ pub fn run(args: EvalArgs) -> Result<()> {
 fn run_map(args: EvalMapArgs) -> Result<()> {
     // The world first: a misspelt world name fails before any network call.
     let world = load_world_spec(&args.world)?;
+    let robot_radius = match (args.robot_radius, &args.rig) {
+        (Some(radius), _) => radius,
+        (None, Some(spec)) => crate::rig_args::load_rig(spec)?.body_radius(),
+        (None, None) => DEFAULT_ROBOT_RADIUS_M,
+    };
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     let (map, seeds) = runtime.block_on(async {
         let client = MapClient::connect(args.connection.client_config()?)
@@ -140,7 +150,7 @@ fn run_map(args: EvalMapArgs) -> Result<()> {
         map: &map,
         world: &world,
         seeds: &seeds,
-        robot_radius_m: args.robot_radius,
+        robot_radius_m: robot_radius,
     };
     let quality = map_quality(&input)
         .with_context(|| format!("judging map {} against world {}", args.map, args.world))?;

@@ -59,6 +59,11 @@ pub struct WanderArgs {
     /// Which pose the data file holds.
     #[arg(long, value_enum, default_value_t = PoseSource::True)]
     pub data_pose: PoseSource,
+    /// The rig the robot must carry (a built-in name or a rig file): the
+    /// wanderer stops at once if the simulator's is another. Without it,
+    /// the simulator's rig, whatever it is.
+    #[arg(long)]
+    pub rig: Option<String>,
     #[command(flatten)]
     pub connection: ConnectionArgs,
 }
@@ -96,6 +101,16 @@ pub fn run(args: WanderArgs) -> Result<()> {
             .await
             .with_context(|| format!("connecting to the simulator at {}", args.sim))?;
         let rig = sim_rig(&sim).await?;
+        if let Some(spec) = &args.rig {
+            let expected = crate::rig_args::load_rig(spec)?;
+            if expected != rig {
+                bail!(
+                    "the simulator's robots carry rig {}, not {} (--rig)",
+                    rig.name(),
+                    expected.name()
+                );
+            }
+        }
         tracing::info!(rig = %rig.name(), readings = rig.readings(), "the simulator's rig");
         if data_file.is_some() && rig.name() != deog_rig::DEFAULT_RIG {
             bail!(
