@@ -46,6 +46,17 @@ impl MotionNoise {
         within("trans_per_rot", self.trans_per_rot, 0.0, 10.0)?;
         Ok(self)
     }
+
+    /// Every figure times `factor`: wider for odometry worse than these
+    /// figures assume.
+    pub fn scaled(self, factor: f64) -> Self {
+        Self {
+            rot_per_rot: self.rot_per_rot * factor,
+            rot_per_trans: self.rot_per_trans * factor,
+            trans_per_trans: self.trans_per_trans * factor,
+            trans_per_rot: self.trans_per_rot * factor,
+        }
+    }
 }
 
 /// Below this translation, metres, the direction of travel between two

@@ -30,11 +30,7 @@ fn filter_settings(options: &LocalizeOptions, seed: u64) -> FilterSettings {
     settings.beam.hit_sigma_m = options.hit_sigma;
     settings.beam.hit_sigma_per_m = options.hit_sigma_per_m;
     settings.alpha_fast = options.alpha_fast;
-    let k = options.motion_noise_scale;
-    settings.motion.rot_per_rot *= k;
-    settings.motion.rot_per_trans *= k;
-    settings.motion.trans_per_trans *= k;
-    settings.motion.trans_per_rot *= k;
+    settings.motion = settings.motion.scaled(options.motion_noise_scale);
     settings.alpha_slow = options.alpha_slow;
     settings.cluster_keep_weight = options.cluster_keep_weight;
     settings.cluster_min_particles = options.cluster_min_particles;

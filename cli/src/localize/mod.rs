@@ -24,7 +24,6 @@ use crate::frame_queue::FrameQueue;
 use crate::rig_args::{load_rig, publish_rig};
 use deog_localizer::sensors::{LikelihoodFieldParams, SensorChoice};
 use deog_proto::rig::frame_rig_name;
-use deog_rig::{BeamShape, Rig};
 
 /// Options of `deog localize`.
 #[derive(Debug, Args)]
@@ -118,33 +117,6 @@ pub struct LocalizeArgs {
     pub connection: ConnectionArgs,
 }
 
-/// The cone the range tables are built for: the rig's sonars' (they must
-/// agree) for the beam model; the default otherwise, whose tables the
-/// likelihood field never builds.
-fn sonar_cone(rig: &Rig, choice: SensorChoice) -> Result<ConeGeometry> {
-    let default = ConeGeometry::default();
-    if choice != SensorChoice::Beam {
-        return Ok(default);
-    }
-    let mut cones = rig.beams().iter().filter_map(|b| match b.shape {
-        BeamShape::Cone { half_angle } => Some((half_angle, b.max_range)),
-        BeamShape::Ray => None,
-    });
-    let Some((half_angle, max_range)) = cones.next() else {
-        return Ok(default);
-    };
-    ensure!(
-        cones.all(|c| c == (half_angle, max_range)),
-        "the beam model needs every sonar of rig {} to share one cone and range: use --sensor likelihood-field",
-        rig.name()
-    );
-    Ok(ConeGeometry {
-        half_angle,
-        max_range,
-        ..default
-    })
-}
-
 /// Runs `deog localize`.
 pub fn run(args: LocalizeArgs) -> Result<()> {
     ensure!(
@@ -186,11 +158,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     settings.kld.max_particles = args.max_particles;
     settings.kld.min_particles = args.min_particles;
     settings.beam.tempering = args.tempering;
-    let noise = settings.motion;
-    settings.motion.rot_per_rot = noise.rot_per_rot * args.motion_noise_scale;
-    settings.motion.rot_per_trans = noise.rot_per_trans * args.motion_noise_scale;
-    settings.motion.trans_per_trans = noise.trans_per_trans * args.motion_noise_scale;
-    settings.motion.trans_per_rot = noise.trans_per_rot * args.motion_noise_scale;
+    settings.motion = settings.motion.scaled(args.motion_noise_scale);
     // The filter is built once the first frame names the rig; its
     // settings are checked now, before anything waits.
     let mut settings = settings.validate().context("the filter's settings")?;
@@ -252,12 +220,17 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     let rig = runtime
         .block_on(client.rig(&rig_name))
         .with_context(|| format!("reading rig {rig_name} of frame {}", first.sequence))?;
-    let choice = args.sensor.unwrap_or(if rig.all_sonar() {
-        SensorChoice::Beam
-    } else {
-        SensorChoice::LikelihoodField
-    });
-    let cone = sonar_cone(&rig, choice)?;
+    let choice = args.sensor.unwrap_or(SensorChoice::for_rig(&rig));
+    let cone = choice
+        .cone_geometry(
+            &rig,
+            ConeGeometry {
+                specular_max_incidence: args.specular_angle.map(f64::to_radians),
+                surface_depth: args.surface_depth,
+                ..ConeGeometry::default()
+            },
+        )
+        .context("--sensor beam")?;
     settings.beam.max_range = cone.max_range;
     let sensor = choice
         .build(&rig, settings.beam, field)
@@ -270,11 +243,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         resolution,
         tile_size,
         thresholds: OccupancyThresholds::default(),
-        geometry: ConeGeometry {
-            specular_max_incidence: args.specular_angle.map(f64::to_radians),
-            surface_depth: args.surface_depth,
-            ..cone
-        },
+        geometry: cone,
         budget_bytes: args.cache_mb << 20,
     })?;
     // Watch first, so no change between the first read and the stream is missed.

@@ -3,10 +3,11 @@
 use std::fmt;
 use std::str::FromStr;
 
-use deog_rig::Rig;
+use deog_rig::{BeamShape, Rig};
 
 use crate::beam_model::BeamModelParams;
 use crate::error::LocalizerError;
+use crate::range_table::ConeGeometry;
 use crate::sensors::{LikelihoodField, LikelihoodFieldParams, SensorModel, SonarCone};
 
 /// A sensor model, by name.
@@ -23,6 +24,49 @@ pub enum SensorChoice {
 }
 
 impl SensorChoice {
+    /// The model a rig's frames get unless the user picks one: the beam
+    /// model for a rig of sonars only, the likelihood field otherwise.
+    pub fn for_rig(rig: &Rig) -> Self {
+        if rig.all_sonar() {
+            Self::Beam
+        } else {
+            Self::LikelihoodField
+        }
+    }
+
+    /// The cone the map's range tables are built for: the rig's sonars'
+    /// (which must share one) for the beam model; `base`'s for the
+    /// likelihood field, which builds no range table. Other figures come
+    /// from `base`.
+    pub fn cone_geometry(
+        self,
+        rig: &Rig,
+        base: ConeGeometry,
+    ) -> Result<ConeGeometry, LocalizerError> {
+        if self != Self::Beam {
+            return Ok(base);
+        }
+        let mut cones = rig.beams().iter().filter_map(|b| match b.shape {
+            BeamShape::Cone { half_angle } => Some((half_angle, b.max_range)),
+            BeamShape::Ray => None,
+        });
+        let Some((half_angle, max_range)) = cones.next() else {
+            return Ok(base);
+        };
+        if !cones.all(|c| c == (half_angle, max_range)) {
+            return Err(LocalizerError::Invalid(format!(
+                "the beam model needs every sonar of rig {} to share one cone and range: \
+                 use the likelihood field",
+                rig.name()
+            )));
+        }
+        Ok(ConeGeometry {
+            half_angle,
+            max_range,
+            ..base
+        })
+    }
+
     /// Every choice, in the order of its name in [`Self::NAMES`].
     pub const ALL: [SensorChoice; 2] = [SensorChoice::Beam, SensorChoice::LikelihoodField];
 
@@ -87,6 +131,35 @@ impl FromStr for SensorChoice {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_rig_picks_its_model_and_the_beam_model_its_cone() {
+        let scout = deog_rig::scout();
+        let pioneer = deog_rig::built_in_rig("pioneer3dx").unwrap();
+        let laser = deog_rig::built_in_rig("laser180").unwrap();
+        assert_eq!(SensorChoice::for_rig(&scout), SensorChoice::Beam);
+        assert_eq!(SensorChoice::for_rig(&laser), SensorChoice::LikelihoodField);
+        let base = ConeGeometry {
+            surface_depth: 0.02,
+            ..ConeGeometry::default()
+        };
+        // The Scout's cone is the default one.
+        let cone = SensorChoice::Beam.cone_geometry(&scout, base).unwrap();
+        assert_eq!(cone, base);
+        let cone = SensorChoice::Beam.cone_geometry(&pioneer, base).unwrap();
+        assert_eq!((cone.max_range, cone.surface_depth), (5.0, 0.02));
+        let cone = SensorChoice::LikelihoodField
+            .cone_geometry(&pioneer, base)
+            .unwrap();
+        assert_eq!(cone, base);
+        // Sonars of two cones cannot share one set of range tables.
+        let text = "name = \"two\"\n[defaults]\nkind = \"sonar\"\nmin_range_m = 0.1\n\
+                    [[sensor]]\nhalf_angle_deg = 10\nmax_range_m = 4\n\
+                    [[sensor]]\nhalf_angle_deg = 15\nmax_range_m = 4\n";
+        let mixed = deog_rig::parse_rig(text, "t").unwrap();
+        let err = SensorChoice::Beam.cone_geometry(&mixed, base).unwrap_err();
+        assert!(err.to_string().contains("share one cone"), "{err}");
+    }
 
     #[test]
     fn each_choice_builds_for_the_rigs_it_fits() {
