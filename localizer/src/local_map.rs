@@ -373,35 +373,17 @@ impl LocalMap {
             .margin_cells(self.settings.resolution);
         // Batches of nearby tiles share one raster, as large as its share
         // of the budget allows.
-        let raster_cells = ((self.settings.budget_bytes / 8 * RASTER_EIGHTHS) as u64
-            / RASTER_BYTES_PER_CELL)
-            .min(MAX_RASTER_CELLS);
+        let raster_cells = self.raster_cells();
         let mut remaining = todo.as_slice();
-        while let Some(first) = remaining.first() {
-            let mut bounds = widen(size.cell_box(*first)?, margin);
-            let mut taken = 1;
-            for key in &remaining[1..] {
-                let candidate = bounds.union(&widen(size.cell_box(*key)?, margin));
-                if candidate.width() * candidate.height() > raster_cells {
-                    break;
-                }
-                bounds = candidate;
-                taken += 1;
-            }
+        while !remaining.is_empty() {
+            let (bounds, taken) = raster_batch(size, margin, raster_cells, remaining)?;
             // Room first, for the new tables and the raster, so that with
             // the process's share the cache stays within the budget
             // unless the correction's own tables do not fit.
             let needed = (bounds.width() * bounds.height() * RASTER_BYTES_PER_CELL) as usize;
             let held = self.raster.as_ref().map_or(0, OccupancyRaster::held_bytes);
             self.make_room(taken, needed.saturating_sub(held), &keep);
-            let raster = match self.raster.take() {
-                Some(mut raster) => {
-                    raster.refill(bounds, |cell| self.cell_state(cell) == OCCUPIED);
-                    raster
-                }
-                None => OccupancyRaster::new(bounds, |cell| self.cell_state(cell) == OCCUPIED),
-            };
-            self.bytes = self.bytes - held + raster.held_bytes();
+            let raster = self.fill_raster(bounds, held);
             let entries = size.area() * self.settings.geometry.stride();
             for key in &remaining[..taken] {
                 // Checked when the batch was formed: cannot fail here.
@@ -544,6 +526,26 @@ impl LocalMap {
         }
     }
 
+    /// The most cells one raster may cover: its share of the budget.
+    fn raster_cells(&self) -> u64 {
+        ((self.settings.budget_bytes / 8 * RASTER_EIGHTHS) as u64 / RASTER_BYTES_PER_CELL)
+            .min(MAX_RASTER_CELLS)
+    }
+
+    /// The raster, reused when there is one, filled with the occupied
+    /// cells of `bounds`; `held` is what the old one counted in `bytes`.
+    fn fill_raster(&mut self, bounds: CellBox, held: usize) -> OccupancyRaster {
+        let raster = match self.raster.take() {
+            Some(mut raster) => {
+                raster.refill(bounds, |cell| self.cell_state(cell) == OCCUPIED);
+                raster
+            }
+            None => OccupancyRaster::new(bounds, |cell| self.cell_state(cell) == OCCUPIED),
+        };
+        self.bytes = self.bytes - held + raster.held_bytes();
+        raster
+    }
+
     /// Drops least recently used tables, then fields, then tiles, outside
     /// `keep` until
     /// the cache fits its budget less the process's share (or nothing
@@ -677,33 +679,15 @@ impl LocalMap {
         let count = todo.len();
         let (size, res) = (self.settings.tile_size, self.settings.resolution);
         let margin = spec.margin_cells(res);
-        let raster_cells = ((self.settings.budget_bytes / 8 * RASTER_EIGHTHS) as u64
-            / RASTER_BYTES_PER_CELL)
-            .min(MAX_RASTER_CELLS);
+        let raster_cells = self.raster_cells();
         let mut remaining = todo.as_slice();
-        while let Some(first) = remaining.first() {
+        while !remaining.is_empty() {
             // Nearby tiles share one raster, as for the range tables.
-            let mut bounds = widen(size.cell_box(*first)?, margin);
-            let mut taken = 1;
-            for key in &remaining[1..] {
-                let candidate = bounds.union(&widen(size.cell_box(*key)?, margin));
-                if candidate.width() * candidate.height() > raster_cells {
-                    break;
-                }
-                bounds = candidate;
-                taken += 1;
-            }
+            let (bounds, taken) = raster_batch(size, margin, raster_cells, remaining)?;
             let needed = (bounds.width() * bounds.height() * RASTER_BYTES_PER_CELL) as usize;
             let held = self.raster.as_ref().map_or(0, OccupancyRaster::held_bytes);
             self.make_room_for_fields(taken, needed.saturating_sub(held), &keep);
-            let raster = match self.raster.take() {
-                Some(mut raster) => {
-                    raster.refill(bounds, |cell| self.cell_state(cell) == OCCUPIED);
-                    raster
-                }
-                None => OccupancyRaster::new(bounds, |cell| self.cell_state(cell) == OCCUPIED),
-            };
-            self.bytes = self.bytes - held + raster.held_bytes();
+            let raster = self.fill_raster(bounds, held);
             for key in &remaining[..taken] {
                 // Checked when the batch was formed: cannot fail here.
                 let tile_box = size.cell_box(*key)?;
@@ -1016,6 +1000,28 @@ fn tiles_around(key: TileKey, m: i32) -> impl Iterator<Item = TileKey> {
             Some(TileKey::new(key.x.checked_add(dx)?, key.y.checked_add(dy)?))
         })
     })
+}
+
+/// The first tiles of `keys` (at least one) whose cells, each widened by
+/// `margin`, fit one raster of at most `raster_cells`: its bounds and how
+/// many they are.
+fn raster_batch(
+    size: TileSize,
+    margin: i32,
+    raster_cells: u64,
+    keys: &[TileKey],
+) -> Result<(CellBox, usize), LocalizerError> {
+    let mut bounds = widen(size.cell_box(keys[0])?, margin);
+    let mut taken = 1;
+    for key in &keys[1..] {
+        let candidate = bounds.union(&widen(size.cell_box(*key)?, margin));
+        if candidate.width() * candidate.height() > raster_cells {
+            break;
+        }
+        bounds = candidate;
+        taken += 1;
+    }
+    Ok((bounds, taken))
 }
 
 fn widen(b: CellBox, by: i32) -> CellBox {
