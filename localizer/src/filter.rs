@@ -408,6 +408,7 @@ impl Mcl {
             ));
         }
         let keys = self.tiles_for_frame(map, ranges);
+        self.sensor.set_searching(!self.settled());
         self.scratch_log.clear();
         self.sensor
             .score_particles(map, &keys, &self.particles, ranges, &mut self.scratch_log)
@@ -484,6 +485,41 @@ impl Mcl {
         ranges: &[f64],
     ) -> Result<f64, LocalizerError> {
         self.sensor.score_pose(map, pose, ranges)
+    }
+
+    /// The tiles a frame of `readings` needs scored at `pose` alone: what
+    /// [`Self::refine`] reads.
+    pub fn tiles_for_pose(&self, map: &LocalMap, pose: &Pose2, readings: &[f64]) -> Vec<TileKey> {
+        self.sensor
+            .tiles_needed(map, std::slice::from_ref(pose), readings)
+    }
+
+    /// Whether [`Self::refine`] may change an estimate.
+    pub fn refines(&self) -> bool {
+        self.sensor.refines()
+    }
+
+    /// `estimate` with its pose refined by matching `readings` against the
+    /// map over `tiles` ([`Self::tiles_for_pose`], fetched), when the
+    /// sensor model refines and trusts the result
+    /// ([`SensorModel::refine_pose`]); as it is otherwise. The particles
+    /// are not touched.
+    pub fn refine(
+        &mut self,
+        map: &mut LocalMap,
+        tiles: &[TileKey],
+        estimate: Estimate,
+        readings: &[f64],
+    ) -> Result<Estimate, LocalizerError> {
+        Ok(
+            match self
+                .sensor
+                .refine_pose(map, tiles, &estimate.pose, readings)?
+            {
+                Some(pose) => Estimate { pose, ..estimate },
+                None => estimate,
+            },
+        )
     }
 
     /// The share of particles the next resampling draws from free space.
@@ -682,6 +718,17 @@ impl Mcl {
         Ok(())
     }
 
+    /// Whether the heaviest cluster holds enough of the weight, tightly
+    /// enough, to call the robot found ([`Estimate::converged`]).
+    pub fn settled(&self) -> bool {
+        self.cluster.is_some_and(|cluster| {
+            let c = cluster.covariance;
+            cluster.weight >= self.settings.converged_weight
+                && (c[0] + c[4]).sqrt() <= self.settings.converged_spread_m
+                && c[8].sqrt() <= self.settings.converged_spread_rad
+        })
+    }
+
     /// The estimate for a frame with odometry pose `odometry`: the heaviest
     /// cluster's mean moved by the odometry since the last correction.
     pub fn estimate(&self, odometry: &Pose2) -> Option<Estimate> {
@@ -690,16 +737,12 @@ impl Mcl {
             Some(last) => OdometryMove::between(&last, odometry).apply(&cluster.pose),
             None => cluster.pose,
         };
-        let c = cluster.covariance;
-        let converged = cluster.weight >= self.settings.converged_weight
-            && (c[0] + c[4]).sqrt() <= self.settings.converged_spread_m
-            && c[8].sqrt() <= self.settings.converged_spread_rad;
         Some(Estimate {
             pose,
-            covariance: c,
+            covariance: cluster.covariance,
             particle_count: self.particles.len(),
             cluster_weight: cluster.weight,
-            converged,
+            converged: self.settled(),
             lost_score: self.injection_share(),
         })
     }

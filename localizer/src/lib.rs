@@ -22,6 +22,8 @@
 //!   exact distance transform both kinds of table are built from.
 //! - [`distance_field`]: per-tile distances to the nearest occupied cell,
 //!   a byte a cell, for the likelihood field.
+//! - [`refine`]: the filter's estimate refined by matching the frame
+//!   against the distance field (Gauss–Newton), for the likelihood field.
 //! - [`beam_model`]: the likelihood of a measured range given the
 //!   expected one.
 //! - [`sampling`], [`cluster`], [`gaussian`]: resampling and the KLD
@@ -38,6 +40,7 @@ pub mod gaussian;
 pub mod local_map;
 pub mod motion;
 pub mod range_table;
+pub mod refine;
 pub mod sampling;
 pub mod sensors;
 pub mod step;

@@ -2,8 +2,9 @@
 //! process and for `deog bench localize`: apply the map changes the server
 //! reported (at most every refresh period), predict, fetch the tiles the
 //! frame needs (as its sensor model says: under the particles for a sonar,
-//! where the endpoints fall for a likelihood field), correct, and evict
-//! what the cache cannot hold.
+//! where the endpoints fall for a likelihood field), correct, evict what
+//! the cache cannot hold, and refine the estimate where the sensor model
+//! does (the likelihood field: [`crate::refine`]).
 //!
 //! The map server is behind [`TileSource`]: the process fetches over the
 //! network, the bench from a map in memory. The step itself does no I/O.
@@ -201,7 +202,18 @@ impl Localizer {
             self.map.evict_to_budget(&needed.into_iter().collect());
             report.correction = Some(correction);
         }
-        report.estimate = self.mcl.estimate(odometry);
+        report.estimate = match self.mcl.estimate(odometry) {
+            Some(estimate) if self.mcl.refines() => {
+                let needed = self.mcl.tiles_for_pose(&self.map, &estimate.pose, readings);
+                let missing = self.mcl.missing_tiles(&self.map, &needed);
+                report.tiles_fetched += fetch_into(tiles, &missing, &mut self.map)?;
+                Some(
+                    self.mcl
+                        .refine(&mut self.map, &needed, estimate, readings)?,
+                )
+            }
+            other => other,
+        };
         Ok(report)
     }
 }

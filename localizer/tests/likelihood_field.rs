@@ -18,6 +18,7 @@ use deog_grid::{
 use deog_localizer::distance_field::FieldSpec;
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::LocalMap;
+use deog_localizer::refine::RefineParams;
 use deog_localizer::sensors::{LikelihoodField, LikelihoodFieldParams, SensorModel};
 use deog_localizer::step::{FetchedTile, Localizer, TileSource};
 use deog_rig::Rig;
@@ -364,6 +365,23 @@ fn bad_parameters_and_frames_are_refused_by_name() {
         },
         "unknown_distance",
     );
+    bad(
+        LikelihoodFieldParams {
+            search_tempering: Some(0.0),
+            ..d
+        },
+        "search_tempering",
+    );
+    bad(
+        LikelihoodFieldParams {
+            refine: Some(RefineParams {
+                inlier_distance: -1.0,
+                ..RefineParams::default()
+            }),
+            ..d
+        },
+        "inlier_distance",
+    );
     let field = model();
     assert_eq!(field.scored_readings().len(), 60);
     assert_eq!(field.scored_readings()[0], 0);
@@ -403,5 +421,102 @@ fn unknown_space_is_neutral_between_a_hit_and_a_miss() {
     assert!(
         (unknown - expected).abs() < 1e-3 * tau,
         "{unknown} vs {expected}"
+    );
+}
+
+/// As [`laser_frame`], but each echo from the middle of the ray's chord
+/// through the first occupied cell, as a map built from such echoes holds
+/// them (a cell is marked where echoes fall, on average its middle),
+/// rather than from the cell's face.
+fn laser_frame_mid_cell(rig: &Rig, map: &impl OccupancyView, pose: &Pose2) -> Vec<f64> {
+    let res = Resolution::DEFAULT;
+    rig.beams()
+        .iter()
+        .map(|b| {
+            let s = pose.compose(&b.mount);
+            let Some(face) = march(map, s.x, s.y, s.theta, b.max_range) else {
+                return b.no_echo.at_or_beyond;
+            };
+            let (sin, cos) = s.theta.sin_cos();
+            let cell = res.cell_of(s.x + face * cos, s.y + face * sin).ok();
+            let mut t = face;
+            while res.cell_of(s.x + t * cos, s.y + t * sin).ok() == cell {
+                t += 0.001;
+            }
+            (face + t) / 2.0
+        })
+        .collect()
+}
+
+/// Mean position error of a tracking run on the room's path with `params`.
+fn tracking_error(params: LikelihoodFieldParams) -> f64 {
+    let reference = room();
+    let rig = laser();
+    let steps = path(150);
+    let now = Instant::now();
+    let start = steps[0].0;
+    let filter = FilterSettings {
+        seed: 4,
+        ..FilterSettings::default()
+    };
+    let field = LikelihoodField::new(rig.clone(), params).unwrap();
+    let mut mcl = Mcl::with_sensor(filter, Box::new(field)).unwrap();
+    mcl.start_at(
+        Pose2::new(start.x + 0.1, start.y - 0.1, start.theta + 0.05),
+        0.2,
+        0.1,
+    )
+    .unwrap();
+    let map = LocalMap::new(settings(1 << 30)).unwrap();
+    let mut localizer = Localizer::new(mcl, map, Duration::from_secs(5), now);
+    let mut source = room_tiles();
+    let mut errors = Vec::new();
+    for (truth, odometry) in &steps {
+        let ranges = laser_frame_mid_cell(&rig, &reference, truth);
+        let report = localizer.step(odometry, &ranges, now, &mut source).unwrap();
+        errors.push(error(&report.estimate.expect("an estimate").pose, truth).0);
+    }
+    let tail = &errors[30..];
+    tail.iter().sum::<f64>() / tail.len() as f64
+}
+
+#[test]
+fn the_refined_estimate_tracks_nearer_than_the_filters_own() {
+    let refined = tracking_error(LikelihoodFieldParams::default());
+    let plain = tracking_error(LikelihoodFieldParams {
+        refine: None,
+        ..LikelihoodFieldParams::default()
+    });
+    assert!(
+        refined < 0.6 * plain && refined < 0.03,
+        "refined {refined:.4} m, the filter's own {plain:.4} m"
+    );
+}
+
+#[test]
+fn a_searching_filter_scores_with_the_search_tempering() {
+    let mut map = room();
+    let rig = laser();
+    let truth = Pose2::new(3.0, 2.5, 0.3);
+    let ranges = laser_frame(&rig, &map, &truth);
+    let off = Pose2::new(3.3, 2.4, 0.4);
+    let mut field = LikelihoodField::new(
+        rig,
+        LikelihoodFieldParams {
+            tempering: 0.5,
+            search_tempering: Some(0.05),
+            ..LikelihoodFieldParams::default()
+        },
+    )
+    .unwrap();
+    let settled = field.score_pose(&mut map, &off, &ranges).unwrap();
+    assert_eq!(field.tempering(), 0.5);
+    field.set_searching(true);
+    let searching = field.score_pose(&mut map, &off, &ranges).unwrap();
+    assert_eq!(field.tempering(), 0.05);
+    assert!(settled.abs() > 1.0, "{settled}");
+    assert!(
+        (searching / settled - 0.1).abs() < 1e-9,
+        "searching {searching}, settled {settled}"
     );
 }

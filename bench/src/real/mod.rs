@@ -45,7 +45,8 @@
 //! Stable keys; figures that do not exist are `null`.
 //! - `log`, `robot`, `scans` (the scans localized: `N`), `log_scans` (the
 //!   log's), `seed`, `settle_scans`, `window_scans` (`W`);
-//! - `recipe`: the localizer's flags, `field_tempering`, `field_beams`,
+//! - `recipe`: the localizer's flags, `field_tempering`,
+//!   `field_search_tempering`, `field_beams`,
 //!   `motion_noise_scale`, `min_particles`, `max_particles`,
 //!   `initial_std_xy`, `initial_std_theta`;
 //! - `bounds`: `position_m`, `heading_rad`;
@@ -99,6 +100,11 @@ pub struct Recipe {
     /// a scan's scored echo likelihoods.
     #[arg(long, default_value_t = 0.5)]
     pub field_tempering: f64,
+    /// The localizer's --field-search-tempering: τ while the filter has
+    /// not settled on a pose (a global start), softer so that look-alike
+    /// places live until the scans tell them apart.
+    #[arg(long, default_value_t = 0.05)]
+    pub field_search_tempering: f64,
     /// The localizer's --field-beams: echoes of a scan scored.
     #[arg(long, default_value_t = 180)]
     pub field_beams: usize,
@@ -127,6 +133,10 @@ impl Recipe {
     fn localize_args(&self) -> Vec<String> {
         [
             ("--field-tempering", self.field_tempering.to_string()),
+            (
+                "--field-search-tempering",
+                self.field_search_tempering.to_string(),
+            ),
             ("--field-beams", self.field_beams.to_string()),
             ("--motion-noise-scale", self.motion_noise_scale.to_string()),
             ("--min-particles", self.min_particles.to_string()),
@@ -144,6 +154,11 @@ impl Recipe {
             self.field_tempering.is_finite() && self.field_tempering > 0.0,
             "--field-tempering",
             || "--field-tempering takes a positive number".into(),
+        )?;
+        require(
+            self.field_search_tempering.is_finite() && self.field_search_tempering > 0.0,
+            "--field-search-tempering",
+            || "--field-search-tempering takes a positive number".into(),
         )?;
         require(self.field_beams > 0, "--field-beams", || {
             "--field-beams must be at least 1".into()
@@ -191,6 +206,9 @@ pub struct RealOptions {
     /// Use the log's first this many scans only (0: all of them).
     #[arg(long, default_value_t = 0)]
     pub to: u64,
+    /// Cell side of the reference map, metres.
+    #[arg(long, default_value_t = 0.05)]
+    pub resolution: f64,
     /// Global starts, each a localizer of its own on a window of scans
     /// (0: no global localization).
     #[arg(long, default_value_t = 20)]
@@ -232,6 +250,16 @@ impl RealOptions {
             deog_proto::names::check_robot_name(&self.robot).is_ok(),
             "--robot",
             || format!("--robot {:?} is not a valid robot name", self.robot),
+        )?;
+        require(
+            self.resolution.is_finite() && (0.01..=1.0).contains(&self.resolution),
+            "--resolution",
+            || {
+                format!(
+                    "--resolution takes a cell side in [0.01, 1] m, got {}",
+                    self.resolution
+                )
+            },
         )?;
         require(self.hold_scans > 0, "--hold-scans", || {
             "--hold-scans must be at least 1: a start must stay within the bounds".into()
@@ -340,6 +368,8 @@ mod tests {
             [
                 "--field-tempering",
                 "0.5",
+                "--field-search-tempering",
+                "0.05",
                 "--field-beams",
                 "180",
                 "--motion-noise-scale",
@@ -365,6 +395,8 @@ mod tests {
         let options = parse(&[
             "--field-tempering",
             "0.3",
+            "--field-search-tempering",
+            "0.2",
             "--field-beams",
             "60",
             "--motion-noise-scale",
@@ -377,7 +409,7 @@ mod tests {
         options.validate().expect("valid");
         assert_eq!(
             options.recipe.localize_args().join(" "),
-            "--field-tempering 0.3 --field-beams 60 --motion-noise-scale 1.5 --min-particles 500 --max-particles 5000"
+            "--field-tempering 0.3 --field-search-tempering 0.2 --field-beams 60 --motion-noise-scale 1.5 --min-particles 500 --max-particles 5000"
         );
     }
 

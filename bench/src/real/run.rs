@@ -67,6 +67,8 @@ pub(super) async fn bench(options: &RealOptions) -> Result<RealFigures> {
                 "reference",
                 "--to",
                 &scans.to_string(),
+                "--resolution",
+                &options.resolution.to_string(),
                 "--idle-exit",
                 IDLE_EXIT_S,
                 // One frame a batch: the server clamps each batch's sum,

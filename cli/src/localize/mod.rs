@@ -97,6 +97,14 @@ pub struct LocalizeArgs {
     /// echoes' likelihoods.
     #[arg(long, default_value_t = LikelihoodFieldParams::default().tempering)]
     pub field_tempering: f64,
+    /// Likelihood field: τ while the filter has not settled on a pose
+    /// (global localization, recovery); default: --field-tempering.
+    #[arg(long)]
+    pub field_search_tempering: Option<f64>,
+    /// Likelihood field: report the filter's estimate as it is, without
+    /// refining it by matching the frame against the map.
+    #[arg(long)]
+    pub no_refine: bool,
     /// Scales the motion model's four noise figures (α1 to α4): above 1 for
     /// odometry worse than the simulator's.
     #[arg(long, default_value_t = 1.0)]
@@ -166,10 +174,19 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         sigma_hit: args.field_sigma,
         max_beams: args.field_beams,
         tempering: args.field_tempering,
+        search_tempering: args.field_search_tempering,
+        refine: if args.no_refine {
+            None
+        } else {
+            LikelihoodFieldParams::default().refine
+        },
         ..LikelihoodFieldParams::default()
     }
     .validate()
-    .context("the likelihood field's options (--field-sigma, --field-beams, --field-tempering)")?;
+    .context(
+        "the likelihood field's options (--field-sigma, --field-beams, --field-tempering, \
+         --field-search-tempering)",
+    )?;
     // One thread: the filter is sequential, and its allocations then come
     // from one arena of the allocator, not one per worker thread each
     // holding memory the others freed. The loop is synchronous and waits

@@ -46,6 +46,7 @@ use crate::beam_model::TABLE_SCALE;
 use crate::distance_field::{FIELD_UNKNOWN, FieldCodes, FieldSpec, FieldWindow};
 use crate::error::{LocalizerError, within};
 use crate::local_map::LocalMap;
+use crate::refine::{InterpolatedField, RefineParams, refine_pose};
 use crate::sensors::SensorModel;
 
 /// The most readings a frame of one rig may hold, and so the most beams.
@@ -79,6 +80,11 @@ pub struct LikelihoodFieldParams {
     /// τ: the exponent applied to the product of the scored beams'
     /// likelihoods.
     pub tempering: f64,
+    /// τ while the filter has not settled on a pose (global localization,
+    /// recovery); `None`: [`Self::tempering`]. A softer τ while searching
+    /// keeps look-alike places alive until the frames tell them apart; a
+    /// sharper one once settled follows the robot closely.
+    pub search_tempering: Option<f64>,
     /// An endpoint in unknown space scores as one this far from an
     /// occupied cell, metres.
     pub unknown_distance: f64,
@@ -96,15 +102,20 @@ pub struct LikelihoodFieldParams {
     /// (the particles disagree with most beams: the filter is searching,
     /// not tracking; amcl's `beam_skip_error_threshold`).
     pub beam_skip_error_threshold: f64,
+    /// The reported estimate refined by matching the frame's echoes, every
+    /// one of them, against the distance field ([`crate::refine`]); `None`
+    /// reports the filter's estimate as it is.
+    pub refine: Option<RefineParams>,
 }
 
 impl Default for LikelihoodFieldParams {
     /// amcl's figures for the likelihood field (z_hit 0.95, z_rand 0.05,
     /// σ 0.2 m, 2 m, 60 beams) and its beam skipping (0.3 of the
     /// particles within 0.5 m, unless over 0.9 of the beams would go);
-    /// τ 1/30; unknown space at two σ. On the real laser logs, whose
-    /// odometry is far worse, 180 beams at τ 0.5 tracked best
-    /// (BENCHMARKS.md, real logs).
+    /// τ 1/30; unknown space at two σ; the estimate refined with
+    /// [`RefineParams::default`]. On the real laser logs, whose odometry
+    /// is far worse, 180 beams at τ 0.5 tracked best (BENCHMARKS.md, real
+    /// logs).
     fn default() -> Self {
         Self {
             z_hit: 0.95,
@@ -113,10 +124,12 @@ impl Default for LikelihoodFieldParams {
             max_distance: 2.0,
             max_beams: 60,
             tempering: 1.0 / 30.0,
+            search_tempering: None,
             unknown_distance: 0.4,
             beam_skip_threshold: 0.3,
             beam_skip_distance: 0.5,
             beam_skip_error_threshold: 0.9,
+            refine: Some(RefineParams::default()),
         }
     }
 }
@@ -135,6 +148,9 @@ impl LikelihoodFieldParams {
             )));
         }
         within("tempering", self.tempering, 1e-3, 1.0)?;
+        if let Some(search) = self.search_tempering {
+            within("search_tempering", search, 1e-3, 1.0)?;
+        }
         within(
             "unknown_distance",
             self.unknown_distance,
@@ -154,6 +170,9 @@ impl LikelihoodFieldParams {
             0.0,
             1.0,
         )?;
+        if let Some(refine) = self.refine {
+            refine.validate()?;
+        }
         Ok(self)
     }
 
@@ -197,6 +216,8 @@ pub struct LikelihoodField {
     /// Field codes of every endpoint for every particle, while beams are
     /// judged for skipping.
     codes: Vec<u8>,
+    /// Whether the filter is searching ([`SensorModel::set_searching`]).
+    searching: bool,
 }
 
 /// An echo's endpoint in the robot's frame, metres, and its beam's table.
@@ -241,6 +262,7 @@ impl LikelihoodField {
         Ok(Self {
             echoes: scored.len(),
             codes: Vec::new(),
+            searching: false,
             rig,
             params,
             spec,
@@ -265,6 +287,14 @@ impl LikelihoodField {
         &self.scored
     }
 
+    /// The τ frames are scored with now.
+    pub fn tempering(&self) -> f64 {
+        match self.params.search_tempering {
+            Some(search) if self.searching => search,
+            _ => self.params.tempering,
+        }
+    }
+
     /// The echoes among the scored readings of `readings`, as endpoints in
     /// the robot's frame; readings that are not ranges are passed over.
     fn endpoints(&self, readings: &[f64]) -> Vec<Endpoint> {
@@ -286,6 +316,23 @@ impl LikelihoodField {
             .collect()
     }
 
+    /// Every echo of `readings`, scored or not, as an endpoint in the
+    /// robot's frame.
+    fn all_endpoints(&self, readings: &[f64]) -> Vec<(f64, f64)> {
+        self.rig
+            .beams()
+            .iter()
+            .zip(readings)
+            .filter_map(|(beam, &range)| match beam.classify(range)? {
+                Reading::Echo(range) => {
+                    let (sin, cos) = beam.mount.theta.sin_cos();
+                    Some((beam.mount.x + range * cos, beam.mount.y + range * sin))
+                }
+                Reading::NoEcho => None,
+            })
+            .collect()
+    }
+
     /// Scores `particles` over `window`, pushing onto `out`; returns how
     /// many of the endpoints were scored (the rest skipped, see
     /// [`LikelihoodFieldParams::beam_skip_threshold`]).
@@ -303,7 +350,7 @@ impl LikelihoodField {
             .iter()
             .map(|e| (e.x, e.y, &self.tables[e.table]))
             .collect();
-        let to_nats = self.params.tempering / TABLE_SCALE;
+        let to_nats = self.tempering() / TABLE_SCALE;
         out.reserve(particles.len());
         for p in particles {
             let (sin, cos) = p.theta.sin_cos();
@@ -354,7 +401,7 @@ impl LikelihoodField {
             .zip(&keep)
             .map(|(e, &k)| (k, &self.tables[e.table]))
             .collect();
-        let to_nats = self.params.tempering / TABLE_SCALE;
+        let to_nats = self.tempering() / TABLE_SCALE;
         out.reserve(particles.len());
         for codes in self.codes.chunks_exact(n.max(1)).take(particles.len()) {
             let mut sum = 0i32;
@@ -402,7 +449,7 @@ impl SensorModel for LikelihoodField {
     }
 
     fn observations(&self) -> f64 {
-        self.echoes.max(1) as f64 * self.params.tempering
+        self.echoes.max(1) as f64 * self.tempering()
     }
 
     fn check_frame(&self, readings: &[f64]) -> Result<(), LocalizerError> {
@@ -459,6 +506,33 @@ impl SensorModel for LikelihoodField {
         let mut out = Vec::with_capacity(1);
         self.score_particles(map, &tiles, particles, readings, &mut out)?;
         Ok(out[0])
+    }
+
+    fn set_searching(&mut self, searching: bool) {
+        self.searching = searching;
+    }
+
+    fn refines(&self) -> bool {
+        self.params.refine.is_some()
+    }
+
+    fn refine_pose(
+        &mut self,
+        map: &mut LocalMap,
+        tiles: &[TileKey],
+        pose: &Pose2,
+        readings: &[f64],
+    ) -> Result<Option<Pose2>, LocalizerError> {
+        let Some(params) = self.params.refine else {
+            return Ok(None);
+        };
+        self.check_frame(readings)?;
+        let endpoints = self.all_endpoints(readings);
+        map.ensure_fields(tiles, &self.spec)?;
+        let cell_m = map.settings().resolution.metres();
+        let window = map.field_window(tiles);
+        let field = InterpolatedField::new(&window, self.spec, cell_m);
+        Ok(refine_pose(&field, &endpoints, pose, &params).map(|r| r.pose))
     }
 }
 

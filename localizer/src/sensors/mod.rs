@@ -120,4 +120,32 @@ pub trait SensorModel: std::fmt::Debug + Send {
         pose: &Pose2,
         readings: &[f64],
     ) -> Result<f64, LocalizerError>;
+
+    /// The filter tells the model, before each frame is scored, whether it
+    /// is searching (has not settled on one pose): a model may score
+    /// frames more softly then. By default, ignored.
+    fn set_searching(&mut self, searching: bool) {
+        let _ = searching;
+    }
+
+    /// Whether [`Self::refine_pose`] may refine a pose: when not, the
+    /// localizer skips fetching its tiles.
+    fn refines(&self) -> bool {
+        false
+    }
+
+    /// `pose` refined by matching `readings` against the map
+    /// ([`crate::refine`]), over `tiles` ([`Self::tiles_needed`] at the
+    /// pose, fetched); `None` when the model does not refine or the
+    /// refinement is not to be trusted. By default, `None`.
+    fn refine_pose(
+        &mut self,
+        map: &mut LocalMap,
+        tiles: &[TileKey],
+        pose: &Pose2,
+        readings: &[f64],
+    ) -> Result<Option<Pose2>, LocalizerError> {
+        let _ = (map, tiles, pose, readings);
+        Ok(None)
+    }
 }
