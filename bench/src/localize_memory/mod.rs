@@ -92,6 +92,13 @@ pub struct LocalizeMemoryOptions {
     /// The robot's cruising speed, m/s (the Scout tops out at 1).
     #[arg(long, default_value_t = 0.8)]
     pub robot_speed: f64,
+    /// The robot's rig (the simulator's and the wanderer's --rig; the
+    /// localizer reads it from the frames): a built-in name or a rig file.
+    /// The city is sized by the beam model's tables all the same, so with a
+    /// laser rig (a likelihood field, far smaller per tile) the map is even
+    /// larger beside the budget than the ratio says.
+    #[arg(long, default_value = "scout")]
+    pub rig: String,
     /// Seed of the city's layout, the simulator, the wanderer and the
     /// localizer.
     #[arg(long, default_value_t = 1)]

@@ -39,6 +39,14 @@ impl CityPlan {
                 )
             },
         )?;
+        let rig = deog_rig::load_rig_spec(&options.rig).map_err(|e| e.to_string());
+        require(rig.is_ok(), "--rig", || {
+            format!(
+                "--rig {}: {}",
+                options.rig,
+                rig.clone().err().unwrap_or_default()
+            )
+        })?;
         require(
             (1..=10_000_000).contains(&options.max_particles),
             "--max-particles",
@@ -183,8 +191,9 @@ mod tests {
 
     #[test]
     fn bad_options_are_refused_naming_the_flag() {
-        let cases: [(&str, &[&str]); 7] = [
+        let cases: [(&str, &[&str]); 8] = [
             ("--cache-mb", &["--cache-mb", "8"]),
+            ("--rig", &["--rig", "no-such-rig"]),
             ("--max-particles", &["--max-particles", "0"]),
             ("--min-ratio", &["--min-ratio", "NaN"]),
             ("--duration", &["--duration", "5"]),
@@ -196,6 +205,13 @@ mod tests {
             let err = CityPlan::new(&parse(args)).expect_err(flag);
             assert_eq!(err.flag, flag, "{err}");
             assert!(err.to_string().starts_with(flag), "{flag}: {err}");
+        }
+    }
+
+    #[test]
+    fn any_rig_deog_knows_is_taken() {
+        for rig in ["scout", "pioneer3dx", "laser180"] {
+            assert_eq!(parse(&["--rig", rig]).validate(), Ok(()), "{rig}");
         }
     }
 
