@@ -46,7 +46,7 @@
 //! - `log`, `robot`, `scans` (the scans localized: `N`), `log_scans` (the
 //!   log's), `seed`, `settle_scans`, `window_scans` (`W`);
 //! - `recipe`: the localizer's flags, `field_tempering`,
-//!   `field_search_tempering`, `field_beams`,
+//!   `field_search_tempering`, `no_refine`, `field_beams`,
 //!   `motion_noise_scale`, `min_particles`, `max_particles`,
 //!   `initial_std_xy`, `initial_std_theta`;
 //! - `bounds`: `position_m`, `heading_rad`;
@@ -105,6 +105,10 @@ pub struct Recipe {
     /// places live until the scans tell them apart.
     #[arg(long, default_value_t = 0.05)]
     pub field_search_tempering: f64,
+    /// The localizer's --no-refine: report the particle filter's estimate
+    /// as it is (the recipe refines it against the map).
+    #[arg(long)]
+    pub no_refine: bool,
     /// The localizer's --field-beams: echoes of a scan scored.
     #[arg(long, default_value_t = 180)]
     pub field_beams: usize,
@@ -144,6 +148,7 @@ impl Recipe {
         ]
         .into_iter()
         .flat_map(|(flag, value)| [flag.to_owned(), value])
+        .chain(self.no_refine.then(|| "--no-refine".to_owned()))
         .collect()
     }
 
@@ -405,11 +410,12 @@ mod tests {
             "500",
             "--max-particles",
             "5000",
+            "--no-refine",
         ]);
         options.validate().expect("valid");
         assert_eq!(
             options.recipe.localize_args().join(" "),
-            "--field-tempering 0.3 --field-search-tempering 0.2 --field-beams 60 --motion-noise-scale 1.5 --min-particles 500 --max-particles 5000"
+            "--field-tempering 0.3 --field-search-tempering 0.2 --field-beams 60 --motion-noise-scale 1.5 --min-particles 500 --max-particles 5000 --no-refine"
         );
     }
 

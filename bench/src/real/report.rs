@@ -189,13 +189,14 @@ impl RealFigures {
         let bounds = params();
         let _ = writeln!(
             out,
-            "\nreal log: {}, {} of {} scans, robot {}; recipe --field-tempering {} --field-search-tempering {} --field-beams {} --motion-noise-scale {} --min-particles {} --max-particles {} (tracking: --initial-std-xy {} --initial-std-theta {}); bounds {} m, {} rad",
+            "\nreal log: {}, {} of {} scans, robot {}; recipe --field-tempering {} --field-search-tempering {}{} --field-beams {} --motion-noise-scale {} --min-particles {} --max-particles {} (tracking: --initial-std-xy {} --initial-std-theta {}); bounds {} m, {} rad",
             self.log,
             self.scans,
             self.log_scans,
             self.robot,
             r.field_tempering,
             r.field_search_tempering,
+            if r.no_refine { " --no-refine" } else { "" },
             r.field_beams,
             r.motion_noise_scale,
             r.min_particles,
