@@ -10,15 +10,16 @@ use deog_localizer::filter::Mcl;
 use deog_localizer::local_map::LocalMap;
 
 /// One line: each beam's measured range and, after a slash, the range the
-/// map's tables predict at `pose` (centimetres; `-` for no echo).
+/// map's tables predict at `pose` for the sonar of `ring` (centimetres;
+/// `-` for no echo).
 pub(super) fn print_beams(
     map: &mut LocalMap,
+    ring: &SensorRing,
     pose: &Pose2,
     ranges: &[f64],
     time_s: f64,
 ) -> Result<()> {
-    let ring = SensorRing::scout();
-    let keys = map.tables_under(&ring, pose)?;
+    let keys = map.tables_under(ring, pose)?;
     let max_range = map.settings().geometry.max_range;
     let no_echo = table_len(max_range) - 1;
     let window = map.window(&keys);

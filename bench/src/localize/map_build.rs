@@ -1,18 +1,25 @@
 //! A world's map as the cartographer builds it from a wandering robot's
-//! frames, and the simulator's sonar with or without specular reflection.
+//! frames, and the simulator's rig with its sonars with or without
+//! specular reflection.
 
 use anyhow::{Context, Result};
-use deog_grid::{ClampLimits, OccupancyThresholds, Resolution, SensorRing, TileMap, TileSize};
+use deog_grid::{ClampLimits, OccupancyThresholds, RayModelParams, Resolution, TileMap, TileSize};
 use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::range_table::ConeGeometry;
+use deog_localizer::sensors::SensorChoice;
 use deog_mapping::{Cartographer, FrameInput, PoseChoice};
+use deog_rig::Rig;
 use deog_simulator::simulation::{SimConfig, Simulation};
 use deog_simulator::{Specular, WanderParams, Wanderer};
 
-/// The simulator's settings: the default sonar, or with `specular` lost
-/// echoes past 60° of incidence and 2 % dropouts.
-pub(super) fn sim_config(specular: bool) -> SimConfig {
-    let mut config = SimConfig::default();
+/// The simulator's settings for a robot carrying `rig`: the default
+/// sonar, or with `specular` lost echoes past 60° of incidence and 2 %
+/// dropouts.
+pub(super) fn sim_config(rig: &Rig, specular: bool) -> SimConfig {
+    let mut config = SimConfig {
+        rig: rig.clone(),
+        ..SimConfig::default()
+    };
     if specular {
         config.sonar.specular = Specular::Lost {
             max_incidence: 60f64.to_radians(),
@@ -23,12 +30,13 @@ pub(super) fn sim_config(specular: bool) -> SimConfig {
 }
 
 /// The map a wandering robot's frames give, as the cartographer builds it
-/// from the sonar of `config`, with range tables for the sonar of
-/// `localize_config`.
+/// from the rig and sonar of `config`, with range tables (for `sensor`'s
+/// cone) for the sonar of `localize_config`.
 pub(super) fn build_map(
     world: deog_world::World,
     config: &SimConfig,
     localize_config: &SimConfig,
+    sensor: SensorChoice,
     minutes: f64,
     surface_depth: f64,
 ) -> Result<(TileMap, LocalMap)> {
@@ -36,7 +44,7 @@ pub(super) fn build_map(
     let size = TileSize::new(64)?;
     let mut sim = Simulation::new(world, config.clone(), 1000)?;
     let mut state = sim.spawn("cartographer", None)?;
-    let mut wanderer = Wanderer::new(WanderParams::default(), &SensorRing::scout(), 1000)?;
+    let mut wanderer = Wanderer::for_rig(WanderParams::default(), &config.rig, 1000)?;
     // The sonar model `deog map` maps with.
     let mut params = deog_mapping::mapping_sonar_model();
     if !matches!(config.sonar.specular, Specular::Off) {
@@ -44,7 +52,20 @@ pub(super) fn build_map(
         // free space: the cartographer is told to ignore them.
         params.no_echo_free_range = 0.0;
     }
-    let mut cartographer = Cartographer::with_model(res, size, PoseChoice::True, params)?;
+    // The Scout's own path for the Scout (as `deog map` takes it): the
+    // same deltas, a little faster.
+    let mut cartographer = if config.rig == deog_rig::scout() {
+        Cartographer::with_model(res, size, PoseChoice::True, params)?
+    } else {
+        Cartographer::for_rig(
+            &config.rig,
+            PoseChoice::True,
+            params,
+            RayModelParams::default(),
+            res,
+            size,
+        )?
+    };
     let mut tiles = TileMap::new(res, size, ClampLimits::default());
     let mut deltas = Vec::new();
     let mut fired = Vec::new();
@@ -73,21 +94,22 @@ pub(super) fn build_map(
             tiles.apply(d)?;
         }
     }
+    // The localizer knows its sonar: specular past the same angle.
+    let base = ConeGeometry {
+        specular_max_incidence: match localize_config.sonar.specular {
+            Specular::Off => None,
+            Specular::Lost { max_incidence } | Specular::Long { max_incidence, .. } => {
+                Some(max_incidence)
+            }
+        },
+        surface_depth,
+        ..ConeGeometry::default()
+    };
     let mut map = LocalMap::new(MapSettings {
         resolution: res,
         tile_size: size,
         thresholds: OccupancyThresholds::default(),
-        // The localizer knows its sonar: specular past the same angle.
-        geometry: ConeGeometry {
-            specular_max_incidence: match localize_config.sonar.specular {
-                Specular::Off => None,
-                Specular::Lost { max_incidence } | Specular::Long { max_incidence, .. } => {
-                    Some(max_incidence)
-                }
-            },
-            surface_depth,
-            ..ConeGeometry::default()
-        },
+        geometry: sensor.cone_geometry(&localize_config.rig, base)?,
         budget_bytes: 512 << 20,
     })?;
     for (key, tile) in tiles.tiles() {

@@ -8,6 +8,13 @@
 //! (uniform over the map's free cells), the wanderer drives, and half-way
 //! the robot is kidnapped to another random pose.
 //!
+//! The robot carries the rig `--rig` names (the Scout's 16 sonars by
+//! default, `pioneer3dx`, `laser180` or a rig file): the simulator fires
+//! it, the wanderer steers by it, the cartographer maps with it and the
+//! filter scores its frames with the model `--sensor` picks (by default
+//! the beam model for a rig of sonars only, the likelihood field
+//! otherwise, as `deog localize` does).
+//!
 //! Its parts: `map_build` (a world's map, as the cartographer builds it),
 //! `seeded_run` (one run, judged) and `diagnostics` (the optional
 //! per-frame printouts of beams, mirror images and the particles).
@@ -24,6 +31,8 @@ use deog_evaluation::runs::summarize;
 use deog_localizer::beam_model::BeamModelParams;
 use deog_localizer::filter::FilterSettings;
 use deog_localizer::range_table::ConeGeometry;
+use deog_localizer::sensors::{LikelihoodFieldParams, SensorChoice};
+use deog_rig::{BUILT_IN_RIGS, Rig, RigError, load_rig_spec};
 use deog_world::load_world_spec;
 
 use crate::option_error::{OptionError, require};
@@ -37,6 +46,17 @@ pub struct LocalizeOptions {
     /// Seeded runs per world.
     #[arg(long, default_value_t = 20)]
     pub runs: u64,
+    /// The sensor rig the robot carries: a built-in name (scout,
+    /// pioneer3dx, laser180) or a rig file (.toml).
+    #[arg(long, default_value = deog_rig::DEFAULT_RIG)]
+    pub rig: String,
+    /// The sensor model: beam (expected ranges over each sonar's cone;
+    /// sonar rigs) or likelihood-field (each echo's endpoint against the
+    /// distance to the nearest wall; any rig). Default: beam for a rig of
+    /// sonars only, likelihood-field otherwise. The --tempering and
+    /// --hit-sigma options are the beam model's.
+    #[arg(long)]
+    pub sensor: Option<SensorChoice>,
     /// First seed; runs use consecutive seeds.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -99,7 +119,8 @@ pub struct LocalizeOptions {
     pub verbose: bool,
     /// Print, for every frame between these simulated seconds ("from,to"),
     /// each beam's measured range beside the one the map predicts at the
-    /// true pose: where the sensor model and the world disagree.
+    /// true pose: where the sensor model and the world disagree. The beam
+    /// model's range tables make the prediction: sonar rigs only.
     #[arg(long, value_delimiter = ',')]
     pub beams_between: Option<Vec<f64>>,
     /// Also score each frame at the true pose and at its image turned 180°
@@ -143,6 +164,76 @@ impl LocalizeOptions {
             "--clean-map only means something with --specular".into()
         })
     }
+
+    /// The rig `--rig` names and the sensor model its frames are scored
+    /// with, checked against each other and against the diagnostics that
+    /// need the beam model.
+    pub fn rig_setup(&self) -> Result<RigSetup, OptionError> {
+        let rig = load_rig_spec(&self.rig).map_err(|error| OptionError {
+            flag: "--rig",
+            message: format!("--rig {}: {}", self.rig, rig_error_line(error)),
+        })?;
+        let sensor = self.sensor.unwrap_or(SensorChoice::for_rig(&rig));
+        // The errors the run would meet building the filter and its map,
+        // met now and blamed on the flag.
+        let checked = sensor
+            .cone_geometry(&rig, ConeGeometry::default())
+            .and_then(|_| {
+                sensor.build(
+                    &rig,
+                    BeamModelParams::default(),
+                    LikelihoodFieldParams::default(),
+                )
+            });
+        if let Err(error) = checked {
+            let (flag, value) = match self.sensor {
+                Some(choice) => ("--sensor", choice.name()),
+                None => ("--rig", self.rig.as_str()),
+            };
+            return Err(OptionError {
+                flag,
+                message: format!("{flag} {value}: {error}"),
+            });
+        }
+        if self.beams_between.is_some() {
+            require(
+                sensor == SensorChoice::Beam && rig.all_sonar(),
+                "--beams-between",
+                || {
+                    format!(
+                        "--beams-between prints the beam model's predicted range per sonar: \
+                         it needs a rig of sonars scored with the beam model, not rig {} with the {sensor} model",
+                        rig.name()
+                    )
+                },
+            )?;
+        }
+        Ok(RigSetup { rig, sensor })
+    }
+}
+
+/// The robot's rig and the sensor model that scores its frames.
+#[derive(Debug, Clone)]
+pub struct RigSetup {
+    /// The rig the simulator fires, the wanderer steers by, the
+    /// cartographer maps with and the filter scores.
+    pub rig: Rig,
+    /// The filter's sensor model.
+    pub sensor: SensorChoice,
+}
+
+/// A rig that would not load, on one line, with the built-in names.
+fn rig_error_line(error: RigError) -> String {
+    let text = match error {
+        // Already lists the built-in names.
+        RigError::Unknown { .. } => error.to_string(),
+        other => {
+            let names: Vec<&str> = BUILT_IN_RIGS.iter().map(|(n, _)| *n).collect();
+            format!("{other} (built-in rigs: {})", names.join(", "))
+        }
+    };
+    // A TOML error spans lines (the line quoted, a caret under it).
+    text.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
 /// Convergence and recovery count when they come within this many
@@ -153,15 +244,17 @@ const CONVERGE_LIMIT_S: f64 = 60.0;
 /// with `--verbose` a line per run, and a summary line.
 pub fn run(options: LocalizeOptions) -> Result<()> {
     options.validate()?;
+    let setup = options.rig_setup()?;
     for world_name in &options.worlds {
         let started = Instant::now();
         let world = load_world_spec(world_name)?;
-        let config = map_build::sim_config(options.specular);
-        let map_config = map_build::sim_config(options.specular && !options.clean_map);
+        let config = map_build::sim_config(&setup.rig, options.specular);
+        let map_config = map_build::sim_config(&setup.rig, options.specular && !options.clean_map);
         let (mut tiles, mut map) = map_build::build_map(
             world.clone(),
             &map_config,
             &config,
+            setup.sensor,
             options.map_minutes,
             options.surface_depth,
         )?;
@@ -173,8 +266,15 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
         let mut all = Vec::new();
         for seed in options.seed..options.seed + options.runs {
             let t0 = Instant::now();
-            let (figures, held) =
-                seeded_run::run_once(world.clone(), &config, map, &mut tiles, seed, &options)?;
+            let (figures, held) = seeded_run::run_once(
+                world.clone(),
+                &config,
+                setup.sensor,
+                map,
+                &mut tiles,
+                seed,
+                &options,
+            )?;
             map = held;
             if options.verbose {
                 println!(
@@ -260,5 +360,83 @@ mod tests {
             assert_eq!(err.flag, flag);
             assert!(err.to_string().starts_with(flag), "{err}");
         }
+    }
+
+    fn setup(args: &[&str]) -> RigSetup {
+        parse(args)
+            .rig_setup()
+            .expect("the rig and sensor go together")
+    }
+
+    fn refused(args: &[&str]) -> OptionError {
+        parse(args).rig_setup().expect_err("refused")
+    }
+
+    #[test]
+    fn the_default_rig_is_the_scout_with_the_beam_model() {
+        let options = parse(&[]);
+        assert_eq!((options.rig.as_str(), options.sensor), ("scout", None));
+        let setup = setup(&[]);
+        assert_eq!(setup.rig, deog_rig::scout());
+        assert_eq!(setup.sensor, SensorChoice::Beam);
+    }
+
+    #[test]
+    fn each_built_in_rig_gets_its_sensor_model() {
+        for (rig, sensor) in [
+            ("scout", SensorChoice::Beam),
+            ("pioneer3dx", SensorChoice::Beam),
+            ("laser180", SensorChoice::LikelihoodField),
+        ] {
+            let setup = setup(&["--rig", rig]);
+            assert_eq!((setup.rig.name(), setup.sensor), (rig, sensor));
+        }
+        let field = setup(&["--sensor", "likelihood-field"]);
+        assert_eq!(field.sensor, SensorChoice::LikelihoodField);
+        // The mirror images are scored by whatever model the filter has.
+        setup(&["--rig", "laser180", "--mirror-about", "1,2"]);
+    }
+
+    #[test]
+    fn a_rig_file_is_read() {
+        let dir = tempfile::tempdir().expect("a temporary folder");
+        let path = dir.path().join("front.toml");
+        std::fs::write(
+            &path,
+            "name = \"front\"\n[[sensor]]\nkind = \"laser\"\nfirst_angle_deg = -45\n\
+             angle_step_deg = 1\nbeam_count = 91\nmin_range_m = 0.1\nmax_range_m = 8\n",
+        )
+        .expect("the rig file is written");
+        let setup = setup(&["--rig", path.to_str().expect("a UTF-8 path")]);
+        assert_eq!(
+            (setup.rig.readings(), setup.sensor),
+            (91, SensorChoice::LikelihoodField)
+        );
+        std::fs::write(&path, "name = [").expect("the rig file is written");
+        let err = refused(&["--rig", path.to_str().expect("a UTF-8 path")]);
+        assert_eq!(err.flag, "--rig");
+        assert!(!err.message.contains('\n'), "{err}");
+    }
+
+    #[test]
+    fn rigs_and_sensors_that_do_not_fit_are_refused_naming_the_flag() {
+        let err = refused(&["--rig", "no-such-rig"]);
+        assert_eq!(err.flag, "--rig");
+        assert!(err.message.starts_with("--rig no-such-rig: "), "{err}");
+        assert!(err.message.contains("scout, pioneer3dx, laser180"), "{err}");
+        let err = refused(&["--rig", "laser180", "--sensor", "beam"]);
+        assert_eq!(err.flag, "--sensor");
+        assert!(err.message.contains("use the likelihood field"), "{err}");
+        for args in [
+            &["--rig", "laser180", "--beams-between", "1,2"][..],
+            &["--sensor", "likelihood-field", "--beams-between", "1,2"][..],
+        ] {
+            let err = refused(args);
+            assert_eq!(err.flag, "--beams-between");
+            assert!(err.message.starts_with("--beams-between "), "{err}");
+        }
+        setup(&["--rig", "pioneer3dx", "--beams-between", "1,2"]);
+        let unknown = Cli::try_parse_from(["localize", "--sensor", "laser"]);
+        assert!(unknown.is_err(), "--sensor laser parsed");
     }
 }

@@ -6,9 +6,10 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use deog_evaluation::localization::{EstimateSample, EvalInput, TruthSample, evaluate};
 use deog_evaluation::runs::RunFigures;
-use deog_grid::{SensorRing, TileMap};
+use deog_grid::TileMap;
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::LocalMap;
+use deog_localizer::sensors::{LikelihoodFieldParams, SensorChoice};
 use deog_localizer::step::{Localizer, TileSource};
 use deog_simulator::simulation::{SimConfig, Simulation};
 use deog_simulator::{WanderParams, Wanderer};
@@ -17,6 +18,10 @@ use rand_chacha::ChaCha8Rng;
 
 use super::LocalizeOptions;
 use super::diagnostics::{image_of, particles_near, print_beams};
+
+/// The robot's name in the simulator, whatever its rig: the name seeds the
+/// robot's draws, so the Scout's figures stay as they were.
+const ROBOT: &str = "scout";
 
 /// The filter's settings for run `seed`, with the options' overrides.
 fn filter_settings(options: &LocalizeOptions, seed: u64) -> FilterSettings {
@@ -37,20 +42,29 @@ fn filter_settings(options: &LocalizeOptions, seed: u64) -> FilterSettings {
     settings
 }
 
-/// One seeded run on `map` (its tiles from `tiles`); returns its figures
-/// and the map, with the tables it built, for the next run.
+/// One seeded run on `map` (its tiles from `tiles`), the robot carrying
+/// the rig of `config` and its frames scored with `sensor`; returns its
+/// figures and the map, with the tables it built, for the next run.
 pub(super) fn run_once(
     world: deog_world::World,
     config: &SimConfig,
+    sensor: SensorChoice,
     map: LocalMap,
     tiles: &mut TileMap,
     seed: u64,
     options: &LocalizeOptions,
 ) -> Result<(RunFigures, LocalMap)> {
     let mut sim = Simulation::new(world, config.clone(), seed)?;
-    let mut state = sim.spawn("scout", None)?;
-    let mut wanderer = Wanderer::new(WanderParams::default(), &SensorRing::scout(), seed)?;
-    let mcl = Mcl::new(filter_settings(options, seed))?;
+    let mut state = sim.spawn(ROBOT, None)?;
+    let rig = &config.rig;
+    let mut wanderer = Wanderer::for_rig(WanderParams::default(), rig, seed)?;
+    let mut settings = filter_settings(options, seed);
+    // The beam model's no-echo range is the cone's the map's tables are for.
+    settings.beam.max_range = map.settings().geometry.max_range;
+    let model = sensor
+        .build(rig, settings.beam, LikelihoodFieldParams::default())
+        .with_context(|| format!("the {sensor} model for rig {}", rig.name()))?;
+    let mcl = Mcl::with_sensor(settings, model)?;
     // No change is ever reported: the map in memory is the whole map.
     let mut localizer = Localizer::new(mcl, map, Duration::MAX, Instant::now());
     let whole = tiles
@@ -71,13 +85,13 @@ pub(super) fn run_once(
     while sim.time_s() < options.seconds {
         if options.kidnap_at > 0.0 && kidnapped_at.is_none() && sim.time_s() >= options.kidnap_at {
             let to = sim.random_free_pose(&mut kidnap_rng)?;
-            sim.teleport("scout", to)?;
+            sim.teleport(ROBOT, to)?;
             kidnapped_at = Some(sim.time_s());
             // The mirror sums compare the halves from the new pose on.
             mirror_sums = (0.0, 0.0, 0, 0);
         }
         let (v, w) = wanderer.command(&state.ranges, state.bumper, period)?;
-        sim.drive("scout", v, w)?;
+        sim.drive(ROBOT, v, w)?;
         fired.clear();
         while fired.is_empty() {
             sim.advance(period, &mut fired)?;
@@ -110,6 +124,7 @@ pub(super) fn run_once(
         {
             print_beams(
                 localizer.parts_mut().1,
+                &rig.ring(),
                 &state.true_pose,
                 &state.ranges,
                 state.time_s,
@@ -170,7 +185,7 @@ pub(super) fn run_once(
     let known: Vec<u64> = kidnap_frame.into_iter().collect();
     let report = evaluate(&EvalInput {
         known_kidnaps: &known,
-        ..EvalInput::new("scout", &truth, &estimates)
+        ..EvalInput::new(ROBOT, &truth, &estimates)
     })
     .with_context(|| format!("judging seed {seed}"))?;
     let figures = RunFigures::from(&report);
