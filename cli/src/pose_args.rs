@@ -49,6 +49,29 @@ impl From<MapPoseSource> for PoseChoice {
     }
 }
 
+/// Where `deog localize --initial-pose` starts tracking from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum InitialPose {
+    /// A pose given as `x,y,theta`.
+    Given(Pose2),
+    /// The first frame's reference pose (a recording's corrected pose).
+    Reference,
+    /// The first frame's true pose (the simulator's).
+    True,
+}
+
+/// `x,y,theta` in metres and radians, or `reference` or `true` for the
+/// first frame's pose of that kind.
+pub fn parse_initial_pose(text: &str) -> Result<InitialPose, String> {
+    match text.trim() {
+        "reference" => Ok(InitialPose::Reference),
+        "true" => Ok(InitialPose::True),
+        _ => parse_pose(text)
+            .map(InitialPose::Given)
+            .map_err(|e| format!("{e} (or `reference` or `true` for the first frame's pose)")),
+    }
+}
+
 /// `x,y,theta` in metres and radians.
 pub fn parse_pose(text: &str) -> Result<Pose2, String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
@@ -66,4 +89,25 @@ pub fn parse_pose(text: &str) -> Result<Pose2, String> {
         number("y", y)?,
         number("theta", theta)?,
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_initial_pose_is_three_numbers_or_a_frames_own() {
+        assert_eq!(
+            parse_initial_pose("1, -2.5, 0.5"),
+            Ok(InitialPose::Given(Pose2::new(1.0, -2.5, 0.5)))
+        );
+        assert_eq!(parse_initial_pose("reference"), Ok(InitialPose::Reference));
+        assert_eq!(parse_initial_pose("true"), Ok(InitialPose::True));
+        let error = parse_initial_pose("1,2").expect_err("two numbers");
+        assert!(
+            error.contains("x,y,theta") && error.contains("`reference`"),
+            "{error}"
+        );
+        assert!(parse_initial_pose("1,inf,0").is_err());
+    }
 }

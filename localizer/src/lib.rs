@@ -14,6 +14,8 @@
 //!   field of any rig ([`sensors::LikelihoodField`]), and
 //!   [`sensors::SensorChoice`] between them.
 //! - [`motion`]: the odometry motion model.
+//! - [`preset`]: named tunings for a kind of data (the simulator, a real
+//!   robot's laser).
 //! - [`local_map`]: [`local_map::LocalMap`], the cache of the server's
 //!   tiles, their expected-range tables and their distance fields within
 //!   a memory budget.
@@ -39,6 +41,7 @@ pub mod filter;
 pub mod gaussian;
 pub mod local_map;
 pub mod motion;
+pub mod preset;
 pub mod range_table;
 pub mod refine;
 pub mod sampling;

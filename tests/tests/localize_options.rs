@@ -22,7 +22,7 @@ async fn bad_options_and_unknown_maps_are_clear_errors() {
         args.extend_from_slice(extra);
         failure(&run_deog(&args, &env))
     };
-    let cases: [(&[&str], &str); 7] = [
+    let cases: [(&[&str], &str); 9] = [
         (&[], "does not exist"),
         (&["--cache-mb", "4"], "--cache-mb"),
         (&["--specular-angle", "120"], "--specular-angle"),
@@ -33,6 +33,8 @@ async fn bad_options_and_unknown_maps_are_clear_errors() {
             "min_particles",
         ),
         (&["--initial-pose", "1,nan,0"], "--initial-pose"),
+        (&["--initial-pose", "refrence"], "or `reference` or `true`"),
+        (&["--preset", "laser"], "real-laser"),
     ];
     for (extra, expected) in cases {
         let stderr = localize(extra);

@@ -83,41 +83,48 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, ensure};
 use clap::Args;
+use deog_localizer::preset::{Preset, Tuning};
 use serde::Serialize;
 
 use crate::option_error::{OptionError, require};
+
+/// The recipe's defaults.
+fn real_laser() -> Tuning {
+    Preset::RealLaser.tuning()
+}
 
 /// The robot's name when none is given.
 const ROBOT: &str = "log";
 /// The reference map's name on the server.
 const MAP: &str = "reference";
 
-/// The localizer's flags of the real-log recipe (its defaults the
-/// recipe's), the same for tracking and for every global start.
+/// The localizer's flags of the real-log recipe (its defaults those of
+/// `deog localize --preset real-laser`), the same for tracking and for
+/// every global start.
 #[derive(Debug, Clone, Args, Serialize)]
 pub struct Recipe {
     /// The localizer's --field-tempering: the exponent on the product of
     /// a scan's scored echo likelihoods.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = real_laser().field_tempering)]
     pub field_tempering: f64,
     /// The localizer's --field-search-tempering: τ while the filter has
     /// not settled on a pose (a global start), softer so that look-alike
     /// places live until the scans tell them apart.
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = real_laser().field_search_tempering.unwrap_or(real_laser().field_tempering))]
     pub field_search_tempering: f64,
     /// The localizer's --no-refine: report the particle filter's estimate
     /// as it is (the recipe refines it against the map).
     #[arg(long)]
     pub no_refine: bool,
     /// The localizer's --field-beams: echoes of a scan scored.
-    #[arg(long, default_value_t = 180)]
+    #[arg(long, default_value_t = real_laser().field_beams)]
     pub field_beams: usize,
     /// The localizer's --motion-noise-scale: a real robot's odometry is
     /// worse than the simulator's.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = real_laser().motion_noise_scale)]
     pub motion_noise_scale: f64,
     /// The localizer's --min-particles.
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, default_value_t = real_laser().min_particles)]
     pub min_particles: usize,
     /// The localizer's --max-particles: global localization starts with
     /// this many.

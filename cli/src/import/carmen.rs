@@ -76,6 +76,14 @@ pub fn import(args: &ImportArgs, robot: &str, file: &Path) -> Result<()> {
         args.first_sequence,
         args.first_sequence + count as u64 - 1
     );
+    if log.reference_source() != ReferenceSource::Absent {
+        println!(
+            "next: deog map --robot {robot} --map {robot} --pose reference --to {last}, then \
+             deog localize --robot {robot} --map {robot} --from {first} --to {last} --initial-pose reference --preset real-laser",
+            first = args.first_sequence,
+            last = args.first_sequence + count as u64 - 1
+        );
+    }
     Ok(())
 }
 

@@ -10,10 +10,11 @@ use server::{ServerTiles, estimate_message, log_estimate};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail, ensure};
-use clap::Args;
-use deog_grid::{CellBox, CellIndex, OccupancyThresholds, Pose2, Resolution, TileSize};
+use clap::{Args, ValueEnum};
+use deog_grid::{CellBox, CellIndex, OccupancyThresholds, Resolution, TileSize};
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};
+use deog_localizer::preset::Preset;
 use deog_localizer::range_table::ConeGeometry;
 use deog_localizer::step::{FetchedTile, Localizer};
 use deog_robot_client::convert::{cell_box_from_wire, pose_from_wire};
@@ -21,6 +22,7 @@ use deog_robot_client::{MapClient, TileChange, TileWatch};
 
 use crate::connection::ConnectionArgs;
 use crate::frame_queue::FrameQueue;
+use crate::pose_args::InitialPose;
 use crate::rig_args::{load_rig, publish_rig};
 use deog_localizer::sensors::{LikelihoodFieldParams, SensorChoice};
 use deog_proto::rig::frame_rig_name;
@@ -43,10 +45,12 @@ pub struct LocalizeArgs {
     /// Stop once no frame has arrived for this many seconds (0: follow until ctrl-c).
     #[arg(long, default_value_t = 0.0)]
     pub idle_exit: f64,
-    /// Track from a known pose "x,y,theta" (metres, radians) instead of
-    /// localizing globally.
-    #[arg(long, value_parser = crate::pose_args::parse_pose, allow_hyphen_values = true)]
-    pub initial_pose: Option<Pose2>,
+    /// Track from a known pose instead of localizing globally:
+    /// "x,y,theta" (metres, radians), or `reference` or `true` for the
+    /// first frame's reference pose (a recording's) or true pose (the
+    /// simulator's).
+    #[arg(long, value_parser = crate::pose_args::parse_initial_pose, allow_hyphen_values = true)]
+    pub initial_pose: Option<InitialPose>,
     /// Standard deviation of the initial position, metres (with --initial-pose).
     #[arg(long, default_value_t = 0.25)]
     pub initial_std_xy: f64,
@@ -56,9 +60,9 @@ pub struct LocalizeArgs {
     /// Most particles (global localization starts with this many).
     #[arg(long, default_value_t = FilterSettings::default().kld.max_particles)]
     pub max_particles: usize,
-    /// Fewest particles.
-    #[arg(long, default_value_t = FilterSettings::default().kld.min_particles)]
-    pub min_particles: usize,
+    /// Fewest particles. Default: the preset's (500 sim, 2000 real-laser).
+    #[arg(long)]
+    pub min_particles: Option<usize>,
     /// The beam model's tempering τ: the frame counts as 16·τ independent
     /// beams.
     #[arg(long, default_value_t = FilterSettings::default().beam.tempering)]
@@ -91,14 +95,17 @@ pub struct LocalizeArgs {
     #[arg(long, default_value_t = LikelihoodFieldParams::default().sigma_hit)]
     pub field_sigma: f64,
     /// Likelihood field: the most echoes of a frame scored, evenly spread.
-    #[arg(long, default_value_t = LikelihoodFieldParams::default().max_beams)]
-    pub field_beams: usize,
+    /// Default: the preset's (60 sim, 180 real-laser).
+    #[arg(long)]
+    pub field_beams: Option<usize>,
     /// Likelihood field: the exponent τ on the product of the scored
-    /// echoes' likelihoods.
-    #[arg(long, default_value_t = LikelihoodFieldParams::default().tempering)]
-    pub field_tempering: f64,
+    /// echoes' likelihoods. Default: the preset's (1/30 sim, 0.5
+    /// real-laser).
+    #[arg(long)]
+    pub field_tempering: Option<f64>,
     /// Likelihood field: τ while the filter has not settled on a pose
-    /// (global localization, recovery); default: --field-tempering.
+    /// (global localization, recovery). Default: the preset's (sim: the
+    /// settled τ; real-laser: 0.05).
     #[arg(long)]
     pub field_search_tempering: Option<f64>,
     /// Likelihood field: report the filter's estimate as it is, without
@@ -106,9 +113,16 @@ pub struct LocalizeArgs {
     #[arg(long)]
     pub no_refine: bool,
     /// Scales the motion model's four noise figures (α1 to α4): above 1 for
-    /// odometry worse than the simulator's.
-    #[arg(long, default_value_t = 1.0)]
-    pub motion_noise_scale: f64,
+    /// odometry worse than the simulator's. Default: the preset's (1 sim,
+    /// 2 real-laser).
+    #[arg(long)]
+    pub motion_noise_scale: Option<f64>,
+    /// The tunings for a kind of data: `sim` (the simulator's robots) or
+    /// `real-laser` (a real robot's planar laser, as the CARMEN logs:
+    /// every beam scored, a softer τ while searching, odometry noise
+    /// doubled, 2000 particles at least). A flag given beside it wins.
+    #[arg(long, value_enum, default_value_t = PresetChoice::Sim)]
+    pub preset: PresetChoice,
     /// Seed of the filter's random draws.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -125,8 +139,28 @@ pub struct LocalizeArgs {
     pub connection: ConnectionArgs,
 }
 
+/// `deog localize --preset`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PresetChoice {
+    /// The simulator's robots.
+    Sim,
+    /// A real robot's planar laser.
+    RealLaser,
+}
+
+impl From<PresetChoice> for Preset {
+    fn from(choice: PresetChoice) -> Self {
+        match choice {
+            PresetChoice::Sim => Preset::Simulator,
+            PresetChoice::RealLaser => Preset::RealLaser,
+        }
+    }
+}
+
 /// Runs `deog localize`.
 pub fn run(args: LocalizeArgs) -> Result<()> {
+    let preset = Preset::from(args.preset).tuning();
+    let motion_noise_scale = args.motion_noise_scale.unwrap_or(preset.motion_noise_scale);
     ensure!(
         args.idle_exit.is_finite() && args.idle_exit >= 0.0,
         "--idle-exit must be zero or positive, got {}",
@@ -154,9 +188,8 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         args.cache_mb
     );
     ensure!(
-        args.motion_noise_scale.is_finite() && (0.0..=100.0).contains(&args.motion_noise_scale),
-        "--motion-noise-scale must be in [0, 100], got {}",
-        args.motion_noise_scale
+        motion_noise_scale.is_finite() && (0.0..=100.0).contains(&motion_noise_scale),
+        "--motion-noise-scale must be in [0, 100], got {motion_noise_scale}"
     );
     let expected_rig = args.rig.as_deref().map(load_rig).transpose()?;
     let mut settings = FilterSettings {
@@ -164,17 +197,19 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         ..FilterSettings::default()
     };
     settings.kld.max_particles = args.max_particles;
-    settings.kld.min_particles = args.min_particles;
+    settings.kld.min_particles = args.min_particles.unwrap_or(preset.min_particles);
     settings.beam.tempering = args.tempering;
-    settings.motion = settings.motion.scaled(args.motion_noise_scale);
+    settings.motion = settings.motion.scaled(motion_noise_scale);
     // The filter is built once the first frame names the rig; its
     // settings are checked now, before anything waits.
     let mut settings = settings.validate().context("the filter's settings")?;
     let field = LikelihoodFieldParams {
         sigma_hit: args.field_sigma,
-        max_beams: args.field_beams,
-        tempering: args.field_tempering,
-        search_tempering: args.field_search_tempering,
+        max_beams: args.field_beams.unwrap_or(preset.field_beams),
+        tempering: args.field_tempering.unwrap_or(preset.field_tempering),
+        search_tempering: args
+            .field_search_tempering
+            .or(preset.field_search_tempering),
         refine: if args.no_refine {
             None
         } else {
@@ -280,7 +315,23 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         tile_size,
     };
     let refresh = Duration::from_secs_f64(args.refresh_s);
-    let mut localizer = match &args.initial_pose {
+    let initial_pose = match args.initial_pose {
+        None => None,
+        Some(InitialPose::Given(pose)) => Some(pose),
+        Some(InitialPose::Reference) => Some(first.reference_pose.map(pose_from_wire).with_context(|| {
+            format!(
+                "--initial-pose reference: frame {} of {} has no reference pose (only recordings with corrected poses have one)",
+                first.sequence, args.robot
+            )
+        })?),
+        Some(InitialPose::True) => Some(first.true_pose.map(pose_from_wire).with_context(|| {
+            format!(
+                "--initial-pose true: frame {} of {} has no true pose (only the simulator's frames have one)",
+                first.sequence, args.robot
+            )
+        })?),
+    };
+    let mut localizer = match &initial_pose {
         Some(pose) => {
             mcl.start_at(*pose, args.initial_std_xy, args.initial_std_theta)
                 .context("--initial-pose")?;
