@@ -17,6 +17,7 @@ use crate::error::{GridError, within};
 use crate::frame::FrameStats;
 use crate::pose::Pose2;
 use crate::ray_model::{RayModel, RayReading};
+use crate::raycast::OccupancyView;
 use crate::sector::Sector;
 use crate::segment_walk::SegmentCells;
 use crate::sensor_ring::SensorRing;
@@ -183,6 +184,29 @@ impl BeamFrameIntegrator {
         readings: &[BeamReading],
         out: &mut Vec<TileDelta>,
     ) -> Result<FrameStats, GridError> {
+        self.integrate_with(robot, readings, None, out)
+    }
+
+    /// [`Self::integrate`] with each sonar cone guarded by the map it
+    /// writes to (see [`SonarModel::visit_cone_guarded`]); laser rays are
+    /// mapped as they are.
+    pub fn integrate_guarded(
+        &mut self,
+        robot: &Pose2,
+        readings: &[BeamReading],
+        walls: &dyn OccupancyView,
+        out: &mut Vec<TileDelta>,
+    ) -> Result<FrameStats, GridError> {
+        self.integrate_with(robot, readings, Some(walls), out)
+    }
+
+    fn integrate_with(
+        &mut self,
+        robot: &Pose2,
+        readings: &[BeamReading],
+        walls: Option<&dyn OccupancyView>,
+        out: &mut Vec<TileDelta>,
+    ) -> Result<FrameStats, GridError> {
         let robot = robot.validate("pose")?;
         if readings.len() != self.beams.len() {
             return Err(GridError::WrongReadingCount {
@@ -251,9 +275,21 @@ impl BeamFrameIntegrator {
                     sector,
                     reading,
                     bounds,
-                } => self.cones[model].visit_cone(&sector, &reading, res, &bounds, |cell, d| {
-                    cursor.add(cell, d)
-                }),
+                } => match walls {
+                    None => {
+                        self.cones[model].visit_cone(&sector, &reading, res, &bounds, |cell, d| {
+                            cursor.add(cell, d)
+                        })
+                    }
+                    Some(walls) => self.cones[model].visit_cone_guarded(
+                        &sector,
+                        &reading,
+                        res,
+                        &bounds,
+                        walls,
+                        |cell, d| cursor.add(cell, d),
+                    ),
+                },
                 Planned::Ray {
                     model,
                     cells,

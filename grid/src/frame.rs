@@ -9,6 +9,7 @@
 use crate::cell::{CellBox, CellIndex, Resolution};
 use crate::error::GridError;
 use crate::pose::Pose2;
+use crate::raycast::OccupancyView;
 use crate::sensor_ring::SensorRing;
 use crate::sonar_model::SonarModel;
 use crate::tile::TileDelta;
@@ -70,6 +71,29 @@ impl FrameIntegrator {
         ranges: &[f64],
         out: &mut Vec<TileDelta>,
     ) -> Result<FrameStats, GridError> {
+        self.integrate_with(robot, ranges, None, out)
+    }
+
+    /// [`Self::integrate`] with each cone guarded by the map it writes to
+    /// (see [`SonarModel::visit_cone_guarded`]): evidence stops at the
+    /// cells `walls` holds occupied.
+    pub fn integrate_guarded(
+        &mut self,
+        robot: &Pose2,
+        ranges: &[f64],
+        walls: &dyn OccupancyView,
+        out: &mut Vec<TileDelta>,
+    ) -> Result<FrameStats, GridError> {
+        self.integrate_with(robot, ranges, Some(walls), out)
+    }
+
+    fn integrate_with(
+        &mut self,
+        robot: &Pose2,
+        ranges: &[f64],
+        walls: Option<&dyn OccupancyView>,
+        out: &mut Vec<TileDelta>,
+    ) -> Result<FrameStats, GridError> {
         let robot = robot.validate("pose")?;
         if ranges.len() != self.ring.len() {
             return Err(GridError::WrongReadingCount {
@@ -100,15 +124,27 @@ impl FrameIntegrator {
         let scratch = &mut self.scratch;
         // Cones, readings and bounds were all checked above: nothing below fails.
         for (sector, reading, bounds) in &cones {
-            self.model
-                .visit_cone(sector, reading, self.resolution, bounds, |cell, delta| {
-                    let col = (cell.x - frame_box.min.x) as usize;
-                    let row = (cell.y - frame_box.min.y) as usize;
-                    // Every visited cell lies in its cone's box, inside frame_box.
-                    if let Some(slot) = scratch.get_mut(row * width + col) {
-                        *slot = combine(*slot, delta);
-                    }
-                });
+            let fold = |cell: CellIndex, delta| {
+                let col = (cell.x - frame_box.min.x) as usize;
+                let row = (cell.y - frame_box.min.y) as usize;
+                // Every visited cell lies in its cone's box, inside frame_box.
+                if let Some(slot) = scratch.get_mut(row * width + col) {
+                    *slot = combine(*slot, delta);
+                }
+            };
+            match walls {
+                None => self
+                    .model
+                    .visit_cone(sector, reading, self.resolution, bounds, fold),
+                Some(walls) => self.model.visit_cone_guarded(
+                    sector,
+                    reading,
+                    self.resolution,
+                    bounds,
+                    walls,
+                    fold,
+                ),
+            }
         }
         Ok(self.fold_into_tiles(&frame_box, out))
     }
@@ -292,5 +328,109 @@ mod tests {
             .integrate(&Pose2::new(5.0, 5.0, 0.0), &[2.0; 16], &mut again)
             .unwrap();
         assert_eq!(first, again);
+    }
+
+    /// Cells a test calls walls.
+    struct Walls(std::collections::HashSet<CellIndex>);
+
+    impl OccupancyView for Walls {
+        fn occupancy(&self, cell: CellIndex) -> crate::raycast::Occupancy {
+            if self.0.contains(&cell) {
+                crate::raycast::Occupancy::Occupied
+            } else {
+                crate::raycast::Occupancy::Unknown
+            }
+        }
+    }
+
+    /// A wall across x = `x` metres, from y = -3 to 3.
+    fn wall_at(x: f64) -> Walls {
+        let res = Resolution::DEFAULT;
+        let column = res.cell_of(x, 0.0).unwrap().x;
+        Walls((-60..=60).map(|y| CellIndex::new(column, y)).collect())
+    }
+
+    #[test]
+    fn a_guard_without_walls_changes_nothing() {
+        let mut plain = integrator();
+        let mut guarded = integrator();
+        let none = Walls(Default::default());
+        for k in 0..8 {
+            let k = f64::from(k);
+            let robot = Pose2::new(0.3 * k - 1.0, 0.7 - 0.2 * k, 0.9 * k);
+            let ranges: Vec<f64> = (0..16)
+                .map(|i| 0.3 + 0.41 * f64::from(i) + 0.1 * k)
+                .collect();
+            let (mut a, mut b) = (Vec::new(), Vec::new());
+            let sa = plain.integrate(&robot, &ranges, &mut a).unwrap();
+            let sb = guarded
+                .integrate_guarded(&robot, &ranges, &none, &mut b)
+                .unwrap();
+            assert_eq!(sa, sb);
+            assert!(a == b, "frame {k}: the deltas differ");
+        }
+    }
+
+    #[test]
+    fn a_reading_past_a_known_wall_erases_neither_it_nor_what_lies_behind() {
+        let res = Resolution::DEFAULT;
+        let walls = wall_at(2.0);
+        let wall_x = res.cell_of(2.0, 0.0).unwrap().x;
+        let robot = Pose2::new(0.0, 0.0, 0.0);
+        // Sonar 0 looks along +x from 0.2 m ahead of the centre and reads
+        // 4 m: it missed the wall 1.8 m ahead (a specular miss).
+        let mut ranges = vec![10.668; 16];
+        ranges[0] = 4.0;
+        let (mut plain, mut guarded) = (integrator(), integrator());
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        plain.integrate(&robot, &ranges, &mut a).unwrap();
+        guarded
+            .integrate_guarded(&robot, &ranges, &walls, &mut b)
+            .unwrap();
+        let (a, b) = (
+            flatten(&a, TileSize::DEFAULT),
+            flatten(&b, TileSize::DEFAULT),
+        );
+        // The plain model frees the wall on the axis and marks 4 m occupied.
+        assert!(a.get(&CellIndex::new(wall_x, 0)).is_some_and(|&d| d < 0));
+        assert!(a.keys().any(|c| c.x > wall_x + 1));
+        // Guarded: nothing on or behind the wall, the same in front of it.
+        assert!(b.keys().all(|c| c.x <= wall_x), "evidence behind the wall");
+        assert!(
+            b.iter().all(|(c, &d)| !(walls.0.contains(c) && d < 0)),
+            "a wall cell freed"
+        );
+        for (cell, d) in &b {
+            if cell.x < wall_x - 1 {
+                assert_eq!(a.get(cell), Some(d), "{cell:?} in front of the wall");
+            }
+        }
+        assert!(b.values().filter(|&&d| d < 0).count() > 100);
+    }
+
+    #[test]
+    fn an_echo_off_a_known_wall_still_marks_it() {
+        let res = Resolution::DEFAULT;
+        let walls = wall_at(2.0);
+        let wall_x = res.cell_of(2.0, 0.0).unwrap().x;
+        let robot = Pose2::new(0.0, 0.0, 0.0);
+        let mut ranges = vec![10.668; 16];
+        ranges[0] = 1.8;
+        let mut guarded = integrator();
+        let mut out = Vec::new();
+        guarded
+            .integrate_guarded(&robot, &ranges, &walls, &mut out)
+            .unwrap();
+        let cells = flatten(&out, TileSize::DEFAULT);
+        assert!(
+            cells
+                .get(&CellIndex::new(wall_x, 0))
+                .is_some_and(|&d| d > 0)
+        );
+        assert!(
+            cells
+                .get(&CellIndex::new(wall_x - 10, 0))
+                .is_some_and(|&d| d < 0)
+        );
     }
 }

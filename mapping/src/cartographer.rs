@@ -3,11 +3,12 @@
 //! simulator's true pose; a real robot has only its odometry).
 
 use deog_grid::{
-    Pose2, RayModelParams, Resolution, SensorRing, SonarModelParams, TileDelta, TileSize,
+    Pose2, RayModelParams, Resolution, SensorRing, SonarModelParams, TileDelta, TileKey, TileSize,
 };
 use deog_rig::Rig;
 
 use crate::error::MappingError;
+use crate::map_view::{MapView, MapViewSettings};
 use crate::sensors::{InverseSensorModel, RigBeams, SonarCone};
 
 /// The sonar model `deog map` builds maps with unless told otherwise: the
@@ -78,11 +79,28 @@ pub struct FrameInput<'a> {
     pub ranges: &'a [f64],
 }
 
+/// How sonar readings become evidence.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SonarMethod {
+    /// The thesis's model as it is: every reading's cone, whatever the map
+    /// already holds.
+    Thesis,
+    /// The thesis's model guarded by the map being written (a bounded
+    /// [`MapView`]): along each direction of a cone, evidence stops at the
+    /// first cell the map holds as a wall, which gets no empty evidence.
+    /// One specular reading cannot erase what many echoes built.
+    #[default]
+    KeepWalls,
+}
+
 /// Turns frames into tile deltas for one map.
 #[derive(Debug)]
 pub struct Cartographer {
     sensor: Box<dyn InverseSensorModel>,
     pose: PoseChoice,
+    /// With [`SonarMethod::KeepWalls`]: the map being written, and how far
+    /// from the robot a frame's cones reach, metres.
+    guard: Option<(MapView, f64)>,
 }
 
 impl Cartographer {
@@ -126,7 +144,66 @@ impl Cartographer {
 
     /// A cartographer that maps with `sensor` rather than the Scout's sonars.
     pub fn with_sensor(pose: PoseChoice, sensor: Box<dyn InverseSensorModel>) -> Self {
-        Self { sensor, pose }
+        Self {
+            sensor,
+            pose,
+            guard: None,
+        }
+    }
+
+    /// Guards every sonar cone with `view`, the map being written
+    /// ([`SonarMethod::KeepWalls`]); `reach` is how far from the robot a
+    /// frame's cones may reach, metres (the tiles [`Self::missing_tiles`]
+    /// names). The cartographer adds its own deltas to the view.
+    pub fn keeping_walls(mut self, view: MapView, reach: f64) -> Self {
+        self.guard = Some((view, reach));
+        self
+    }
+
+    /// Maps sonar readings by `method`: with [`SonarMethod::KeepWalls`]
+    /// and a rig with sonars, guards its cones with a new view of
+    /// `settings` reaching as far as `sonar`'s cones can from the rig's
+    /// sensors. A rig of lasers alone, or [`SonarMethod::Thesis`], leaves
+    /// the cartographer as it is.
+    pub fn with_sonar_method(
+        self,
+        method: SonarMethod,
+        rig: &Rig,
+        sonar: &SonarModelParams,
+        settings: MapViewSettings,
+        resolution: Resolution,
+        tile_size: TileSize,
+    ) -> Result<Self, MappingError> {
+        if method == SonarMethod::Thesis || rig.all_laser() {
+            return Ok(self);
+        }
+        let view = MapView::new(resolution, tile_size, settings)?;
+        // A cone reaches its mapped range from a sensor up to `reach` off
+        // the centre; one more cell for the cells its edge touches.
+        let reach = sonar
+            .max_mapped_range
+            .min(sonar.max_range)
+            .min(rig.max_range())
+            + rig.reach()
+            + resolution.metres();
+        Ok(self.keeping_walls(view, reach))
+    }
+
+    /// The view of the map being written, when walls are kept.
+    pub fn view_mut(&mut self) -> Option<&mut MapView> {
+        self.guard.as_mut().map(|(view, _)| view)
+    }
+
+    /// The tiles a frame may reach that the view lacks: the process
+    /// fetches them from the map server (or marks them unknown) before
+    /// [`Self::integrate`]. Empty when walls are not kept.
+    pub fn missing_tiles(&mut self, frame: &FrameInput<'_>) -> Result<Vec<TileKey>, MappingError> {
+        if self.guard.is_none() {
+            return Ok(Vec::new());
+        }
+        let pose = self.pose_of(frame)?;
+        let (view, reach) = self.guard.as_mut().expect("checked above");
+        view.missing_around(&pose, *reach)
     }
 
     /// The pose the map is built from.
@@ -142,6 +219,23 @@ impl Cartographer {
         frame: &FrameInput<'_>,
         out: &mut Vec<TileDelta>,
     ) -> Result<usize, MappingError> {
+        let pose = self.pose_of(frame)?;
+        let start = out.len();
+        let cells = match &self.guard {
+            Some((view, _)) => self
+                .sensor
+                .integrate_guarded(&pose, frame.ranges, view, out),
+            None => self.sensor.integrate(&pose, frame.ranges, out),
+        }
+        .map_err(|e| MappingError::invalid(format!("frame {}", frame.sequence), e.to_string()))?;
+        if let Some((view, _)) = &mut self.guard {
+            view.apply(&out[start..])?;
+        }
+        Ok(cells)
+    }
+
+    /// The frame's pose of the chosen kind.
+    fn pose_of(&self, frame: &FrameInput<'_>) -> Result<Pose2, MappingError> {
         let missing = |hint: &str| {
             MappingError::invalid(
                 format!("frame {}.{}", frame.sequence, self.pose.field()),
@@ -160,9 +254,7 @@ impl Cartographer {
                 .estimate
                 .ok_or_else(|| missing("no converged estimate for this frame"))?,
         };
-        self.sensor
-            .integrate(&pose, frame.ranges, out)
-            .map_err(|e| MappingError::invalid(format!("frame {}", frame.sequence), e.to_string()))
+        Ok(pose)
     }
 }
 
@@ -373,5 +465,94 @@ mod tests {
             .integrate(&sixteen, &mut out)
             .expect_err("sixteen readings");
         assert!(error.to_string().contains("frame 3"), "{error}");
+    }
+
+    /// The Scout facing a wall 2 m ahead along +x, at `y`.
+    fn facing_wall(sequence: u64, y: f64, range0: f64) -> (Pose2, Vec<f64>, u64) {
+        let mut ranges = vec![10.668; 16];
+        ranges[0] = range0;
+        (Pose2::new(0.0, y, 0.0), ranges, sequence)
+    }
+
+    #[test]
+    fn keeping_walls_a_specular_miss_does_not_erase_the_wall() {
+        let (res, size) = (Resolution::DEFAULT, TileSize::DEFAULT);
+        let params = crate::mapping_sonar_model();
+        let rig = deog_rig::scout();
+        let build = |method| {
+            Cartographer::with_model(res, size, PoseChoice::True, params)
+                .expect("cartographer")
+                .with_sonar_method(method, &rig, &params, MapViewSettings::default(), res, size)
+                .expect("method")
+        };
+        let map_of = |method| {
+            let mut cartographer = build(method);
+            let mut map = deog_grid::TileMap::new(res, size, deog_grid::ClampLimits::default());
+            // Fifteen head-on echoes off the wall 1.8 m from the front
+            // sonar, then twenty readings that missed it and heard 4 m.
+            let frames = (0..15)
+                .map(|k| facing_wall(k, 0.0, 1.8))
+                .chain((15..35).map(|k| facing_wall(k, 0.0, 4.0)));
+            for (pose, ranges, sequence) in frames {
+                let frame = FrameInput {
+                    sequence,
+                    true_pose: Some(pose),
+                    odometry: pose,
+                    reference_pose: None,
+                    estimate: None,
+                    ranges: &ranges,
+                };
+                assert!(cartographer.missing_tiles(&frame).is_ok());
+                let mut out = Vec::new();
+                cartographer.integrate(&frame, &mut out).expect("frame");
+                for delta in &out {
+                    map.apply(delta).expect("apply");
+                }
+            }
+            map
+        };
+        let wall = res.cell_of(2.0, 0.0).expect("cell");
+        let behind = res.cell_of(3.0, 0.0).expect("cell");
+        let thesis = map_of(SonarMethod::Thesis);
+        let kept = map_of(SonarMethod::KeepWalls);
+        let p = |map: &deog_grid::TileMap, cell| map.get(cell).map(|b| b.probability());
+        assert!(
+            p(&thesis, wall).is_some_and(|p| p < 0.5),
+            "the thesis's model erases it"
+        );
+        assert!(
+            p(&kept, wall).is_some_and(|p| p > 0.8),
+            "kept: {:?}",
+            p(&kept, wall)
+        );
+        assert_eq!(p(&kept, behind), None, "nothing behind a kept wall");
+        assert!(
+            p(&thesis, behind).is_some(),
+            "the thesis's model maps through it"
+        );
+    }
+
+    #[test]
+    fn a_laser_rig_or_the_thesis_method_keeps_no_view() {
+        let (res, size) = (Resolution::DEFAULT, TileSize::DEFAULT);
+        let params = crate::mapping_sonar_model();
+        let laser = deog_rig::built_in_rig("laser180").expect("laser180");
+        for (rig, method) in [
+            (laser, SonarMethod::KeepWalls),
+            (deog_rig::scout(), SonarMethod::Thesis),
+        ] {
+            let mut c = Cartographer::for_rig(
+                &rig,
+                PoseChoice::Odometry,
+                params,
+                RayModelParams::default(),
+                res,
+                size,
+            )
+            .expect("cartographer")
+            .with_sonar_method(method, &rig, &params, MapViewSettings::default(), res, size)
+            .expect("method");
+            assert!(c.view_mut().is_none(), "{} {method:?}", rig.name());
+        }
     }
 }

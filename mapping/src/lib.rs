@@ -5,6 +5,9 @@
 //! # Layout
 //! - [`cartographer`]: [`Cartographer`], one frame to per-tile deltas from
 //!   the chosen pose ([`PoseChoice`]).
+//! - [`map_view`]: [`MapView`], the cartographer's bounded view of the
+//!   map it writes to, whose walls a sonar cone stops at
+//!   ([`SonarMethod::KeepWalls`]).
 //! - [`estimates`]: [`EstimateBook`], which frames a localizer's converged
 //!   estimates place (mapping without ground truth).
 //! - [`sensors`]: the inverse sensor models behind
@@ -22,10 +25,12 @@ pub mod error;
 pub mod estimates;
 pub mod map_export;
 pub mod map_import;
+pub mod map_view;
 pub mod sensors;
 
-pub use cartographer::{Cartographer, FrameInput, PoseChoice, mapping_sonar_model};
+pub use cartographer::{Cartographer, FrameInput, PoseChoice, SonarMethod, mapping_sonar_model};
 pub use error::MappingError;
 pub use estimates::{EstimateBook, EstimateLookup};
 pub use map_export::{ExportCounts, MapExport, export_map};
 pub use map_import::{ImportTarget, MapImport, image_origin_cell, import_map};
+pub use map_view::{MapView, MapViewSettings};

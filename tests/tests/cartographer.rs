@@ -52,12 +52,14 @@ async fn the_map_is_the_frames_applied_in_order_and_a_restart_resumes_exactly() 
         .expect("publish");
 
     // Half, then the rest after a "restart", then once more: nothing left.
+    // The thesis's sonar method, whose deltas depend on the frame alone.
+    let thesis = ["--sonar-method", "thesis"];
     let middle = (first + 79).to_string();
-    let out = map_run(&server, &["--to", &middle]);
+    let out = map_run(&server, &["--to", &middle, thesis[0], thesis[1]]);
     assert!(out.contains(": 80 frames integrated"), "{out}");
-    let out = map_run(&server, &[]);
+    let out = map_run(&server, &thesis);
     assert!(out.contains(": 80 frames integrated"), "{out}");
-    let out = map_run(&server, &[]);
+    let out = map_run(&server, &thesis);
     assert!(out.contains(": 0 frames integrated"), "{out}");
     let cursor = client.update_cursor("m", "carto/r").await.expect("cursor");
     assert_eq!(cursor, last);
@@ -118,5 +120,80 @@ async fn the_map_is_the_frames_applied_in_order_and_a_restart_resumes_exactly() 
         compared += got.len();
     }
     assert!(compared > 10_000, "{compared}");
+    drop(server);
+}
+
+/// The Scout at the origin facing +x, its front sonar reading `front`
+/// (a wall stands 1.8 m ahead of it), the others no echo.
+fn facing_wall(robot: &str, sequence: u64, front: f64) -> pb::SonarFrame {
+    let pose = pb::Pose2 {
+        x: 0.0,
+        y: 0.0,
+        theta: 0.0,
+    };
+    let mut ranges = vec![10.668; 16];
+    ranges[0] = front;
+    pb::SonarFrame {
+        robot: robot.into(),
+        sequence,
+        time_s: sequence as f64 * 0.1,
+        odometry: Some(pose),
+        true_pose: Some(pose),
+        ranges,
+        ..Default::default()
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn keeping_walls_a_reading_that_missed_the_wall_does_not_erase_it() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let server = ServerProcess::start(&dir.path().join("data"), &[]).await;
+    let client = MapClient::connect(ClientConfig::new(server.addr.to_string()))
+        .await
+        .expect("client");
+    // Fifteen echoes off the wall, then twenty readings that glanced off
+    // it and heard something 4 m away.
+    let frames: Vec<_> = (1..=15)
+        .map(|k| facing_wall("r", k, 1.8))
+        .chain((16..=35).map(|k| facing_wall("r", k, 4.0)))
+        .collect();
+    client.publish_frames(frames).await.expect("publish");
+    let wall_belief = |map: &str| {
+        let client = client.clone();
+        let map = map.to_owned();
+        async move {
+            let (_, tiles) = client.download(&map).await.expect("download");
+            let cell = tiles.resolution().cell_of(2.0, 0.0).expect("cell");
+            let behind = tiles.resolution().cell_of(3.0, 0.0).expect("cell");
+            (
+                tiles.get(cell).map(|b| b.probability()),
+                tiles.get(behind).map(|b| b.probability()),
+            )
+        }
+    };
+    let map_to = |map: &str, extra: &[&str]| {
+        let mut args = vec!["--map", map];
+        args.extend_from_slice(extra);
+        let output = Command::new(deog_binary())
+            .args(["map", "--robot", "r", "--idle-exit", "1"])
+            .args(&args)
+            .env("DEOG_SERVER", server.addr.to_string())
+            .env("RUST_LOG", "warn")
+            .output()
+            .expect("run deog map");
+        assert!(
+            output.status.success(),
+            "{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+    };
+    map_to("kept", &[]);
+    map_to("thesis", &["--sonar-method", "thesis"]);
+    let (wall, behind) = wall_belief("kept").await;
+    assert!(wall.is_some_and(|p| p > 0.7), "kept: {wall:?}");
+    assert_eq!(behind, None, "nothing mapped behind a kept wall");
+    let (wall, behind) = wall_belief("thesis").await;
+    assert!(wall.is_some_and(|p| p < 0.5), "thesis: {wall:?}");
+    assert!(behind.is_some(), "the thesis's model maps through the wall");
     drop(server);
 }

@@ -25,6 +25,9 @@ fn start_cartographer(server: &ServerProcess, robot: &str, map: &str, log: &Path
     Command::new(deog_binary())
         .args(["map", "--robot", robot, "--map", map, "--idle-exit", "1"])
         .args(["--max-occupied", &MAX_OCCUPIED.to_string()])
+        // The thesis's method: a frame's deltas then depend on the frame
+        // alone, not on what the other cartographers wrote before it.
+        .args(["--sonar-method", "thesis"])
         .args(["--batch-frames", "1", "--ack-log"])
         .arg(log)
         .env("DEOG_SERVER", server.addr.to_string())

@@ -4,7 +4,7 @@
 
 use anyhow::{Context, Result, bail};
 use deog_grid::{RayModelParams, Resolution, SonarModelParams, TileSize};
-use deog_mapping::{Cartographer, PoseChoice};
+use deog_mapping::{Cartographer, MapViewSettings, PoseChoice, SonarMethod};
 use deog_proto::rig::frame_rig_name;
 use deog_rig::Rig;
 use deog_robot_client::MapClient;
@@ -22,6 +22,10 @@ pub struct ModelSettings {
     pub resolution: Resolution,
     /// The map's tiles.
     pub tile_size: TileSize,
+    /// How sonar readings become evidence.
+    pub method: SonarMethod,
+    /// With [`SonarMethod::KeepWalls`], the view of the map cones stop in.
+    pub view: MapViewSettings,
 }
 
 /// One cartographer, for the rig of the frames seen last.
@@ -82,6 +86,7 @@ fn build(rig: &Rig, s: &ModelSettings) -> Result<Cartographer> {
         Cartographer::with_model(s.resolution, s.tile_size, s.pose, s.sonar)
     } else {
         Cartographer::for_rig(rig, s.pose, s.sonar, s.ray, s.resolution, s.tile_size)
-    };
+    }
+    .and_then(|c| c.with_sonar_method(s.method, rig, &s.sonar, s.view, s.resolution, s.tile_size));
     cartographer.with_context(|| format!("the sensor models for rig {}", rig.name()))
 }

@@ -9,9 +9,11 @@ mod estimates;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use clap::Args;
-use deog_grid::{RayModelParams, Resolution, SonarModelParams, TileSize};
-use deog_mapping::{FrameInput, PoseChoice, mapping_sonar_model};
+use clap::{Args, ValueEnum};
+use deog_grid::{RayModelParams, Resolution, SonarModelParams, TileKey, TileSize};
+use deog_mapping::{
+    FrameInput, MapView, MapViewSettings, PoseChoice, SonarMethod, mapping_sonar_model,
+};
 use deog_proto::names::check_robot_name;
 use deog_proto::v1 as pb;
 use deog_robot_client::convert::{pose_from_wire, pose_or_origin};
@@ -129,8 +131,46 @@ pub struct MapArgs {
     /// frees its ray out to here and adds no hit.
     #[arg(long, default_value_t = RayModelParams::default().max_mapped_range)]
     pub ray_max_mapped_range: f64,
+    /// How sonar readings become evidence: `keep-walls` (the thesis's
+    /// model, each cone stopping at the cells the map already holds as
+    /// walls, so that a reading that glanced off a wall cannot erase it)
+    /// or `thesis` (the thesis's model alone).
+    #[arg(long, value_enum, default_value_t = SonarMethodChoice::KeepWalls)]
+    pub sonar_method: SonarMethodChoice,
+    /// With --sonar-method keep-walls: the probability of occupancy from
+    /// which a cell is a wall that cones stop at.
+    #[arg(long, default_value_t = MapViewSettings::default().wall_probability)]
+    pub wall_probability: f64,
+    /// With --sonar-method keep-walls: tiles of the map kept in memory
+    /// around the robot (least recently used forgotten first; 8 KiB each
+    /// for 64-cell tiles).
+    #[arg(long, default_value_t = MapViewSettings::default().max_tiles)]
+    pub view_tiles: usize,
+    /// With --sonar-method keep-walls: how often the tiles kept are read
+    /// again from the map server, seconds, so that other robots' walls
+    /// count too.
+    #[arg(long, default_value_t = 5.0)]
+    pub view_refresh_s: f64,
     #[command(flatten)]
     pub connection: ConnectionArgs,
+}
+
+/// `deog map --sonar-method`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SonarMethodChoice {
+    /// Cones stop at the walls the map already holds.
+    KeepWalls,
+    /// The thesis's model alone.
+    Thesis,
+}
+
+impl From<SonarMethodChoice> for SonarMethod {
+    fn from(choice: SonarMethodChoice) -> Self {
+        match choice {
+            SonarMethodChoice::KeepWalls => SonarMethod::KeepWalls,
+            SonarMethodChoice::Thesis => SonarMethod::Thesis,
+        }
+    }
 }
 
 /// Tiles a batch may reach before it is sent at the next frame boundary:
@@ -180,6 +220,20 @@ pub fn run(args: MapArgs) -> Result<()> {
         "the laser ray model's options (--hit-probability, --miss-probability, \
          --ray-no-echo-free-range, --ray-max-mapped-range)",
     )?;
+    let view = MapViewSettings {
+        wall_probability: args.wall_probability,
+        max_tiles: args.view_tiles,
+        ..MapViewSettings::default()
+    }
+    .validate()
+    .context("--wall-probability, --view-tiles")?;
+    if !(args.view_refresh_s.is_finite() && args.view_refresh_s > 0.0) {
+        bail!(
+            "--view-refresh-s must be positive, got {}",
+            args.view_refresh_s
+        );
+    }
+    let view_refresh = std::time::Duration::from_secs_f64(args.view_refresh_s);
     let expected_rig = args.rig.as_deref().map(load_rig).transpose()?;
     let client_id = format!("carto/{}", args.robot);
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
@@ -207,6 +261,8 @@ pub fn run(args: MapArgs) -> Result<()> {
             ray,
             resolution,
             tile_size,
+            method: SonarMethod::from(args.sonar_method),
+            view,
         };
         let mut cartographers = CartographerByRig::new(client.clone(), settings, expected_rig);
         let mut sender = client
@@ -257,6 +313,7 @@ pub fn run(args: MapArgs) -> Result<()> {
         let (mut integrated, mut cells, mut last) = (0u64, 0u64, 0u64);
         let mut deltas = Vec::new();
         let mut batch = Vec::new();
+        let mut view_read = Instant::now();
         'follow: loop {
             let first = tokio::select! {
                 () = &mut shutdown => break,
@@ -306,6 +363,18 @@ pub fn run(args: MapArgs) -> Result<()> {
                     ranges: &frame.ranges,
                 };
                 let cartographer = cartographers.for_frame(&frame.rig, frame.sequence).await?;
+                if let Some(view) = cartographer.view_mut() {
+                    if view_read.elapsed() >= view_refresh {
+                        // Read again what other writers changed.
+                        view.clear();
+                        view_read = Instant::now();
+                    }
+                }
+                let missing = cartographer.missing_tiles(&input)?;
+                if !missing.is_empty() {
+                    let view = cartographer.view_mut().expect("tiles are missing from a view");
+                    fill_view(&client, &args.map, tile_size, view, &missing).await?;
+                }
                 cells += cartographer.integrate(&input, &mut deltas)? as u64;
                 for delta in deltas.drain(..) {
                     sender.push(delta).await?;
@@ -352,6 +421,30 @@ pub fn run(args: MapArgs) -> Result<()> {
     })
 }
 
+/// Reads the tiles `keys` of `map` into `view`; those the server lacks
+/// are unknown everywhere.
+async fn fill_view(
+    client: &MapClient,
+    map: &str,
+    tile_size: TileSize,
+    view: &mut MapView,
+    keys: &[TileKey],
+) -> Result<()> {
+    let tiles = client
+        .tiles_by_key(map, tile_size, keys)
+        .await
+        .with_context(|| format!("reading {} tiles of map {map} around the robot", keys.len()))?;
+    let mut found = std::collections::HashSet::with_capacity(tiles.len());
+    for (key, _, tile) in tiles {
+        found.insert(key);
+        view.insert(key, tile)?;
+    }
+    for &key in keys.iter().filter(|key| !found.contains(key)) {
+        view.insert_unknown(key)?;
+    }
+    Ok(())
+}
+
 /// Sends the batch being filled under `sequence`; with an ack log, waits
 /// for its acknowledgement and writes it down.
 async fn send(
@@ -363,9 +456,10 @@ async fn send(
     if sender.pending_tiles() == 0 {
         return Ok(());
     }
+    // Read before sending: the acknowledgement may arrive at once.
+    let before = sender.acks();
     sender.send_batch_as(sequence).await?;
     if let Some(log) = ack_log {
-        let before = sender.acks();
         let after = sender.flush().await?;
         writeln!(
             log,

@@ -18,7 +18,7 @@ pub mod sonar_cone;
 pub use rig_beams::RigBeams;
 pub use sonar_cone::SonarCone;
 
-use deog_grid::{GridError, Pose2, TileDelta};
+use deog_grid::{GridError, OccupancyView, Pose2, TileDelta};
 
 /// One frame of readings at a pose to per-tile log-odds deltas.
 pub trait InverseSensorModel: std::fmt::Debug + Send {
@@ -35,4 +35,18 @@ pub trait InverseSensorModel: std::fmt::Debug + Send {
         readings: &[f64],
         out: &mut Vec<TileDelta>,
     ) -> Result<usize, GridError>;
+
+    /// [`Self::integrate`] guarded by the map being written: a sensor
+    /// whose evidence should stop at known walls (a sonar cone) stops
+    /// there; by default the guard is ignored.
+    fn integrate_guarded(
+        &mut self,
+        robot: &Pose2,
+        readings: &[f64],
+        walls: &dyn OccupancyView,
+        out: &mut Vec<TileDelta>,
+    ) -> Result<usize, GridError> {
+        let _ = walls;
+        self.integrate(robot, readings, out)
+    }
 }

@@ -13,8 +13,8 @@
 //! what the rig calls no echo is mapped as no echo.
 
 use deog_grid::{
-    BeamFrameIntegrator, BeamModel, BeamReading, FrameBeam, GridError, Pose2, RayModel,
-    RayModelParams, Resolution, SonarModel, SonarModelParams, TileDelta, TileSize,
+    BeamFrameIntegrator, BeamModel, BeamReading, FrameBeam, GridError, OccupancyView, Pose2,
+    RayModel, RayModelParams, Resolution, SonarModel, SonarModelParams, TileDelta, TileSize,
 };
 use deog_rig::{Beam, Reading, Rig, SensorKind};
 
@@ -134,6 +134,28 @@ impl InverseSensorModel for RigBeams {
         readings: &[f64],
         out: &mut Vec<TileDelta>,
     ) -> Result<usize, GridError> {
+        self.judge_all(readings)?;
+        Ok(self.integrator.integrate(robot, &self.judged, out)?.cells)
+    }
+
+    fn integrate_guarded(
+        &mut self,
+        robot: &Pose2,
+        readings: &[f64],
+        walls: &dyn OccupancyView,
+        out: &mut Vec<TileDelta>,
+    ) -> Result<usize, GridError> {
+        self.judge_all(readings)?;
+        Ok(self
+            .integrator
+            .integrate_guarded(robot, &self.judged, walls, out)?
+            .cells)
+    }
+}
+
+impl RigBeams {
+    /// Judges a frame's readings into `self.judged`, one per beam.
+    fn judge_all(&mut self, readings: &[f64]) -> Result<(), GridError> {
         if readings.len() != self.rig.readings() {
             return Err(GridError::WrongReadingCount {
                 expected: self.rig.readings(),
@@ -145,7 +167,7 @@ impl InverseSensorModel for RigBeams {
             let judged = judge(beam, value).ok_or(GridError::BadReading { index, value })?;
             self.judged.push(judged);
         }
-        Ok(self.integrator.integrate(robot, &self.judged, out)?.cells)
+        Ok(())
     }
 }
 

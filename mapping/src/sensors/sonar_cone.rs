@@ -3,8 +3,8 @@
 //! one delta per cell per frame ([`deog_grid::FrameIntegrator`]).
 
 use deog_grid::{
-    FrameIntegrator, GridError, Pose2, Resolution, SensorRing, SonarModel, SonarModelParams,
-    TileDelta, TileSize,
+    FrameIntegrator, GridError, OccupancyView, Pose2, Resolution, SensorRing, SonarModel,
+    SonarModelParams, TileDelta, TileSize,
 };
 
 use crate::sensors::InverseSensorModel;
@@ -43,5 +43,18 @@ impl InverseSensorModel for SonarCone {
         out: &mut Vec<TileDelta>,
     ) -> Result<usize, GridError> {
         Ok(self.integrator.integrate(robot, readings, out)?.cells)
+    }
+
+    fn integrate_guarded(
+        &mut self,
+        robot: &Pose2,
+        readings: &[f64],
+        walls: &dyn OccupancyView,
+        out: &mut Vec<TileDelta>,
+    ) -> Result<usize, GridError> {
+        Ok(self
+            .integrator
+            .integrate_guarded(robot, readings, walls, out)?
+            .cells)
     }
 }
