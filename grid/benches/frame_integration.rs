@@ -5,7 +5,10 @@
 //! `fast` is [`FrameIntegrator`]: row-clipped cones, tabled deltas, a dense
 //! scratch buffer. `baseline` is the plain way: every cell of each cone's
 //! bounding box, angle by atan2, delta by ln, cells combined in a hash map
-//! and grouped into tiles afterwards. Run with
+//! and grouped into tiles afterwards. `guarded` is
+//! [`FrameIntegrator::integrate_guarded`] with the room itself as the map
+//! the cones stop at (the keep-walls method once the walls are known:
+//! every cone that reaches a wall walks its cells twice). Run with
 //! `cargo bench -p deog-grid --bench frame_integration`.
 
 use std::collections::HashMap;
@@ -106,6 +109,7 @@ fn bench(c: &mut Criterion) {
     let ring = SensorRing::scout();
     let size = TileSize::DEFAULT;
     let frames = frames(&model, &ring);
+    let walls = room();
     let mut integrator =
         FrameIntegrator::new(model.clone(), ring.clone(), Resolution::DEFAULT, size);
 
@@ -133,6 +137,18 @@ fn bench(c: &mut Criterion) {
                 for (pose, ranges) in &frames {
                     out.clear();
                     black_box(integrator.integrate(pose, ranges, &mut out).unwrap());
+                }
+            })
+        });
+        group.bench_function("guarded", |b| {
+            b.iter(|| {
+                for (pose, ranges) in &frames {
+                    out.clear();
+                    black_box(
+                        integrator
+                            .integrate_guarded(pose, ranges, &walls, &mut out)
+                            .unwrap(),
+                    );
                 }
             })
         });
