@@ -206,14 +206,11 @@ struct Mount {
 }
 
 /// One sonar in the world for one frame: its position and the directions of
-/// its axis and its wedge's two edges, world frame.
+/// its wedge's two edges, world frame.
 #[derive(Debug, Clone, Copy, Default)]
 struct Wedge {
     x: f64,
     y: f64,
-    /// The axis, a unit vector.
-    ux: f64,
-    uy: f64,
     /// The right (clockwise) edge; inside is to its left.
     rx: f64,
     ry: f64,
@@ -390,7 +387,7 @@ impl SonarRing {
             *r = (w.x - center.x).hypot(w.y - center.y) * (1.0 + 1e-9) + 1e-9;
         }
         let reach = radii.iter().copied().fold(0.0, f64::max);
-        self.echoes_from(index, &wedges, center, &radii, reach, out);
+        self.echoes_from(index, &wedges, center, |i| radii[i], reach, out);
         self.finish(rng, out);
         Ok(())
     }
@@ -417,6 +414,8 @@ impl SonarRing {
     /// With probability `crosstalk_probability` (one draw per sonar, in
     /// ring order), a sonar hears the shorter of its two ring neighbours'
     /// echoes when it beats its own: that echo arrives first.
+    #[cold]
+    #[inline(never)]
     fn crosstalk<R: Rng + ?Sized>(&self, rng: &mut R, out: &mut [f64]) {
         let n = out.len();
         let mut own = [0.0; MAX_SONARS];
@@ -463,29 +462,26 @@ impl SonarRing {
         check_finite(pose)?;
         self.check_out(out)?;
         let wedges = self.wedges(pose);
-        let mut radii = [0.0; MAX_SONARS];
-        for (r, m) in radii.iter_mut().zip(&self.mounts) {
-            *r = m.radius;
-        }
         let center = Point2::new(pose.x, pose.y);
-        self.echoes_from(index, &wedges, center, &radii, self.reach, out);
+        let radius = |i: usize| self.mounts[i].radius;
+        self.echoes_from(index, &wedges, center, radius, self.reach, out);
         Ok(())
     }
 
     /// Each sonar's nearest echo from its wedge, unclamped, or `max_range`
-    /// for none. Sensor `i` lies within `radii[i]` of `center`, and every
+    /// for none. Sensor `i` lies within `radius(i)` of `center`, and every
     /// sensor within `reach`.
     fn echoes_from(
         &self,
         index: &SegmentIndex,
         wedges: &[Wedge; MAX_SONARS],
         center: Point2,
-        radii: &[f64; MAX_SONARS],
+        radius: impl Fn(usize) -> f64,
         reach: f64,
         out: &mut [f64],
     ) {
         if !matches!(self.params.specular, Specular::Off) {
-            self.occluded_echoes(index, wedges, center, radii, reach, out);
+            self.occluded_echoes(index, wedges, center, radius, reach, out);
             return;
         }
         let n = self.mounts.len();
@@ -503,7 +499,7 @@ impl SonarRing {
                     mask &= mask - 1;
                     // The sensor is within `radius` of the centre: a wall at
                     // least best + radius from the centre cannot beat best.
-                    let bound = best[i] + radii[i];
+                    let bound = best[i] + radius(i);
                     if dc2 < bound * bound {
                         best[i] = best[i].min(self.echo(&wedges[i], wall, best[i]));
                     }
@@ -515,7 +511,7 @@ impl SonarRing {
                 while mask != 0 {
                     let i = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
-                    if best[i] + radii[i] <= cleared {
+                    if best[i] + radius(i) <= cleared {
                         active &= !(1u64 << i);
                     }
                 }
@@ -548,8 +544,6 @@ impl SonarRing {
         Wedge {
             x: pose.x + cos * m.x - sin * m.y,
             y: pose.y + sin * m.x + cos * m.y,
-            ux,
-            uy,
             rx: ux * ch + uy * sh,
             ry: uy * ch - ux * sh,
             lx: ux * ch - uy * sh,
@@ -560,16 +554,57 @@ impl SonarRing {
     /// The echo `wall` gives the sonar `s`, if it beats `best`: the
     /// distance to the nearest point of the wall inside the wedge, times the
     /// specular factor when struck at a grazing angle; infinity for none.
+    /// The same clipping as [`nearest_in_wedge`], written out: this is the
+    /// hot loop of a frame without specular loss, kept as it was measured.
     #[inline]
     fn echo(&self, s: &Wedge, wall: &Segment, best: f64) -> f64 {
-        let Some(near) = nearest_in_wedge(s, wall) else {
+        let (ax, ay) = (wall.a.x - s.x, wall.a.y - s.y);
+        let (bx, by) = (wall.b.x - s.x, wall.b.y - s.y);
+        // Signed sides of each edge: >= 0 is the wedge's side. For a
+        // half-angle below 90° the two half-planes meet in the wedge alone.
+        let (fa1, fb1) = (s.rx * ay - s.ry * ax, s.rx * by - s.ry * bx);
+        let (fa2, fb2) = (ax * s.ly - ay * s.lx, bx * s.ly - by * s.lx);
+        if (fa1 < 0.0 && fb1 < 0.0) || (fa2 < 0.0 && fb2 < 0.0) {
             return f64::INFINITY;
+        }
+        // Clip the parameter range of a + t (b - a) to both half-planes.
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        if fa1 < 0.0 {
+            t0 = fa1 / (fa1 - fb1);
+        } else if fb1 < 0.0 {
+            t1 = fa1 / (fa1 - fb1);
+        }
+        if fa2 < 0.0 {
+            t0 = t0.max(fa2 / (fa2 - fb2));
+        } else if fb2 < 0.0 {
+            t1 = t1.min(fa2 / (fa2 - fb2));
+        }
+        if t0 > t1 {
+            // The wall crosses both edges' lines behind the sensor.
+            return f64::INFINITY;
+        }
+        let (dx, dy) = (bx - ax, by - ay);
+        let dd = dx * dx + dy * dy;
+        // The foot of the perpendicular from the sensor, as a parameter.
+        let foot = if dd > 0.0 {
+            -(ax * dx + ay * dy) / dd
+        } else {
+            0.0
         };
-        if near.grazing(self.cos2_incidence) {
-            let long = near.d2.sqrt() * self.specular_factor;
+        let t = foot.max(t0).min(t1);
+        let (qx, qy) = (ax + t * dx, ay + t * dy);
+        let d2 = qx * qx + qy * qy;
+        // Incidence is 0 at the foot; elsewhere cos(incidence) =
+        // |d × q| / (|d| |q|). Compared squared, so no root, no atan2.
+        let grazing = t != foot && {
+            let cross = dx * qy - dy * qx;
+            cross * cross < self.cos2_incidence * dd * d2
+        };
+        if grazing {
+            let long = d2.sqrt() * self.specular_factor;
             if long < best { long } else { f64::INFINITY }
-        } else if near.d2 < best * best {
-            near.d2.sqrt()
+        } else if d2 < best * best {
+            d2.sqrt()
         } else {
             f64::INFINITY
         }
@@ -616,7 +651,7 @@ impl Nearest {
 }
 
 /// The nearest point of `wall` inside the wedge `s`, if any of the wall
-/// lies inside it.
+/// lies inside it. Only the specular path uses it ([`occlusion`]).
 #[inline]
 fn nearest_in_wedge(s: &Wedge, wall: &Segment) -> Option<Nearest> {
     let (ax, ay) = (wall.a.x - s.x, wall.a.y - s.y);

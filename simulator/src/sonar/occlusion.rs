@@ -76,17 +76,25 @@ const NO_HIT: FirstHit = FirstHit {
 impl SonarRing {
     /// Each sonar's echo from its wedge with grazed walls hiding what lies
     /// behind them, unclamped, or `max_range` for none. Sensor `i` lies
-    /// within `radii[i]` of `center`, and every sensor within `reach`.
+    /// within `radius(i)` of `center`, and every sensor within `reach`.
+    // Kept out of the frame without specular loss, which it would slow.
+    #[inline(never)]
     pub(super) fn occluded_echoes(
         &self,
         index: &SegmentIndex,
         wedges: &[Wedge; MAX_SONARS],
         center: Point2,
-        radii: &[f64; MAX_SONARS],
+        radius: impl Fn(usize) -> f64,
         reach: f64,
         out: &mut [f64],
     ) {
         let n = self.mounts.len();
+        // Each sonar's axis, halfway between its wedge's edges.
+        let mut axes = [(0.0, 0.0); MAX_SONARS];
+        for (axis, w) in axes.iter_mut().zip(&wedges[..n]) {
+            let scale = 0.5 / self.cos_half;
+            *axis = ((w.rx + w.lx) * scale, (w.ry + w.ly) * scale);
+        }
         let rays = self.fan.len();
         let max_range = self.params.max_range;
         let mut hits = vec![NO_HIT; n * rays];
@@ -103,11 +111,12 @@ impl SonarRing {
                 while mask != 0 {
                     let i = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
-                    let bound = far[i] + radii[i];
+                    let bound = far[i] + radius(i);
                     let s = &wedges[i];
                     if dc2 < bound * bound && nearest_in_wedge(s, wall).is_some() {
                         walls[i].push(wall);
-                        self.cast_fan(s, wall, &mut hits[i * rays..(i + 1) * rays]);
+                        let fan_hits = &mut hits[i * rays..(i + 1) * rays];
+                        self.cast_fan(s, axes[i], wall, fan_hits);
                     }
                 }
                 ControlFlow::Continue(())
@@ -123,7 +132,7 @@ impl SonarRing {
                     // Every unvisited wall is farther than `cleared` from
                     // the centre, so farther than cleared - radius from
                     // the sensor: past every ray's first hit.
-                    if far[i] + radii[i] <= cleared {
+                    if far[i] + radius(i) <= cleared {
                         active &= !(1u64 << i);
                     }
                 }
@@ -144,13 +153,14 @@ impl SonarRing {
     }
 
     /// Lowers each ray's first hit in `hits` to where it meets `wall`, if
-    /// nearer.
-    fn cast_fan(&self, s: &Wedge, wall: &Segment, hits: &mut [FirstHit]) {
+    /// nearer, for the sonar of wedge `s` whose axis is the unit vector
+    /// `(ux, uy)`.
+    fn cast_fan(&self, s: &Wedge, (ux, uy): (f64, f64), wall: &Segment, hits: &mut [FirstHit]) {
         let p = (wall.a.x - s.x, wall.a.y - s.y);
         let (ex, ey) = (wall.b.x - wall.a.x, wall.b.y - wall.a.y);
         let ee = ex * ex + ey * ey;
         for (&(cos, sin), hit) in self.fan.iter().zip(hits.iter_mut()) {
-            let (dx, dy) = (s.ux * cos - s.uy * sin, s.uy * cos + s.ux * sin);
+            let (dx, dy) = (ux * cos - uy * sin, uy * cos + ux * sin);
             let Some(distance) = ray_hits(dx, dy, p, ex, ey) else {
                 continue;
             };
@@ -236,8 +246,10 @@ impl SonarRing {
             .iter()
             .filter(|w| nearest_in_wedge(s, w).is_some())
             .collect();
+        let scale = 0.5 / self.cos_half;
+        let axis = ((s.rx + s.lx) * scale, (s.ry + s.ly) * scale);
         for wall in &inside {
-            self.cast_fan(s, wall, &mut hits);
+            self.cast_fan(s, axis, wall, &mut hits);
         }
         let max_range = self.params.max_range;
         let far = hits
