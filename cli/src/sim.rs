@@ -5,7 +5,8 @@ use clap::{Args, ValueEnum};
 use deog_simulator::deog_rig::{BUILT_IN_RIGS, Rig, RigError, load_rig_spec};
 use deog_simulator::serve::{SimServeConfig, serve_sim};
 use deog_simulator::simulation::{SimConfig, Simulation};
-use deog_simulator::sonar::Specular;
+use deog_simulator::sonar::{SonarParams, Specular};
+use deog_simulator::{SonarFiring, SonarPreset};
 use deog_world::load_world_spec;
 use std::net::SocketAddr;
 
@@ -18,6 +19,15 @@ pub enum SpecularMode {
     Lost,
     /// The echo comes back long.
     Long,
+}
+
+/// When the sonars of a frame fire.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FiringMode {
+    /// All at once, at the frame's pose.
+    Together,
+    /// One at a time in ring order, spread over the sensor period.
+    Sequential,
 }
 
 /// Options of `deog sim`.
@@ -45,21 +55,38 @@ pub struct SimArgs {
     /// robots'.
     #[arg(long, env = "DEOG_RIG", default_value = deog_simulator::deog_rig::DEFAULT_RIG)]
     pub rig: String,
-    /// Sonar range noise, a fraction of the range (uniform ±).
-    #[arg(long, default_value_t = 0.01)]
-    pub sonar_noise: f64,
-    /// Specular reflection past --specular-angle.
-    #[arg(long, value_enum, default_value_t = SpecularMode::Off)]
-    pub specular: SpecularMode,
-    /// Incidence angle past which specular reflection sets in, degrees.
-    #[arg(long, default_value_t = 60.0)]
-    pub specular_angle: f64,
-    /// How much longer a specular echo comes back (with --specular long).
-    #[arg(long, default_value_t = 1.5)]
-    pub specular_factor: f64,
-    /// Probability that a sonar reading is lost (reads the maximum range).
-    #[arg(long, default_value_t = 0.0)]
-    pub dropout: f64,
+    /// The sonar's figures: default (every wall echoes), realistic
+    /// (echoes lost past 30° of incidence, 2 % dropouts, 1 % crosstalk,
+    /// sequential firing) or specular60 (lost past 60°, 2 % dropouts).
+    /// The sonar flags below, when given, change the preset's figures.
+    #[arg(long, default_value_t = SonarPreset::Default)]
+    pub sonar: SonarPreset,
+    /// Sonar range noise, a fraction of the range (uniform ±) [preset: 0.01].
+    #[arg(long)]
+    pub sonar_noise: Option<f64>,
+    /// Specular reflection past --specular-angle [preset: off].
+    #[arg(long, value_enum)]
+    pub specular: Option<SpecularMode>,
+    /// Incidence angle past which specular reflection sets in, degrees
+    /// [preset's, or 60].
+    #[arg(long)]
+    pub specular_angle: Option<f64>,
+    /// How much longer a specular echo comes back (with --specular long)
+    /// [preset's, or 1.5].
+    #[arg(long)]
+    pub specular_factor: Option<f64>,
+    /// Probability that a sonar reading is lost (reads the maximum range)
+    /// [preset: 0].
+    #[arg(long)]
+    pub dropout: Option<f64>,
+    /// Probability that a sonar hears a ring neighbour's shorter echo
+    /// instead of its own [preset: 0].
+    #[arg(long)]
+    pub crosstalk: Option<f64>,
+    /// When the sonars of a frame fire: together, or one at a time in ring
+    /// order over the sensor period [preset: together].
+    #[arg(long, value_enum)]
+    pub sonar_firing: Option<FiringMode>,
     /// Laser range noise: standard deviation, metres (Gaussian).
     #[arg(long, default_value_t = 0.01)]
     pub laser_noise: f64,
@@ -97,29 +124,65 @@ pub fn sim_config(args: &SimArgs) -> Result<SimConfig> {
     };
     config.laser.noise_sigma = args.laser_noise;
     config.laser.validate().context("--laser-noise")?;
-    config.sonar.noise_fraction = args.sonar_noise;
-    config.sonar.dropout_probability = args.dropout;
-    if !(0.0..=90.0).contains(&args.specular_angle) {
-        bail!(
-            "--specular-angle must be within 0 to 90 degrees, got {}",
-            args.specular_angle
-        );
-    }
-    let max_incidence = args.specular_angle.to_radians();
-    config.sonar.specular = match args.specular {
-        SpecularMode::Off => Specular::Off,
-        SpecularMode::Lost => Specular::Lost { max_incidence },
-        SpecularMode::Long => Specular::Long {
-            max_incidence,
-            factor: args.specular_factor,
-        },
-    };
-    config.sonar.validate().context("sonar options")?;
+    config.sonar = sonar_params(args)?;
     config.odometry = config
         .odometry
         .scaled(args.odometry_noise)
         .context("--odometry-noise")?;
     Ok(config)
+}
+
+/// The sonar figures: `--sonar`'s preset, then each sonar flag given.
+pub fn sonar_params(args: &SimArgs) -> Result<SonarParams> {
+    let mut sonar = args.sonar.params();
+    if let Some(noise) = args.sonar_noise {
+        sonar.noise_fraction = noise;
+    }
+    if let Some(dropout) = args.dropout {
+        sonar.dropout_probability = dropout;
+    }
+    if let Some(crosstalk) = args.crosstalk {
+        sonar.crosstalk_probability = crosstalk;
+    }
+    if let Some(firing) = args.sonar_firing {
+        sonar.firing = match firing {
+            FiringMode::Together => SonarFiring::Together,
+            FiringMode::Sequential => SonarFiring::Sequential,
+        };
+    }
+    if let Some(angle) = args.specular_angle.filter(|a| !(0.0..=90.0).contains(a)) {
+        bail!("--specular-angle must be within 0 to 90 degrees, got {angle}");
+    }
+    // The preset's figures where no flag gives them.
+    let (preset_incidence, preset_factor) = match sonar.specular {
+        Specular::Off => (None, None),
+        Specular::Lost { max_incidence } => (Some(max_incidence), None),
+        Specular::Long {
+            max_incidence,
+            factor,
+        } => (Some(max_incidence), Some(factor)),
+    };
+    let max_incidence = args
+        .specular_angle
+        .map(f64::to_radians)
+        .or(preset_incidence)
+        .unwrap_or(60f64.to_radians());
+    let factor = args.specular_factor.or(preset_factor).unwrap_or(1.5);
+    let mode = args.specular.unwrap_or(match sonar.specular {
+        Specular::Off => SpecularMode::Off,
+        Specular::Lost { .. } => SpecularMode::Lost,
+        Specular::Long { .. } => SpecularMode::Long,
+    });
+    sonar.specular = match mode {
+        SpecularMode::Off => Specular::Off,
+        SpecularMode::Lost => Specular::Lost { max_incidence },
+        SpecularMode::Long => Specular::Long {
+            max_incidence,
+            factor,
+        },
+    };
+    sonar.validate().context("sonar options")?;
+    Ok(sonar)
 }
 
 /// Runs the simulator until ctrl-c or SIGTERM.
@@ -156,4 +219,95 @@ pub fn run(args: SimArgs) -> Result<()> {
         serve_sim(sim, listener, serve_config, deog_harness::shutdown_signal()).await?;
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: SimArgs,
+    }
+
+    fn sonar(args: &[&str]) -> Result<SonarParams> {
+        let cli = Cli::try_parse_from(std::iter::once("sim").chain(args.iter().copied()))?;
+        sonar_params(&cli.args)
+    }
+
+    #[test]
+    fn the_default_preset_is_the_default_sonar() {
+        assert_eq!(sonar(&[]).expect("valid"), SonarParams::default());
+        assert_eq!(
+            sonar(&["--sonar", "default"]).expect("valid"),
+            SonarParams::default()
+        );
+        // --specular-angle alone leaves specular loss off, as before.
+        assert_eq!(
+            sonar(&["--specular-angle", "30"]).expect("valid"),
+            SonarParams::default()
+        );
+        let lost = sonar(&["--specular", "lost"]).expect("valid");
+        assert_eq!(
+            lost.specular,
+            Specular::Lost {
+                max_incidence: 60f64.to_radians()
+            }
+        );
+    }
+
+    #[test]
+    fn the_realistic_preset_and_flags_that_change_it() {
+        assert_eq!(
+            sonar(&["--sonar", "realistic"]).expect("valid"),
+            SonarParams::realistic()
+        );
+        let changed = sonar(&[
+            "--sonar",
+            "realistic",
+            "--specular-angle",
+            "40",
+            "--dropout",
+            "0",
+            "--crosstalk",
+            "0.5",
+            "--sonar-firing",
+            "together",
+        ])
+        .expect("valid");
+        assert_eq!(
+            changed.specular,
+            Specular::Lost {
+                max_incidence: 40f64.to_radians()
+            }
+        );
+        assert_eq!(changed.dropout_probability, 0.0);
+        assert_eq!(changed.crosstalk_probability, 0.5);
+        assert_eq!(changed.firing, SonarFiring::Together);
+        let long = sonar(&["--sonar", "realistic", "--specular", "long"]).expect("valid");
+        assert_eq!(
+            long.specular,
+            Specular::Long {
+                max_incidence: 30f64.to_radians(),
+                factor: 1.5
+            }
+        );
+        let off = sonar(&["--sonar", "realistic", "--specular", "off"]).expect("valid");
+        assert_eq!(off.specular, Specular::Off);
+    }
+
+    #[test]
+    fn bad_sonar_options_are_refused() {
+        assert!(sonar(&["--sonar", "loud"]).is_err());
+        assert!(sonar(&["--specular-angle", "100"]).is_err());
+        let err = sonar(&["--crosstalk", "2"]).expect_err("out of range");
+        assert!(
+            format!("{err:#}").contains("crosstalk_probability"),
+            "{err:#}"
+        );
+        assert!(sonar(&["--dropout", "-1"]).is_err());
+    }
 }

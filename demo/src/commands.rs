@@ -9,6 +9,7 @@ use std::path::Path;
 use deog_harness::os;
 
 use crate::plan::{DemoPlan, PlannedRobot};
+use deog_simulator::SonarPreset;
 
 /// The name of the shared map on the server.
 pub(crate) const MAP: &str = "demo";
@@ -45,8 +46,15 @@ pub(crate) fn server(addresses: &Addresses, data: &Path) -> Vec<OsString> {
         .collect()
 }
 
-/// The simulator, with the plan's world, speed and seed.
+/// The simulator, with the plan's world, speed, seed, rig and sonar (no
+/// flag for the default sonar).
 pub(crate) fn sim(plan: &DemoPlan, addresses: &Addresses) -> Vec<OsString> {
+    let sonar = [OsString::from("--sonar"), OsString::from(plan.sonar.name())];
+    let sonar = if plan.sonar == SonarPreset::Default {
+        &sonar[..0]
+    } else {
+        &sonar[..]
+    };
     os(&[
         "sim",
         "--world",
@@ -60,6 +68,9 @@ pub(crate) fn sim(plan: &DemoPlan, addresses: &Addresses) -> Vec<OsString> {
         "--rig",
         &plan.rig_spec,
     ])
+    .into_iter()
+    .chain(sonar.iter().cloned())
+    .collect()
 }
 
 /// A wanderer that spawns `robot` and drives it for the plan's duration.
@@ -99,8 +110,17 @@ pub(crate) fn map(robot: &PlannedRobot, addresses: &Addresses) -> Vec<OsString> 
     ])
 }
 
-/// A localizer for `robot` on the shared map, with no initial pose.
-pub(crate) fn localize(robot: &PlannedRobot, addresses: &Addresses) -> Vec<OsString> {
+/// A localizer for `robot` on the shared map, with no initial pose,
+/// expecting no echo past the plan's sonar's specular angle, if any.
+pub(crate) fn localize(
+    plan: &DemoPlan,
+    robot: &PlannedRobot,
+    addresses: &Addresses,
+) -> Vec<OsString> {
+    let specular: Vec<OsString> = match plan.sonar.specular_angle_deg() {
+        Some(angle) => os(&["--specular-angle", &angle.to_string()]),
+        None => Vec::new(),
+    };
     os(&[
         "localize",
         "--robot",
@@ -114,6 +134,9 @@ pub(crate) fn localize(robot: &PlannedRobot, addresses: &Addresses) -> Vec<OsStr
         "--server",
         &addresses.server_url(),
     ])
+    .into_iter()
+    .chain(specular)
+    .collect()
 }
 
 #[cfg(test)]
@@ -164,9 +187,28 @@ mod tests {
             "map --robot scout-2 --map demo --idle-exit 3 --server http://127.0.0.1:5001"
         );
         assert_eq!(
-            line(&localize(robot, &addresses)),
+            line(&localize(&plan, robot, &addresses)),
             "localize --robot scout-2 --map demo --idle-exit 3 --seed 2002 \
              --server http://127.0.0.1:5001"
+        );
+    }
+
+    #[test]
+    fn a_realistic_sonar_goes_to_the_simulator_and_its_angle_to_the_localizers() {
+        let plan = plan(&["--sonar", "realistic"]).expect("valid options");
+        let addresses = Addresses {
+            server: "127.0.0.1:5001".parse().expect("address"),
+            sim: "127.0.0.1:5002".parse().expect("address"),
+        };
+        assert_eq!(
+            line(&sim(&plan, &addresses)),
+            "sim --world map2 --listen 127.0.0.1:5002 --speed 4 --seed 1 --rig scout \
+             --sonar realistic"
+        );
+        assert_eq!(
+            line(&localize(&plan, &plan.robots[0], &addresses)),
+            "localize --robot scout-1 --map demo --idle-exit 3 --seed 1001 \
+             --server http://127.0.0.1:5001 --specular-angle 30"
         );
     }
 }

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::{Result, bail};
 use clap::Args;
+use deog_simulator::SonarPreset;
 
 /// The most robots a demo runs: each brings three processes.
 pub(crate) const MAX_ROBOTS: u32 = 8;
@@ -21,6 +22,12 @@ pub struct DemoOptions {
     /// laser180) or a rig file.
     #[arg(long, default_value = deog_simulator::deog_rig::DEFAULT_RIG)]
     pub rig: String,
+    /// The simulated sonar: default (every wall echoes), realistic (echoes
+    /// lost past 30° of incidence, 2 % dropouts, 1 % crosstalk, sequential
+    /// firing) or specular60 (lost past 60°, 2 % dropouts). With specular
+    /// loss the localizers are told its angle (`--specular-angle`).
+    #[arg(long, default_value_t = SonarPreset::Default)]
+    pub sonar: SonarPreset,
     /// Robots in the world, each with its wanderer, cartographer and
     /// localizer (1 to 8).
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=i64::from(MAX_ROBOTS)))]
@@ -133,6 +140,12 @@ mod tests {
         assert_eq!(options.robots, 3);
         assert_eq!(options.seed, 1);
         assert_eq!(options.out, PathBuf::from("demo-out"));
+        assert_eq!(options.sonar, SonarPreset::Default);
+        assert_eq!(
+            parse(&["--sonar", "realistic"]).expect("valid").sonar,
+            SonarPreset::Realistic
+        );
+        assert!(parse(&["--sonar", "loud"]).is_err());
         assert!(!options.keep && !options.no_kidnap);
         let schedule = options.schedule().expect("the defaults are valid");
         assert_eq!(

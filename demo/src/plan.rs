@@ -6,6 +6,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
+use deog_simulator::SonarPreset;
 use deog_simulator::deog_rig::{Rig, load_rig_spec};
 use deog_world::{World, load_world_spec};
 
@@ -31,6 +32,9 @@ pub(crate) struct DemoPlan {
     pub rig_spec: String,
     /// That rig, loaded: the map's judging takes the robots' size from it.
     pub rig: Rig,
+    /// The simulated sonar, handed on to the simulator (and its specular
+    /// angle to the localizers).
+    pub sonar: SonarPreset,
     /// The robots, in order; the first is the one kidnapped.
     pub robots: Vec<PlannedRobot>,
     /// Seed of the simulator and the kidnap.
@@ -59,6 +63,7 @@ impl DemoPlan {
             world_spec: options.world.clone(),
             world,
             rig_spec: options.rig.clone(),
+            sonar: options.sonar,
             robots: (1..=options.robots)
                 .map(|i| PlannedRobot {
                     name: format!("{}-{i}", rig.name()),

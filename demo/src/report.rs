@@ -48,6 +48,9 @@ pub struct DemoReport {
     pub world: String,
     /// The demo's seed (`--seed`).
     pub seed: u64,
+    /// The simulated sonar's preset (`--sonar`): `default`, `realistic`
+    /// or `specular60`.
+    pub sonar: String,
     /// Simulated second the localizers started.
     pub localize_at_s: f64,
     /// The kidnap; `null` when nobody was kidnapped.
@@ -84,6 +87,7 @@ impl DemoReport {
             speed: plan.schedule.speed,
             world: plan.world.name().to_string(),
             seed: plan.seed,
+            sonar: plan.sonar.name().to_string(),
             localize_at_s: plan.schedule.localize_at_s,
             kidnap: outcome.kidnap.map(|k| DemoKidnapRecord {
                 robot: k.robot.clone(),
@@ -151,10 +155,12 @@ mod tests {
                 "speed",
                 "world",
                 "seed",
+                "sonar",
                 "localize_at_s",
                 "kidnap"
             ])
         );
+        assert_eq!(json["sonar"], "default");
         assert_eq!(json["duration_s"], 80.5);
         assert_eq!(json["simulated_s"], 100.0);
         assert_eq!(json["speed"], 4.0);

@@ -167,7 +167,7 @@ impl Demo<'_> {
                     self.children.start(
                         &format!("localize-{}", robot.name),
                         Role::Task,
-                        &commands::localize(robot, &self.addresses),
+                        &commands::localize(plan, robot, &self.addresses),
                     )?;
                 }
                 localizing = true;

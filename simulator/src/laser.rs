@@ -378,7 +378,7 @@ fn cast(scan: &Scan, frame: &Frame, wall: &Segment, best: &mut [f64]) {
 /// Where the ray from the origin along (dx, dy) (a unit vector) meets the
 /// segment from `p` along (ex, ey): its distance, if it does.
 #[inline]
-fn ray_hits(dx: f64, dy: f64, p: (f64, f64), ex: f64, ey: f64) -> Option<f64> {
+pub(crate) fn ray_hits(dx: f64, dy: f64, p: (f64, f64), ex: f64, ey: f64) -> Option<f64> {
     let denom = dx * ey - dy * ex;
     let cross_pd = p.0 * dy - p.1 * dx;
     if denom == 0.0 {

@@ -8,7 +8,12 @@
 //!
 //! # Layout
 //! - [`sonar`]: [`SonarRing`], each sonar's nearest echo inside its cone,
-//!   with noise, specular loss ([`Specular`]) and dropouts ([`SonarParams`]).
+//!   with noise, specular loss ([`Specular`]; a grazed wall still hides
+//!   what is behind it), crosstalk and dropouts ([`SonarParams`]).
+//! - [`sonar_firing`]: [`SonarFiring`], when each sonar of a frame fires
+//!   (all at once, or one at a time over the sensor period).
+//! - [`sonar_preset`]: [`SonarPreset`], the named sonar figures the
+//!   command line picks (`default`, `realistic`, `specular60`).
 //! - [`laser`]: [`Lasers`], each laser ray's distance to the first wall,
 //!   with Gaussian noise ([`LaserParams`]).
 //! - [`rig_sensors`]: [`RigSensors`], a rig's sonars (grouped into rings by
@@ -35,6 +40,8 @@ pub mod serve;
 pub mod service;
 pub mod simulation;
 pub mod sonar;
+pub mod sonar_firing;
+pub mod sonar_preset;
 pub mod wander;
 
 /// The rigs the simulation's robots carry ([`SimConfig::rig`]), for
@@ -46,4 +53,6 @@ pub use rig_sensors::RigSensors;
 pub use robot::{OdometryNoise, Robot, ScoutParams};
 pub use simulation::{RobotSnapshot, SimConfig, Simulation};
 pub use sonar::{SonarParams, SonarRing, Specular};
+pub use sonar_firing::SonarFiring;
+pub use sonar_preset::SonarPreset;
 pub use wander::{WanderParams, Wanderer};

@@ -10,6 +10,11 @@
 //! frame; a rig of one kind of sonar (the Scout's) is one ring fired
 //! straight into the frame, exactly as before rigs existed.
 //!
+//! With [`SonarFiring::Sequential`] the sonars fire one at a time in the
+//! rig's order of its sonars ([`RigSensors::fire_sequential`] takes the
+//! robot's pose at each firing); crosstalk is between neighbours of one
+//! group's ring (for a rig of one kind of sonar, the rig's own order).
+//!
 //! A sonar reading at its maximum range (no echo, or an echo clamped or
 //! dropped there) reads the sonar's no-echo value when the rig gives one
 //! other than the maximum range.
@@ -22,6 +27,8 @@ use rand::Rng;
 use crate::error::SimError;
 use crate::laser::{LaserParams, Lasers, no_echo_reading};
 use crate::sonar::{MAX_SONARS, SonarParams, SonarRing};
+#[cfg(doc)]
+use crate::sonar_firing::SonarFiring;
 
 /// Sonars of one set of figures, fired as one ring.
 #[derive(Debug, Clone)]
@@ -29,6 +36,8 @@ struct SonarGroup {
     ring: SonarRing,
     /// The frame slot of each of its sonars, in ring order.
     slots: Vec<usize>,
+    /// Each of its sonars' place among the rig's sonars, in ring order.
+    ordinals: Vec<usize>,
     /// The first slot, when the slots follow one another: the ring fires
     /// straight into the frame.
     contiguous: Option<usize>,
@@ -42,6 +51,7 @@ struct Draft {
     no_echo: Option<f64>,
     mounts: Vec<Pose2>,
     slots: Vec<usize>,
+    ordinals: Vec<usize>,
 }
 
 /// Every sensor of a rig, ready to fire.
@@ -49,6 +59,8 @@ struct Draft {
 pub struct RigSensors {
     rig: Rig,
     sonars: Vec<SonarGroup>,
+    /// How many of the rig's beams are sonars.
+    sonar_count: usize,
     lasers: Lasers,
 }
 
@@ -59,10 +71,13 @@ impl RigSensors {
     pub fn new(rig: Rig, sonar: SonarParams, laser: LaserParams) -> Result<Self, SimError> {
         // Groups in the order of their first beams.
         let mut groups: Vec<Draft> = Vec::new();
+        let mut sonar_count = 0;
         for (slot, beam) in rig.beams().iter().enumerate() {
             let BeamShape::Cone { half_angle } = beam.shape else {
                 continue;
             };
+            let ordinal = sonar_count;
+            sonar_count += 1;
             let params = SonarParams {
                 min_range: beam.min_range,
                 max_range: beam.max_range,
@@ -80,12 +95,14 @@ impl RigSensors {
                 Some(group) => {
                     group.mounts.push(beam.mount);
                     group.slots.push(slot);
+                    group.ordinals.push(ordinal);
                 }
                 None => groups.push(Draft {
                     params,
                     no_echo,
                     mounts: vec![beam.mount],
                     slots: vec![slot],
+                    ordinals: vec![ordinal],
                 }),
             }
         }
@@ -102,6 +119,7 @@ impl RigSensors {
                 Ok(SonarGroup {
                     ring: SonarRing::new(ring, g.params)?,
                     slots: g.slots,
+                    ordinals: g.ordinals,
                     contiguous,
                     no_echo: g.no_echo,
                 })
@@ -111,6 +129,7 @@ impl RigSensors {
         Ok(Self {
             rig,
             sonars,
+            sonar_count,
             lasers,
         })
     }
@@ -123,6 +142,12 @@ impl RigSensors {
     /// Readings per frame (the length `fire` expects of its output).
     pub fn readings(&self) -> usize {
         self.rig.readings()
+    }
+
+    /// How many of the rig's beams are sonars (the length
+    /// [`fire_sequential`](Self::fire_sequential) expects of its poses).
+    pub fn sonar_count(&self) -> usize {
+        self.sonar_count
     }
 
     /// The sonar rings the rig's sonars fire as, one per set of figures.
@@ -147,6 +172,46 @@ impl RigSensors {
         out: &mut [f64],
     ) -> Result<(), SimError> {
         self.frame(out, |group, slots| group.ring.fire(index, pose, rng, slots))?;
+        if !self.lasers.is_empty() {
+            self.lasers.fire(index, pose, rng, out)?;
+        }
+        Ok(())
+    }
+
+    /// One frame of sonars fired one after another: as
+    /// [`fire`](Self::fire), but the rig's `k`th sonar (in beam order,
+    /// counting sonars only) reads for a robot at `sonar_poses[k]`, its pose
+    /// when that sonar fired; the lasers read at `pose`. Errors on a
+    /// non-finite pose or a `sonar_poses` whose length is not
+    /// [`sonar_count`](Self::sonar_count) or an `out` whose length is not
+    /// [`readings`](Self::readings).
+    pub fn fire_sequential<R: Rng + ?Sized>(
+        &self,
+        index: &SegmentIndex,
+        pose: &Pose2,
+        sonar_poses: &[Pose2],
+        rng: &mut R,
+        out: &mut [f64],
+    ) -> Result<(), SimError> {
+        if sonar_poses.len() != self.sonar_count {
+            return Err(SimError::invalid(
+                "sonar poses",
+                format!(
+                    "expected one per sonar ({}), got {}",
+                    self.sonar_count,
+                    sonar_poses.len()
+                ),
+            ));
+        }
+        self.frame(out, |group, slots| {
+            let mut poses = [Pose2::default(); MAX_SONARS];
+            for (pose, &k) in poses.iter_mut().zip(&group.ordinals) {
+                *pose = sonar_poses[k];
+            }
+            group
+                .ring
+                .fire_posed(index, &poses[..group.ordinals.len()], rng, slots)
+        })?;
         if !self.lasers.is_empty() {
             self.lasers.fire(index, pose, rng, out)?;
         }

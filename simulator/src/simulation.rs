@@ -5,8 +5,14 @@
 //! seed and the robot's name, so a robot's run does not depend on which other
 //! robots share the world. Robots do not see or bump into each other: each
 //! senses the static world only, which is what the maps are built of.
+//!
+//! With [`SonarFiring::Sequential`] each sonar reads from the true pose the
+//! robot had at the physics step its firing falls on
+//! ([`steps_before_frame`]); a robot keeps its poses of the last sensor
+//! period for that. A teleport starts that record afresh, so a frame never
+//! mixes the places before and after a kidnapping.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 
 use deog_grid::Pose2;
@@ -20,6 +26,7 @@ use crate::laser::LaserParams;
 use crate::rig_sensors::RigSensors;
 use crate::robot::{OdometryNoise, Robot, ScoutParams};
 use crate::sonar::SonarParams;
+use crate::sonar_firing::{SonarFiring, steps_before_frame};
 
 /// Figures of a simulation.
 #[derive(Debug, Clone, PartialEq)]
@@ -35,7 +42,8 @@ pub struct SimConfig {
     /// The robots' speed limits. The body radius is the rig's
     /// ([`SimConfig::robot_params`]); `scout.radius` is not used.
     pub scout: ScoutParams,
-    /// The sonars' noise, specular reflection and dropouts. Their range
+    /// The sonars' noise, specular reflection, crosstalk, dropouts and
+    /// firing order. Their range
     /// limits and half-angle are each sonar's in the rig (for the Scout,
     /// the same as these defaults).
     pub sonar: SonarParams,
@@ -98,6 +106,12 @@ struct SimRobot {
     rng: ChaCha8Rng,
     ranges: Vec<f64>,
     sequence: u64,
+    /// With sequential firing: the true poses after each of the last
+    /// physics steps (at most a sensor period's), oldest first; empty
+    /// otherwise.
+    trail: VecDeque<Pose2>,
+    /// Scratch for each sonar's pose at its firing.
+    sonar_poses: Vec<Pose2>,
 }
 
 /// The simulation: a world, its robots and the clock.
@@ -114,6 +128,8 @@ pub struct Simulation {
     steps: u64,
     /// Physics steps between two firings of the sensors.
     fire_every: u64,
+    /// Whether the sonars fire one after another over the period.
+    sequential: bool,
     /// Time left over from the last advance, less than one physics step.
     carry_s: f64,
 }
@@ -174,6 +190,7 @@ impl Simulation {
             robots: BTreeMap::new(),
             steps: 0,
             fire_every: (config.sonar_period_s / config.step_s).round().max(1.0) as u64,
+            sequential: config.sonar.firing == SonarFiring::Sequential,
             carry_s: 0.0,
         })
     }
@@ -237,7 +254,12 @@ impl Simulation {
             rng,
             ranges: vec![0.0; self.sensors.readings()],
             sequence: 0,
+            trail: VecDeque::new(),
+            sonar_poses: Vec::new(),
         };
+        if self.sequential {
+            entry.trail.push_back(pose);
+        }
         self.fire(&mut entry)?;
         self.robots.insert(name.to_string(), entry);
         self.snapshot(name)
@@ -272,6 +294,10 @@ impl Simulation {
         }
         if let Some(entry) = self.robots.get_mut(name) {
             entry.robot.teleport(pose)?;
+            if self.sequential {
+                entry.trail.clear();
+                entry.trail.push_back(pose);
+            }
         }
         self.snapshot(name)
     }
@@ -326,6 +352,12 @@ impl Simulation {
                 let mut result = entry
                     .robot
                     .step(step, &self.index, &self.world, &mut entry.rng);
+                if self.sequential {
+                    entry.trail.push_back(entry.robot.true_pose());
+                    if entry.trail.len() as u64 > self.fire_every {
+                        entry.trail.pop_front();
+                    }
+                }
                 if fire && result.is_ok() {
                     result = self.fire(&mut entry);
                     fired.push(snapshot_of(&name, &entry, &self.rig_name, now));
@@ -339,8 +371,30 @@ impl Simulation {
 
     fn fire(&self, entry: &mut SimRobot) -> Result<(), SimError> {
         let pose = entry.robot.true_pose();
-        self.sensors
-            .fire(&self.index, &pose, &mut entry.rng, &mut entry.ranges)?;
+        if self.sequential {
+            // Each sonar at the pose of the step its firing falls on, or
+            // the oldest pose kept (just spawned or teleported).
+            let n = self.sensors.sonar_count();
+            let kept = entry.trail.len() as u64;
+            entry.sonar_poses.clear();
+            entry.sonar_poses.extend((0..n).map(|k| {
+                let back = steps_before_frame(k, n, self.fire_every).min(kept.saturating_sub(1));
+                kept.checked_sub(1 + back)
+                    .and_then(|at| entry.trail.get(at as usize))
+                    .copied()
+                    .unwrap_or(pose)
+            }));
+            self.sensors.fire_sequential(
+                &self.index,
+                &pose,
+                &entry.sonar_poses,
+                &mut entry.rng,
+                &mut entry.ranges,
+            )?;
+        } else {
+            self.sensors
+                .fire(&self.index, &pose, &mut entry.rng, &mut entry.ranges)?;
+        }
         entry.sequence += 1;
         Ok(())
     }
@@ -462,6 +516,77 @@ mod tests {
             "{:?}",
             run[57].ranges
         );
+    }
+
+    #[test]
+    fn sequential_sonars_read_from_the_pose_at_their_firing() {
+        use crate::sonar::SonarRing;
+        let config = SimConfig {
+            sonar: SonarParams {
+                firing: SonarFiring::Sequential,
+                ..SonarParams::exact()
+            },
+            ..SimConfig::default()
+        };
+        let mut sim = Simulation::new(room(), config, 1).expect("sim");
+        sim.spawn("a", Some(Pose2::new(2.0, 2.0, 0.0)))
+            .expect("spawn");
+        sim.drive("a", 0.3, 0.8).expect("drive");
+        let ring =
+            SonarRing::new(deog_grid::SensorRing::scout(), SonarParams::exact()).expect("valid");
+        let index = SegmentIndex::new(room().walls());
+        let mut poses = Vec::new();
+        let mut fired = Vec::new();
+        let mut frames = 0;
+        for _ in 0..100 {
+            sim.advance(0.01, &mut fired).expect("advance");
+            poses.push(sim.snapshot("a").expect("a robot").true_pose);
+            let Some(frame) = fired.pop() else {
+                continue;
+            };
+            frames += 1;
+            let mut together = [0.0; 16];
+            ring.true_ranges(&index, &frame.true_pose, &mut together)
+                .expect("fires");
+            for k in 0..16 {
+                let back = steps_before_frame(k, 16, 10) as usize;
+                let at = poses[poses.len() - 1 - back];
+                let mut own = [0.0; 16];
+                ring.true_ranges(&index, &at, &mut own).expect("fires");
+                assert_eq!(frame.ranges[k], own[k], "sonar {k}");
+            }
+            assert_ne!(frame.ranges.to_vec(), together.to_vec(), "the motion shows");
+            assert_eq!(
+                frame.ranges[15], together[15],
+                "the last fires with the frame"
+            );
+        }
+        assert_eq!(frames, 10);
+    }
+
+    #[test]
+    fn a_teleport_starts_the_sequential_record_afresh() {
+        let config = SimConfig {
+            sonar: SonarParams {
+                firing: SonarFiring::Sequential,
+                ..SonarParams::exact()
+            },
+            ..SimConfig::default()
+        };
+        let mut sim = Simulation::new(room(), config, 1).expect("sim");
+        sim.spawn("a", Some(Pose2::new(2.0, 2.0, 0.0)))
+            .expect("spawn");
+        let mut fired = Vec::new();
+        sim.advance(0.05, &mut fired).expect("advance");
+        let there = Pose2::new(7.0, 6.0, 1.0);
+        sim.teleport("a", there).expect("teleport");
+        sim.advance(0.05, &mut fired).expect("advance");
+        let frame = fired.pop().expect("a firing");
+        let mut expected = vec![0.0; 16];
+        sim.sensors()
+            .true_ranges(&sim.index, &there, &mut expected)
+            .expect("fires");
+        assert_eq!(frame.ranges, expected);
     }
 
     #[test]

@@ -1,6 +1,5 @@
 //! A world's map as the cartographer builds it from a wandering robot's
-//! frames, and the simulator's rig with its sonars with or without
-//! specular reflection.
+//! frames, and the simulator's rig with its sonars of a preset.
 
 use anyhow::{Context, Result};
 use deog_grid::{ClampLimits, OccupancyThresholds, RayModelParams, Resolution, TileMap, TileSize};
@@ -10,23 +9,16 @@ use deog_localizer::sensors::SensorChoice;
 use deog_mapping::{Cartographer, FrameInput, PoseChoice};
 use deog_rig::Rig;
 use deog_simulator::simulation::{SimConfig, Simulation};
-use deog_simulator::{Specular, WanderParams, Wanderer};
+use deog_simulator::{SonarPreset, Specular, WanderParams, Wanderer};
 
-/// The simulator's settings for a robot carrying `rig`: the default
-/// sonar, or with `specular` lost echoes past 60° of incidence and 2 %
-/// dropouts.
-pub(super) fn sim_config(rig: &Rig, specular: bool) -> SimConfig {
-    let mut config = SimConfig {
+/// The simulator's settings for a robot carrying `rig`, with the sonar of
+/// `preset`.
+pub(super) fn sim_config(rig: &Rig, preset: SonarPreset) -> SimConfig {
+    SimConfig {
         rig: rig.clone(),
+        sonar: preset.params(),
         ..SimConfig::default()
-    };
-    if specular {
-        config.sonar.specular = Specular::Lost {
-            max_incidence: 60f64.to_radians(),
-        };
-        config.sonar.dropout_probability = 0.02;
     }
-    config
 }
 
 /// The map a wandering robot's frames give, as the cartographer builds it

@@ -15,17 +15,25 @@
 //! the beam model for a rig of sonars only, the likelihood field
 //! otherwise, as `deog localize` does).
 //!
+//! The simulated sonar is the preset `--sonar` names (`default`,
+//! `realistic`, `specular60`; `--specular` is `specular60`), for the runs
+//! and the map alike unless `--clean-map` builds the map from the default
+//! sonar.
+//!
 //! Its parts: `map_build` (a world's map, as the cartographer builds it),
-//! `seeded_run` (one run, judged) and `diagnostics` (the optional
-//! per-frame printouts of beams, mirror images and the particles).
+//! `seeded_run` (one run, judged), `report` (the figures as JSON for
+//! `--json`) and `diagnostics` (the optional per-frame printouts of beams,
+//! mirror images and the particles).
 
 mod diagnostics;
 mod map_build;
+mod report;
 mod seeded_run;
 
+use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::Args;
 use deog_evaluation::runs::summarize;
 use deog_localizer::beam_model::BeamModelParams;
@@ -33,6 +41,7 @@ use deog_localizer::filter::FilterSettings;
 use deog_localizer::range_table::ConeGeometry;
 use deog_localizer::sensors::{LikelihoodFieldParams, SensorChoice};
 use deog_rig::{BUILT_IN_RIGS, Rig, RigError, load_rig_spec};
+use deog_simulator::SonarPreset;
 use deog_world::load_world_spec;
 
 use crate::option_error::{OptionError, require};
@@ -72,15 +81,28 @@ pub struct LocalizeOptions {
     /// Most particles.
     #[arg(long, default_value_t = FilterSettings::default().kld.max_particles)]
     pub max_particles: usize,
+    /// The simulated sonar: default (every wall echoes), realistic (echoes
+    /// lost past 30° of incidence, 2 % dropouts, 1 % crosstalk, sequential
+    /// firing) or specular60 (lost past 60°, 2 % dropouts). The filter's
+    /// range tables expect no echo past the preset's angle. [default:
+    /// default]
+    #[arg(long, conflicts_with = "specular")]
+    pub sonar: Option<SonarPreset>,
     /// Turn specular reflection (lost echoes past 60° of incidence) and 2 %
-    /// dropouts on in the simulator.
+    /// dropouts on in the simulator: `--sonar specular60`.
     #[arg(long)]
     pub specular: bool,
-    /// With `--specular`, build the map from the default sonar all the same
-    /// (as a map drawn from a laser scan would be): the runs' specular
-    /// readings then meet a map without the holes such readings leave in it.
+    /// With a sonar other than the default, build the map from the default
+    /// sonar all the same (as a map drawn from a laser scan would be): the
+    /// runs' specular readings then meet a map without the holes such
+    /// readings leave in it.
     #[arg(long)]
     pub clean_map: bool,
+    /// Also write the figures as JSON to this file: per world its runs,
+    /// how many converged and recovered and the mean errors, and every
+    /// run's figures.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
     /// Fewest particles.
     #[arg(long, default_value_t = FilterSettings::default().kld.min_particles)]
     pub min_particles: usize,
@@ -160,9 +182,38 @@ impl LocalizeOptions {
                 || "--mirror-about takes a point in metres, \"x,y\"".into(),
             )?;
         }
-        require(!self.clean_map || self.specular, "--clean-map", || {
-            "--clean-map only means something with --specular".into()
-        })
+        require(
+            !self.clean_map || self.sonar_preset() != SonarPreset::Default,
+            "--clean-map",
+            || {
+                "--clean-map only means something with --specular or a --sonar other than default"
+                    .into()
+            },
+        )?;
+        // A JSON file that cannot be written fails now, not after the runs.
+        if let Some(json) = &self.json
+            && let Some(parent) = json.parent()
+            && !parent.as_os_str().is_empty()
+        {
+            require(parent.is_dir(), "--json", || {
+                format!(
+                    "--json {}: folder {} does not exist",
+                    json.display(),
+                    parent.display()
+                )
+            })?;
+        }
+        Ok(())
+    }
+
+    /// The sonar preset of the runs: `--sonar`, or specular60 for
+    /// `--specular`.
+    pub fn sonar_preset(&self) -> SonarPreset {
+        if self.specular {
+            SonarPreset::Specular60
+        } else {
+            self.sonar.unwrap_or_default()
+        }
     }
 
     /// The rig `--rig` names and the sensor model its frames are scored
@@ -245,11 +296,27 @@ const CONVERGE_LIMIT_S: f64 = 60.0;
 pub fn run(options: LocalizeOptions) -> Result<()> {
     options.validate()?;
     let setup = options.rig_setup()?;
+    let preset = options.sonar_preset();
+    let mut report = report::LocalizeReport {
+        rig: setup.rig.name().to_string(),
+        sensor: setup.sensor.name().to_string(),
+        sonar: preset.name().to_string(),
+        clean_map: options.clean_map,
+        seconds: options.seconds,
+        kidnap_at_s: options.kidnap_at,
+        converge_limit_s: CONVERGE_LIMIT_S,
+        worlds: Vec::new(),
+    };
     for world_name in &options.worlds {
         let started = Instant::now();
         let world = load_world_spec(world_name)?;
-        let config = map_build::sim_config(&setup.rig, options.specular);
-        let map_config = map_build::sim_config(&setup.rig, options.specular && !options.clean_map);
+        let config = map_build::sim_config(&setup.rig, preset);
+        let map_preset = if options.clean_map {
+            SonarPreset::Default
+        } else {
+            preset
+        };
+        let map_config = map_build::sim_config(&setup.rig, map_preset);
         let (mut tiles, mut map) = map_build::build_map(
             world.clone(),
             &map_config,
@@ -302,6 +369,21 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
             summary.mean_heading_deg.unwrap_or(0.0),
             started.elapsed().as_secs_f64()
         );
+        if let Some(path) = &options.json {
+            report.worlds.push(report::WorldFigures::new(
+                world_name,
+                options.seed,
+                &all,
+                &summary,
+            ));
+            // Rewritten after each world, so a long bench leaves the
+            // worlds done so far.
+            std::fs::write(path, report.json()?)
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
+    }
+    if let Some(path) = &options.json {
+        eprintln!("figures written to {}", path.display());
     }
     Ok(())
 }
@@ -355,11 +437,32 @@ mod tests {
             ("--mirror-about", &["--mirror-about", "1,2,3"][..]),
             ("--mirror-about", &["--mirror-about", "1,NaN"][..]),
             ("--clean-map", &["--clean-map"][..]),
+            ("--clean-map", &["--clean-map", "--sonar", "default"][..]),
+            ("--json", &["--json", "no-such-folder/figures.json"][..]),
         ] {
             let err = parse(args).validate().expect_err(flag);
             assert_eq!(err.flag, flag);
             assert!(err.to_string().starts_with(flag), "{err}");
         }
+    }
+
+    #[test]
+    fn the_sonar_preset_comes_from_sonar_or_specular() {
+        assert_eq!(parse(&[]).sonar_preset(), SonarPreset::Default);
+        assert_eq!(
+            parse(&["--specular"]).sonar_preset(),
+            SonarPreset::Specular60
+        );
+        let realistic = parse(&["--sonar", "realistic", "--clean-map"]);
+        assert_eq!(realistic.sonar_preset(), SonarPreset::Realistic);
+        assert_eq!(realistic.validate(), Ok(()));
+        assert!(Cli::try_parse_from(["localize", "--sonar", "realistic", "--specular"]).is_err());
+        assert!(Cli::try_parse_from(["localize", "--sonar", "loud"]).is_err());
+        let dir = tempfile::tempdir().expect("a temporary folder");
+        let json = dir.path().join("figures.json");
+        let with_json = parse(&["--json", json.to_str().expect("a UTF-8 path")]);
+        assert_eq!(with_json.validate(), Ok(()));
+        assert_eq!(parse(&["--json", "figures.json"]).validate(), Ok(()));
     }
 
     fn setup(args: &[&str]) -> RigSetup {

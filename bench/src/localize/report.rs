@@ -1,0 +1,143 @@
+//! The figures `deog bench localize` prints, as JSON for `--json`.
+
+use anyhow::{Context, Result};
+use deog_evaluation::runs::{RunFigures, RunsSummary};
+use serde::Serialize;
+
+/// The whole file: the options that matter to the figures and one entry per
+/// world.
+#[derive(Debug, Clone, Serialize)]
+pub(super) struct LocalizeReport {
+    /// The rig's name.
+    pub rig: String,
+    /// The filter's sensor model.
+    pub sensor: String,
+    /// The sonar preset of the runs (`default`, `realistic`, `specular60`).
+    pub sonar: String,
+    /// Whether the map came from the default sonar whatever the runs'.
+    pub clean_map: bool,
+    /// Seconds of a run, and its kidnap (0: none).
+    pub seconds: f64,
+    pub kidnap_at_s: f64,
+    /// Convergence and recovery count when within this many seconds.
+    pub converge_limit_s: f64,
+    /// One entry per world, in the order run.
+    pub worlds: Vec<WorldFigures>,
+}
+
+/// One world's summary line and its runs.
+#[derive(Debug, Clone, Serialize)]
+pub(super) struct WorldFigures {
+    pub world: String,
+    /// Runs made.
+    pub runs: usize,
+    /// Runs whose filter converged within the limit.
+    pub converged: usize,
+    /// Runs whose filter found the robot again within the limit of the
+    /// kidnap.
+    pub recovered: usize,
+    /// Mean position error after convergence, metres (null: none
+    /// converged).
+    pub mean_abs_error_m: Option<f64>,
+    /// Mean heading error after convergence, degrees.
+    pub mean_abs_error_deg: Option<f64>,
+    /// Every run, by seed.
+    pub per_run: Vec<RunRow>,
+}
+
+/// One seeded run.
+#[derive(Debug, Clone, Serialize)]
+pub(super) struct RunRow {
+    pub seed: u64,
+    /// Seconds to convergence (null: never).
+    pub converge_s: Option<f64>,
+    /// Seconds from the kidnap to recovery (null: never).
+    pub recover_s: Option<f64>,
+    pub mean_abs_error_m: Option<f64>,
+    pub mean_abs_error_deg: Option<f64>,
+    /// Frames judged after convergence.
+    pub samples: u64,
+}
+
+impl WorldFigures {
+    /// A world's figures from its runs (seeds from `first_seed`) and their
+    /// summary.
+    pub fn new(world: &str, first_seed: u64, runs: &[RunFigures], summary: &RunsSummary) -> Self {
+        Self {
+            world: world.to_string(),
+            runs: summary.runs,
+            converged: summary.converged,
+            recovered: summary.recovered,
+            mean_abs_error_m: summary.mean_position_m,
+            mean_abs_error_deg: summary.mean_heading_deg,
+            per_run: runs
+                .iter()
+                .zip(first_seed..)
+                .map(|(run, seed)| RunRow {
+                    seed,
+                    converge_s: run.converge_s,
+                    recover_s: run.recover_s,
+                    mean_abs_error_m: run.mean_position_m,
+                    mean_abs_error_deg: run.mean_heading_deg,
+                    samples: run.samples,
+                })
+                .collect(),
+        }
+    }
+}
+
+impl LocalizeReport {
+    /// The report as pretty JSON.
+    pub fn json(&self) -> Result<String> {
+        deog_evaluation::json::pretty_json(self).context("assembling the JSON")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use deog_evaluation::runs::summarize;
+
+    #[test]
+    fn the_json_has_the_summary_keys_per_world() {
+        let runs = [
+            RunFigures {
+                converge_s: Some(12.0),
+                recover_s: None,
+                mean_position_m: Some(0.2),
+                mean_heading_deg: Some(3.0),
+                samples: 40,
+            },
+            RunFigures {
+                converge_s: None,
+                recover_s: None,
+                mean_position_m: None,
+                mean_heading_deg: None,
+                samples: 0,
+            },
+        ];
+        let summary = summarize(&runs, 60.0);
+        let report = LocalizeReport {
+            rig: "scout".into(),
+            sensor: "beam".into(),
+            sonar: "realistic".into(),
+            clean_map: false,
+            seconds: 180.0,
+            kidnap_at_s: 90.0,
+            converge_limit_s: 60.0,
+            worlds: vec![WorldFigures::new("map1", 7, &runs, &summary)],
+        };
+        let json: serde_json::Value =
+            serde_json::from_str(&report.json().expect("serializes")).expect("valid JSON");
+        let world = &json["worlds"][0];
+        assert_eq!(world["world"], "map1");
+        assert_eq!(world["runs"], 2);
+        assert_eq!(world["converged"], 1);
+        assert_eq!(world["recovered"], 0);
+        assert!(world["mean_abs_error_m"].is_number());
+        assert!(world["mean_abs_error_deg"].is_number());
+        assert_eq!(world["per_run"][1]["seed"], 8);
+        assert_eq!(world["per_run"][1]["converge_s"], serde_json::Value::Null);
+        assert_eq!(json["sonar"], "realistic");
+    }
+}
