@@ -40,5 +40,6 @@ pub mod localize_memory;
 pub mod map_server;
 pub mod option_error;
 pub mod real;
+pub mod sonar_mapping;
 
 pub use option_error::OptionError;

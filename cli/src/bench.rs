@@ -8,6 +8,7 @@ use deog_bench::localize::LocalizeOptions;
 use deog_bench::localize_memory::LocalizeMemoryOptions;
 use deog_bench::map_server::MapServerOptions;
 use deog_bench::real::RealOptions;
+use deog_bench::sonar_mapping::SonarMappingOptions;
 
 /// Options of `deog bench`.
 #[derive(Debug, Args)]
@@ -36,6 +37,10 @@ enum BenchTarget {
     /// the reference map, tracking over the whole log and seeded global
     /// starts, judged against the log's reference poses.
     Real(RealOptions),
+    /// The sonar mapping methods side by side (the thesis's model, and
+    /// cones that stop at known walls) on the same simulated readings,
+    /// each map judged against the world.
+    SonarMapping(SonarMappingOptions),
 }
 
 /// Runs `deog bench`.
@@ -46,5 +51,6 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchTarget::LocalizeMemory(options) => deog_bench::localize_memory::run(options),
         BenchTarget::LaserMapping(options) => deog_bench::laser_mapping::run(options),
         BenchTarget::Real(options) => deog_bench::real::run(options),
+        BenchTarget::SonarMapping(options) => deog_bench::sonar_mapping::run(options),
     }
 }

@@ -95,8 +95,16 @@ pub(crate) fn wander(
     ])
 }
 
-/// A cartographer adding `robot`'s frames to the shared map.
-pub(crate) fn map(robot: &PlannedRobot, addresses: &Addresses) -> Vec<OsString> {
+/// A cartographer adding `robot`'s frames to the shared map; with a
+/// specular sonar, cones stop at the walls the map holds and no-echo
+/// readings (mostly lost echoes) are ignored, the best sonar maps measured
+/// on such readings (BENCHMARKS.md, sonar mapping).
+pub(crate) fn map(plan: &DemoPlan, robot: &PlannedRobot, addresses: &Addresses) -> Vec<OsString> {
+    let specular = if plan.sonar.specular_angle_deg().is_some() {
+        os(&["--sonar-method", "keep-walls", "--no-echo-free-range", "0"])
+    } else {
+        Vec::new()
+    };
     os(&[
         "map",
         "--robot",
@@ -108,6 +116,9 @@ pub(crate) fn map(robot: &PlannedRobot, addresses: &Addresses) -> Vec<OsString> 
         "--server",
         &addresses.server_url(),
     ])
+    .into_iter()
+    .chain(specular)
+    .collect()
 }
 
 /// A localizer for `robot` on the shared map, with no initial pose,
@@ -183,7 +194,7 @@ mod tests {
              --sim http://127.0.0.1:5002 --server http://127.0.0.1:5001"
         );
         assert_eq!(
-            line(&map(robot, &addresses)),
+            line(&map(&plan, robot, &addresses)),
             "map --robot scout-2 --map demo --idle-exit 3 --server http://127.0.0.1:5001"
         );
         assert_eq!(
@@ -194,7 +205,7 @@ mod tests {
     }
 
     #[test]
-    fn a_realistic_sonar_goes_to_the_simulator_and_its_angle_to_the_localizers() {
+    fn a_realistic_sonar_goes_to_the_simulator_the_cartographers_and_the_localizers() {
         let plan = plan(&["--sonar", "realistic"]).expect("valid options");
         let addresses = Addresses {
             server: "127.0.0.1:5001".parse().expect("address"),
@@ -204,6 +215,11 @@ mod tests {
             line(&sim(&plan, &addresses)),
             "sim --world map2 --listen 127.0.0.1:5002 --speed 4 --seed 1 --rig scout \
              --sonar realistic"
+        );
+        assert_eq!(
+            line(&map(&plan, &plan.robots[0], &addresses)),
+            "map --robot scout-1 --map demo --idle-exit 3 --server http://127.0.0.1:5001 \
+             --sonar-method keep-walls --no-echo-free-range 0"
         );
         assert_eq!(
             line(&localize(&plan, &plan.robots[0], &addresses)),

@@ -130,7 +130,7 @@ impl<'a> Demo<'a> {
             children.start(
                 &format!("map-{}", robot.name),
                 Role::Task,
-                &commands::map(robot, &addresses),
+                &commands::map(plan, robot, &addresses),
             )?;
         }
         Ok(Self {

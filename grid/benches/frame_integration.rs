@@ -17,8 +17,8 @@ use std::hint::black_box;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use deog_grid::frame::combine;
 use deog_grid::{
-    CellIndex, ClampLimits, FrameIntegrator, Pose2, Resolution, SensorRing, SonarModel,
-    SonarModelParams, TileDelta, TileMap, TileSize, cast_cone,
+    CellIndex, ClampLimits, ConeGuard, FrameIntegrator, Occupancy, OccupancyView, Pose2,
+    Resolution, SensorRing, SonarModel, SonarModelParams, TileDelta, TileMap, TileSize, cast_cone,
 };
 
 const FRAMES: usize = 200;
@@ -104,12 +104,25 @@ fn baseline(
     tiles.into_values().collect()
 }
 
+/// The room's occupied cells as the walls a guarded cone stops at.
+struct RoomWalls(TileMap);
+
+impl ConeGuard for RoomWalls {
+    fn shadows(&self, cell: CellIndex) -> bool {
+        self.0.occupancy(cell) == Occupancy::Occupied
+    }
+
+    fn keeps(&self, cell: CellIndex) -> bool {
+        self.shadows(cell)
+    }
+}
+
 fn bench(c: &mut Criterion) {
     let model = SonarModel::new(SonarModelParams::default()).unwrap();
     let ring = SensorRing::scout();
     let size = TileSize::DEFAULT;
     let frames = frames(&model, &ring);
-    let walls = room();
+    let walls = RoomWalls(room());
     let mut integrator =
         FrameIntegrator::new(model.clone(), ring.clone(), Resolution::DEFAULT, size);
 

@@ -17,11 +17,10 @@ use crate::error::{GridError, within};
 use crate::frame::FrameStats;
 use crate::pose::Pose2;
 use crate::ray_model::{RayModel, RayReading};
-use crate::raycast::OccupancyView;
 use crate::sector::Sector;
 use crate::segment_walk::SegmentCells;
 use crate::sensor_ring::SensorRing;
-use crate::sonar_model::{Reading, SonarModel};
+use crate::sonar_model::{ConeGuard, Reading, SonarModel};
 use crate::tile::TileDelta;
 use crate::tile_key::TileSize;
 use crate::tile_scratch::TileScratch;
@@ -194,17 +193,17 @@ impl BeamFrameIntegrator {
         &mut self,
         robot: &Pose2,
         readings: &[BeamReading],
-        walls: &dyn OccupancyView,
+        guard: &dyn ConeGuard,
         out: &mut Vec<TileDelta>,
     ) -> Result<FrameStats, GridError> {
-        self.integrate_with(robot, readings, Some(walls), out)
+        self.integrate_with(robot, readings, Some(guard), out)
     }
 
     fn integrate_with(
         &mut self,
         robot: &Pose2,
         readings: &[BeamReading],
-        walls: Option<&dyn OccupancyView>,
+        guard: Option<&dyn ConeGuard>,
         out: &mut Vec<TileDelta>,
     ) -> Result<FrameStats, GridError> {
         let robot = robot.validate("pose")?;
@@ -275,18 +274,18 @@ impl BeamFrameIntegrator {
                     sector,
                     reading,
                     bounds,
-                } => match walls {
+                } => match guard {
                     None => {
                         self.cones[model].visit_cone(&sector, &reading, res, &bounds, |cell, d| {
                             cursor.add(cell, d)
                         })
                     }
-                    Some(walls) => self.cones[model].visit_cone_guarded(
+                    Some(guard) => self.cones[model].visit_cone_guarded(
                         &sector,
                         &reading,
                         res,
                         &bounds,
-                        walls,
+                        guard,
                         |cell, d| cursor.add(cell, d),
                     ),
                 },

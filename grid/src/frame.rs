@@ -9,9 +9,8 @@
 use crate::cell::{CellBox, CellIndex, Resolution};
 use crate::error::GridError;
 use crate::pose::Pose2;
-use crate::raycast::OccupancyView;
 use crate::sensor_ring::SensorRing;
-use crate::sonar_model::SonarModel;
+use crate::sonar_model::{ConeGuard, SonarModel};
 use crate::tile::TileDelta;
 use crate::tile_key::{TileKey, TileSize};
 
@@ -81,17 +80,17 @@ impl FrameIntegrator {
         &mut self,
         robot: &Pose2,
         ranges: &[f64],
-        walls: &dyn OccupancyView,
+        guard: &dyn ConeGuard,
         out: &mut Vec<TileDelta>,
     ) -> Result<FrameStats, GridError> {
-        self.integrate_with(robot, ranges, Some(walls), out)
+        self.integrate_with(robot, ranges, Some(guard), out)
     }
 
     fn integrate_with(
         &mut self,
         robot: &Pose2,
         ranges: &[f64],
-        walls: Option<&dyn OccupancyView>,
+        guard: Option<&dyn ConeGuard>,
         out: &mut Vec<TileDelta>,
     ) -> Result<FrameStats, GridError> {
         let robot = robot.validate("pose")?;
@@ -132,16 +131,16 @@ impl FrameIntegrator {
                     *slot = combine(*slot, delta);
                 }
             };
-            match walls {
+            match guard {
                 None => self
                     .model
                     .visit_cone(sector, reading, self.resolution, bounds, fold),
-                Some(walls) => self.model.visit_cone_guarded(
+                Some(guard) => self.model.visit_cone_guarded(
                     sector,
                     reading,
                     self.resolution,
                     bounds,
-                    walls,
+                    guard,
                     fold,
                 ),
             }
@@ -333,13 +332,13 @@ mod tests {
     /// Cells a test calls walls.
     struct Walls(std::collections::HashSet<CellIndex>);
 
-    impl OccupancyView for Walls {
-        fn occupancy(&self, cell: CellIndex) -> crate::raycast::Occupancy {
-            if self.0.contains(&cell) {
-                crate::raycast::Occupancy::Occupied
-            } else {
-                crate::raycast::Occupancy::Unknown
-            }
+    impl ConeGuard for Walls {
+        fn shadows(&self, cell: CellIndex) -> bool {
+            self.0.contains(&cell)
+        }
+
+        fn keeps(&self, cell: CellIndex) -> bool {
+            self.0.contains(&cell)
         }
     }
 

@@ -76,7 +76,7 @@ pub use ray_model::{RayModel, RayModelParams};
 pub use raycast::{Occupancy, OccupancyThresholds, OccupancyView, cast_cone, cast_ray};
 pub use segment_walk::SegmentCells;
 pub use sensor_ring::{SCOUT_BODY_RADIUS_M, SCOUT_RING_RADIUS_M, SCOUT_SONAR_COUNT, SensorRing};
-pub use sonar_model::{Region, SonarModel, SonarModelParams};
+pub use sonar_model::{ConeGuard, Region, SonarModel, SonarModelParams};
 pub use tile::{Tile, TileDelta};
 pub use tile_key::{CellOffset, TileKey, TileSize};
 pub use tile_map::TileMap;

@@ -47,8 +47,18 @@ use crate::cell::{CellBox, CellIndex, Resolution};
 use crate::error::{GridError, within};
 use crate::log_odds::{LOG_ODDS_SCALE, logit};
 use crate::pose::Pose2;
-use crate::raycast::{Occupancy, OccupancyView};
 use crate::sector::{LocalPoint, Sector};
+
+/// What a guarded cone asks of the map it writes to.
+pub trait ConeGuard {
+    /// Whether `cell` hides what lies behind it: a cone's evidence stops
+    /// a cell past it.
+    fn shadows(&self, cell: CellIndex) -> bool;
+    /// Whether `cell` is a wall no reading may free.
+    /// Whether `cell` is a wall no reading may free. A kept cell must
+    /// also shadow.
+    fn keeps(&self, cell: CellIndex) -> bool;
+}
 
 /// Directions a guarded cone is split into, evenly in `tan α` across the
 /// cone: about half a degree each for the Scout's 30° cone, finer than a
@@ -87,6 +97,12 @@ pub struct SonarModelParams {
     /// How far any reading's cone reaches, metres: cells farther than
     /// this are left to nearer readings. The maximum range reaches all.
     pub max_mapped_range: f64,
+    /// How far a reading's empty evidence reaches, metres; its region I
+    /// is still marked out to `max_mapped_range`. A specular sonar's echo
+    /// may come from past a wall it glanced off, and the farther a cell,
+    /// the likelier such a wall stands before it. The maximum range (the
+    /// default) frees the whole region II.
+    pub max_free_range: f64,
 }
 
 impl Default for SonarModelParams {
@@ -102,6 +118,7 @@ impl Default for SonarModelParams {
             min_empty: 0.5,
             no_echo_free_range: 3.0,
             max_mapped_range: 10.668,
+            max_free_range: 10.668,
         }
     }
 }
@@ -134,6 +151,7 @@ impl SonarModelParams {
             0.0,
             self.max_range,
         )?;
+        within("max_free_range", self.max_free_range, 0.0, self.max_range)?;
         Ok(*self)
     }
 }
@@ -269,6 +287,8 @@ impl SonarModel {
             None
         } else if reading.echo && r >= reading.range - self.params.region_i_tolerance {
             Some(Region::Occupied)
+        } else if r > self.params.max_free_range {
+            None
         } else {
             Some(Region::Empty)
         }
@@ -361,6 +381,7 @@ impl SonarModel {
     ) {
         // The sector ends at the reading's extent, so every visited cell is
         // in region I or II: only the boundary between them is tested here.
+        let max_free = self.params.max_free_range;
         let region_i_start = if reading.echo {
             reading.range - self.params.region_i_tolerance
         } else {
@@ -370,6 +391,8 @@ impl SonarModel {
             let r = local.distance();
             let region = if r >= region_i_start {
                 Region::Occupied
+            } else if r > max_free {
+                return;
             } else {
                 Region::Empty
             };
@@ -380,19 +403,19 @@ impl SonarModel {
         });
     }
 
-    /// [`Self::visit_cone`] guarded by `walls`: along each direction of
-    /// the cone, a cell `walls` holds occupied gets no empty evidence, and
-    /// cells more than a cell behind the nearest such one get no evidence
-    /// at all. An echo off that wall still marks it (its region I lies
-    /// within a cell of it); a reading that passed it (a specular miss, a
-    /// multipath echo) erases nothing behind it.
+    /// [`Self::visit_cone`] guarded by the map it writes to: along each
+    /// direction of the cone, cells more than a cell behind the nearest
+    /// one `guard` says shadows get no evidence, and a cell it keeps gets
+    /// no empty evidence. An echo off a wall still marks it (its region I
+    /// lies within a cell of it); a reading that passed it (a specular
+    /// miss, a multipath echo) changes nothing behind it.
     pub(crate) fn visit_cone_guarded(
         &self,
         sector: &Sector,
         reading: &Reading,
         res: Resolution,
         bounds: &CellBox,
-        walls: &dyn OccupancyView,
+        guard: &dyn ConeGuard,
         mut visit: impl FnMut(CellIndex, i16),
     ) {
         let cell = res.metres();
@@ -403,7 +426,7 @@ impl SonarModel {
         let mut shadow = [f64::INFINITY; GUARD_BINS];
         let mut any_wall = false;
         sector.for_each_cell(res, bounds, |index, local| {
-            if local.along <= 0.0 || walls.occupancy(index) != Occupancy::Occupied {
+            if local.along <= 0.0 || !guard.shadows(index) {
                 return;
             }
             any_wall = true;
@@ -422,6 +445,7 @@ impl SonarModel {
             self.visit_cone(sector, reading, res, bounds, visit);
             return;
         }
+        let max_free = self.params.max_free_range;
         let region_i_start = if reading.echo {
             reading.range - self.params.region_i_tolerance
         } else {
@@ -431,6 +455,8 @@ impl SonarModel {
             let r = local.distance();
             let region = if r >= region_i_start {
                 Region::Occupied
+            } else if r > max_free {
+                return;
             } else {
                 Region::Empty
             };
@@ -441,10 +467,15 @@ impl SonarModel {
             if local.along > 0.0 {
                 let bin = (bin_of(local.across / local.along).floor().max(0.0) as usize)
                     .min(GUARD_BINS - 1);
-                let wall = shadow[bin];
-                if r > wall + cell || (delta < 0 && r >= wall - 0.5 * cell) {
+                // Behind the nearest shadowing cell: an echo off it may
+                // still mark the next cell (region I's tolerance), nothing
+                // frees it.
+                if r > shadow[bin] + cell || (delta < 0 && r > shadow[bin] + 0.5 * cell) {
                     return;
                 }
+            }
+            if delta < 0 && guard.keeps(index) {
+                return;
             }
             visit(index, delta);
         });
@@ -720,6 +751,36 @@ mod tests {
         // No echo: still at most no_echo_free_range (3 m) here.
         let none = cells(&near, pose, 50.0);
         assert!(none.keys().all(|c| distance(c) <= 3.0 + res.metres()));
+    }
+
+    #[test]
+    fn empty_evidence_ends_at_the_free_range_and_the_echo_is_still_marked() {
+        let short = SonarModel::new(SonarModelParams {
+            max_free_range: 1.0,
+            ..SonarModelParams::default()
+        })
+        .unwrap();
+        let pose = Pose2::new(-0.2, 0.4, 1.1);
+        let res = Resolution::DEFAULT;
+        let distance = |cell: &CellIndex| {
+            let (x, y) = res.cell_center(*cell);
+            (x - pose.x).hypot(y - pose.y)
+        };
+        let cut = cells(&short, pose, 3.0);
+        let plain = cells(&model(), pose, 3.0);
+        assert!(cut.iter().all(|(c, &d)| d > 0 || distance(c) <= 1.0));
+        // Region I and the empty cells within 1 m are the plain model's.
+        for (cell, d) in &plain {
+            if *d > 0 || distance(cell) <= 1.0 {
+                assert_eq!(cut.get(cell), Some(d), "{cell:?}");
+            }
+        }
+        assert!(cut.values().any(|&d| d > 0) && cut.values().any(|&d| d < 0));
+        let bad = SonarModelParams {
+            max_free_range: -1.0,
+            ..SonarModelParams::default()
+        };
+        assert!(SonarModel::new(bad).is_err());
     }
 
     #[test]

@@ -84,12 +84,14 @@ pub struct FrameInput<'a> {
 pub enum SonarMethod {
     /// The thesis's model as it is: every reading's cone, whatever the map
     /// already holds.
+    #[default]
     Thesis,
     /// The thesis's model guarded by the map being written (a bounded
     /// [`MapView`]): along each direction of a cone, evidence stops at the
     /// first cell the map holds as a wall, which gets no empty evidence.
-    /// One specular reading cannot erase what many echoes built.
-    #[default]
+    /// One specular reading cannot erase what many echoes built. It costs
+    /// clean sonar maps some precision: a cell that reached the wall
+    /// belief by mistake is never freed (BENCHMARKS.md, sonar mapping).
     KeepWalls,
 }
 

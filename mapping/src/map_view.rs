@@ -12,8 +12,8 @@
 use std::collections::HashMap;
 
 use deog_grid::{
-    CellBox, CellIndex, ClampLimits, LogOdds, Occupancy, OccupancyView, Pose2, Resolution, Tile,
-    TileDelta, TileKey, TileSize,
+    CellBox, CellIndex, ClampLimits, ConeGuard, LogOdds, Pose2, Resolution, Tile, TileDelta,
+    TileKey, TileSize,
 };
 
 use crate::error::MappingError;
@@ -21,9 +21,13 @@ use crate::error::MappingError;
 /// How big a view is and what it calls a wall.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MapViewSettings {
-    /// A cell at or above this probability of occupancy is a wall a cone
-    /// stops at.
+    /// A cell at or above this probability of occupancy is a wall no
+    /// reading may free.
     pub wall_probability: f64,
+    /// A cell at or above this probability of occupancy hides what lies
+    /// behind it: a cone's evidence stops a cell past it. At most
+    /// `wall_probability`.
+    pub shadow_probability: f64,
     /// Tiles held at most.
     pub max_tiles: usize,
     /// The map's clamp limits, applied to the cartographer's own deltas as
@@ -38,6 +42,7 @@ impl Default for MapViewSettings {
     fn default() -> Self {
         Self {
             wall_probability: 0.7,
+            shadow_probability: 0.7,
             max_tiles: 4096,
             limits: ClampLimits::default(),
         }
@@ -51,6 +56,15 @@ impl MapViewSettings {
             return Err(MappingError::invalid(
                 "wall_probability",
                 format!("must be in (0.5, 1), got {}", self.wall_probability),
+            ));
+        }
+        if !(self.shadow_probability > 0.5 && self.shadow_probability <= self.wall_probability) {
+            return Err(MappingError::invalid(
+                "shadow_probability",
+                format!(
+                    "must be in (0.5, wall_probability = {}], got {}",
+                    self.wall_probability, self.shadow_probability
+                ),
             ));
         }
         if self.max_tiles < 16 {
@@ -75,6 +89,7 @@ struct ViewTile {
 pub struct MapView {
     settings: MapViewSettings,
     wall: i16,
+    shadow: i16,
     resolution: Resolution,
     tile_size: TileSize,
     tiles: HashMap<TileKey, ViewTile>,
@@ -91,6 +106,7 @@ impl MapView {
         let settings = settings.validate()?;
         Ok(Self {
             wall: LogOdds::from_probability(settings.wall_probability)?.raw(),
+            shadow: LogOdds::from_probability(settings.shadow_probability)?.raw(),
             settings,
             resolution,
             tile_size,
@@ -223,15 +239,24 @@ impl MapView {
     }
 }
 
-impl OccupancyView for MapView {
-    /// Occupied for a wall (at or above the wall probability), unknown
-    /// otherwise: the guard needs nothing finer.
-    fn occupancy(&self, cell: CellIndex) -> Occupancy {
+impl MapView {
+    /// The raw belief of `cell`, `None` if unknown or not held.
+    fn belief(&self, cell: CellIndex) -> Option<i16> {
         let (key, offset) = self.tile_size.split(cell);
-        match self.tiles.get(&key).and_then(|t| t.tile.get(offset)) {
-            Some(belief) if belief.raw() >= self.wall => Occupancy::Occupied,
-            _ => Occupancy::Unknown,
-        }
+        self.tiles
+            .get(&key)
+            .and_then(|t| t.tile.get(offset))
+            .map(LogOdds::raw)
+    }
+}
+
+impl ConeGuard for MapView {
+    fn shadows(&self, cell: CellIndex) -> bool {
+        self.belief(cell).is_some_and(|b| b >= self.shadow)
+    }
+
+    fn keeps(&self, cell: CellIndex) -> bool {
+        self.belief(cell).is_some_and(|b| b >= self.wall)
     }
 }
 
@@ -262,12 +287,12 @@ mod tests {
         delta.raw_mut()[offset.index(size)] = LogOdds::from_probability(0.6).unwrap().raw();
         for echoes in 1..=5 {
             v.apply(std::slice::from_ref(&delta)).expect("apply");
-            let wall = v.occupancy(cell) == Occupancy::Occupied;
+            let wall = v.keeps(cell);
             // 0.6 three times: odds 1.5^3 = 3.4, p = 0.77 >= 0.7; twice
             // 2.25, p = 0.69.
             assert_eq!(wall, echoes >= 3, "after {echoes} echoes");
         }
-        assert_eq!(v.occupancy(CellIndex::new(4, -2)), Occupancy::Unknown);
+        assert!(!v.keeps(CellIndex::new(4, -2)) && !v.shadows(CellIndex::new(4, -2)));
     }
 
     #[test]
@@ -289,7 +314,7 @@ mod tests {
         let (first, _) = size
             .tiles_covering(&CellBox::new(CellIndex::new(16, 0), CellIndex::new(16, 0)).unwrap());
         assert_eq!(first, TileKey::new(1, 0));
-        assert_eq!(v.occupancy(CellIndex::new(16, 0)), Occupancy::Unknown);
+        assert!(!v.shadows(CellIndex::new(16, 0)));
     }
 
     #[test]
@@ -315,6 +340,10 @@ mod tests {
         }));
         assert!(bad(MapViewSettings {
             wall_probability: f64::NAN,
+            ..MapViewSettings::default()
+        }));
+        assert!(bad(MapViewSettings {
+            shadow_probability: 0.9,
             ..MapViewSettings::default()
         }));
         assert!(bad(MapViewSettings {

@@ -110,6 +110,11 @@ pub struct MapArgs {
     /// sonar's range, maps all).
     #[arg(long, default_value_t = mapping_sonar_model().max_mapped_range)]
     pub max_mapped_range: f64,
+    /// How far a sonar reading's empty evidence reaches, metres (its
+    /// occupied arc is still marked out to --max-mapped-range): a specular
+    /// sonar's echo may come from past a wall it glanced off.
+    #[arg(long, default_value_t = mapping_sonar_model().max_free_range)]
+    pub max_free_range: f64,
     /// The rig the robot's frames come from (a built-in name or a rig
     /// file): frames of another rig are refused. Without it, each frame is
     /// mapped with the rig it names, as the map server keeps it.
@@ -131,11 +136,11 @@ pub struct MapArgs {
     /// frees its ray out to here and adds no hit.
     #[arg(long, default_value_t = RayModelParams::default().max_mapped_range)]
     pub ray_max_mapped_range: f64,
-    /// How sonar readings become evidence: `keep-walls` (the thesis's
-    /// model, each cone stopping at the cells the map already holds as
-    /// walls, so that a reading that glanced off a wall cannot erase it)
-    /// or `thesis` (the thesis's model alone).
-    #[arg(long, value_enum, default_value_t = SonarMethodChoice::KeepWalls)]
+    /// How sonar readings become evidence: `thesis` (the thesis's model
+    /// alone) or `keep-walls` (each cone stopping at the cells the map
+    /// already holds as walls, so that a reading that glanced off a wall
+    /// cannot erase it: for a specular sonar).
+    #[arg(long, value_enum, default_value_t = SonarMethodChoice::Thesis)]
     pub sonar_method: SonarMethodChoice,
     /// With --sonar-method keep-walls: the probability of occupancy from
     /// which a cell is a wall that cones stop at.
@@ -203,11 +208,12 @@ pub fn run(args: MapArgs) -> Result<()> {
         region_i_tolerance: args.region_tolerance,
         no_echo_free_range: args.no_echo_free_range,
         max_mapped_range: args.max_mapped_range,
+        max_free_range: args.max_free_range,
         ..mapping_sonar_model()
     };
     let params = params.validate().context(
         "the sonar model's options (--max-occupied, --max-empty, --min-empty, --min-occupied, \
-         --region-tolerance, --no-echo-free-range, --max-mapped-range)",
+         --region-tolerance, --no-echo-free-range, --max-mapped-range, --max-free-range)",
     )?;
     let ray = RayModelParams {
         hit_probability: args.hit_probability,
@@ -222,6 +228,7 @@ pub fn run(args: MapArgs) -> Result<()> {
     )?;
     let view = MapViewSettings {
         wall_probability: args.wall_probability,
+        shadow_probability: args.wall_probability,
         max_tiles: args.view_tiles,
         ..MapViewSettings::default()
     }

@@ -18,7 +18,7 @@ pub mod sonar_cone;
 pub use rig_beams::RigBeams;
 pub use sonar_cone::SonarCone;
 
-use deog_grid::{GridError, OccupancyView, Pose2, TileDelta};
+use deog_grid::{ConeGuard, GridError, Pose2, TileDelta};
 
 /// One frame of readings at a pose to per-tile log-odds deltas.
 pub trait InverseSensorModel: std::fmt::Debug + Send {
@@ -43,10 +43,10 @@ pub trait InverseSensorModel: std::fmt::Debug + Send {
         &mut self,
         robot: &Pose2,
         readings: &[f64],
-        walls: &dyn OccupancyView,
+        guard: &dyn ConeGuard,
         out: &mut Vec<TileDelta>,
     ) -> Result<usize, GridError> {
-        let _ = walls;
+        let _ = guard;
         self.integrate(robot, readings, out)
     }
 }

@@ -13,8 +13,8 @@
 //! what the rig calls no echo is mapped as no echo.
 
 use deog_grid::{
-    BeamFrameIntegrator, BeamModel, BeamReading, FrameBeam, GridError, OccupancyView, Pose2,
-    RayModel, RayModelParams, Resolution, SonarModel, SonarModelParams, TileDelta, TileSize,
+    BeamFrameIntegrator, BeamModel, BeamReading, ConeGuard, FrameBeam, GridError, Pose2, RayModel,
+    RayModelParams, Resolution, SonarModel, SonarModelParams, TileDelta, TileSize,
 };
 use deog_rig::{Beam, Reading, Rig, SensorKind};
 
@@ -59,6 +59,7 @@ impl RigBeams {
                         region_i_tolerance: sonar.region_i_tolerance.min(s.max_range),
                         no_echo_free_range: sonar.no_echo_free_range.min(s.max_range),
                         max_mapped_range: sonar.max_mapped_range.min(s.max_range),
+                        max_free_range: sonar.max_free_range.min(s.max_range),
                         ..sonar
                     };
                     match cones.iter().position(|m| *m.params() == params) {
@@ -142,13 +143,13 @@ impl InverseSensorModel for RigBeams {
         &mut self,
         robot: &Pose2,
         readings: &[f64],
-        walls: &dyn OccupancyView,
+        guard: &dyn ConeGuard,
         out: &mut Vec<TileDelta>,
     ) -> Result<usize, GridError> {
         self.judge_all(readings)?;
         Ok(self
             .integrator
-            .integrate_guarded(robot, &self.judged, walls, out)?
+            .integrate_guarded(robot, &self.judged, guard, out)?
             .cells)
     }
 }

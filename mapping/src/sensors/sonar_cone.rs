@@ -3,7 +3,7 @@
 //! one delta per cell per frame ([`deog_grid::FrameIntegrator`]).
 
 use deog_grid::{
-    FrameIntegrator, GridError, OccupancyView, Pose2, Resolution, SensorRing, SonarModel,
+    ConeGuard, FrameIntegrator, GridError, Pose2, Resolution, SensorRing, SonarModel,
     SonarModelParams, TileDelta, TileSize,
 };
 
@@ -49,12 +49,12 @@ impl InverseSensorModel for SonarCone {
         &mut self,
         robot: &Pose2,
         readings: &[f64],
-        walls: &dyn OccupancyView,
+        guard: &dyn ConeGuard,
         out: &mut Vec<TileDelta>,
     ) -> Result<usize, GridError> {
         Ok(self
             .integrator
-            .integrate_guarded(robot, readings, walls, out)?
+            .integrate_guarded(robot, readings, guard, out)?
             .cells)
     }
 }
