@@ -128,8 +128,7 @@ impl SonarParams {
     /// point inside its cone, and with the default 15° half-angle that
     /// point is struck within 30° of the wall's normal while the sonar's
     /// axis is within 45° of it, so a smooth wall echoes while the sonar
-    /// faces it within 45°, about what Polaroid rangers show against
-    /// smooth office walls.
+    /// faces it within 45°.
     pub fn realistic() -> Self {
         Self {
             specular: Specular::Lost {
