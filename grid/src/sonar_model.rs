@@ -379,6 +379,23 @@ impl SonarModel {
         bounds: &CellBox,
         mut visit: impl FnMut(CellIndex, i16),
     ) {
+        self.walk_cone(sector, reading, res, bounds, |cell, _, _, delta| {
+            visit(cell, delta)
+        });
+    }
+
+    /// Calls `visit(cell, local, r, delta)` for every cell of the cone
+    /// with a nonzero delta: its place in the cone's frame, its distance
+    /// from the apex and its delta.
+    #[inline]
+    fn walk_cone(
+        &self,
+        sector: &Sector,
+        reading: &Reading,
+        res: Resolution,
+        bounds: &CellBox,
+        mut visit: impl FnMut(CellIndex, LocalPoint, f64, i16),
+    ) {
         // The sector ends at the reading's extent, so every visited cell is
         // in region I or II: only the boundary between them is tested here.
         let max_free = self.params.max_free_range;
@@ -398,7 +415,7 @@ impl SonarModel {
             };
             let delta = self.delta_for_strength(region, self.local_strength(local, r));
             if delta != 0 {
-                visit(cell, delta);
+                visit(cell, local, r, delta);
             }
         });
     }
@@ -445,25 +462,7 @@ impl SonarModel {
             self.visit_cone(sector, reading, res, bounds, visit);
             return;
         }
-        let max_free = self.params.max_free_range;
-        let region_i_start = if reading.echo {
-            reading.range - self.params.region_i_tolerance
-        } else {
-            f64::INFINITY
-        };
-        sector.for_each_cell(res, bounds, |index, local| {
-            let r = local.distance();
-            let region = if r >= region_i_start {
-                Region::Occupied
-            } else if r > max_free {
-                return;
-            } else {
-                Region::Empty
-            };
-            let delta = self.delta_for_strength(region, self.local_strength(local, r));
-            if delta == 0 {
-                return;
-            }
+        self.walk_cone(sector, reading, res, bounds, |index, local, r, delta| {
             if local.along > 0.0 {
                 let bin = (bin_of(local.across / local.along).floor().max(0.0) as usize)
                     .min(GUARD_BINS - 1);

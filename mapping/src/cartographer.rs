@@ -204,8 +204,10 @@ impl Cartographer {
             return Ok(Vec::new());
         }
         let pose = self.pose_of(frame)?;
-        let (view, reach) = self.guard.as_mut().expect("checked above");
-        view.missing_around(&pose, *reach)
+        match self.guard.as_mut() {
+            Some((view, reach)) => view.missing_around(&pose, *reach),
+            None => Ok(Vec::new()),
+        }
     }
 
     /// The pose the map is built from.

@@ -6,7 +6,7 @@ use deog_grid::{ClampLimits, OccupancyThresholds, RayModelParams, Resolution, Ti
 use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::range_table::ConeGeometry;
 use deog_localizer::sensors::SensorChoice;
-use deog_mapping::{Cartographer, FrameInput, PoseChoice};
+use deog_mapping::{Cartographer, FrameInput, MapViewSettings, PoseChoice, SonarMethod};
 use deog_rig::Rig;
 use deog_simulator::simulation::{SimConfig, Simulation};
 use deog_simulator::{SonarPreset, Specular, WanderParams, Wanderer};
@@ -39,11 +39,18 @@ pub(super) fn build_map(
     let mut wanderer = Wanderer::for_rig(WanderParams::default(), &config.rig, 1000)?;
     // The sonar model `deog map` maps with.
     let mut params = deog_mapping::mapping_sonar_model();
-    if !matches!(config.sonar.specular, Specular::Off) {
+    let specular = !matches!(config.sonar.specular, Specular::Off);
+    if specular {
         // A specular sonar's no-echo readings are mostly lost echoes, not
-        // free space: the cartographer is told to ignore them.
+        // free space: the cartographer is told to ignore them, and its
+        // cones stop at the walls it has mapped (as `deog demo` maps).
         params.no_echo_free_range = 0.0;
     }
+    let method = if specular {
+        SonarMethod::KeepWalls
+    } else {
+        SonarMethod::Thesis
+    };
     // The Scout's own path for the Scout (as `deog map` takes it): the
     // same deltas, a little faster.
     let mut cartographer = if config.rig == deog_rig::scout() {
@@ -57,7 +64,15 @@ pub(super) fn build_map(
             res,
             size,
         )?
-    };
+    }
+    .with_sonar_method(
+        method,
+        &config.rig,
+        &params,
+        MapViewSettings::default(),
+        res,
+        size,
+    )?;
     let mut tiles = TileMap::new(res, size, ClampLimits::default());
     let mut deltas = Vec::new();
     let mut fired = Vec::new();

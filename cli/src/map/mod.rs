@@ -378,8 +378,7 @@ pub fn run(args: MapArgs) -> Result<()> {
                     }
                 }
                 let missing = cartographer.missing_tiles(&input)?;
-                if !missing.is_empty() {
-                    let view = cartographer.view_mut().expect("tiles are missing from a view");
+                if let (false, Some(view)) = (missing.is_empty(), cartographer.view_mut()) {
                     fill_view(&client, &args.map, tile_size, view, &missing).await?;
                 }
                 cells += cartographer.integrate(&input, &mut deltas)? as u64;
