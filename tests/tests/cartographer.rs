@@ -187,8 +187,8 @@ async fn keeping_walls_a_reading_that_missed_the_wall_does_not_erase_it() {
             String::from_utf8_lossy(&output.stderr)
         );
     };
-    map_to("kept", &[]);
-    map_to("thesis", &["--sonar-method", "thesis"]);
+    map_to("kept", &["--sonar-method", "keep-walls"]);
+    map_to("thesis", &[]);
     let (wall, behind) = wall_belief("kept").await;
     assert!(wall.is_some_and(|p| p > 0.7), "kept: {wall:?}");
     assert_eq!(behind, None, "nothing mapped behind a kept wall");
