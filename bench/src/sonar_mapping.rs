@@ -15,12 +15,22 @@
 //! - `keep-walls`: cones stopping at the walls the map already holds
 //!   ([`SonarMethod::KeepWalls`], `deog map --sonar-method keep-walls`);
 //! - `keep-walls-no-echo-ignored`: the same with no-echo readings
-//!   ignored (what `deog demo` runs with a specular sonar).
+//!   ignored (what `deog demo` runs with a specular sonar);
+//! - `directional`: evidence kept per direction of the surface normal
+//!   ([`SonarMethod::Directional`], `deog map --sonar-method directional`);
+//! - `directional-no-echo-ignored`: the same with no-echo readings
+//!   ignored;
+//! - `directional-specular`: what `deog demo` maps a specular sonar with
+//!   ([`specular_sonar_mapping`]: directional, no-echo readings ignored,
+//!   empty evidence out to 2 m whatever `--max-free-range` says).
+//!
+//! `--methods` picks some of them.
 //!
 //! The JSON (`--json FILE`) holds `options` and `worlds`: per world its
 //! `world`, `robots`, `frames` and `methods`, each with `method`,
 //! `frames_per_s` (mapping alone), and the map quality's `cells_observed`,
-//! `fraction_correct`, `occupied_precision`, `occupied_recall` and
+//! `fraction_correct`, `occupied_precision`, `occupied_recall`,
+//! `observed_occupied_recall` and
 //! `coverage`.
 
 use std::path::PathBuf;
@@ -32,6 +42,7 @@ use deog_evaluation::map_quality::{QualityInput, map_quality, verdict_png};
 use deog_grid::{ClampLimits, Pose2, Resolution, TileMap, TileSize};
 use deog_mapping::{
     Cartographer, FrameInput, MapViewSettings, PoseChoice, SonarMethod, mapping_sonar_model,
+    specular_sonar_mapping,
 };
 use deog_simulator::simulation::{SimConfig, Simulation};
 use deog_simulator::{SonarPreset, WanderParams, Wanderer};
@@ -41,11 +52,14 @@ use serde::Serialize;
 use crate::option_error::{OptionError, require};
 
 /// The methods compared, in the order the table lists them.
-pub const METHODS: [&str; 4] = [
+pub const METHODS: [&str; 7] = [
     "thesis",
     "thesis-no-echo-ignored",
     "keep-walls",
     "keep-walls-no-echo-ignored",
+    "directional",
+    "directional-no-echo-ignored",
+    "directional-specular",
 ];
 
 /// Options of `deog bench sonar-mapping`.
@@ -73,6 +87,9 @@ pub struct SonarMappingOptions {
     /// Seed of the simulator and the wanderers.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// The methods to compare, comma-separated (all of them by default).
+    #[arg(long, value_delimiter = ',', default_values_t = METHODS.map(String::from))]
+    pub methods: Vec<String>,
     /// Also write the figures as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -110,6 +127,14 @@ impl SonarMappingOptions {
                 )
             },
         )?;
+        for method in &self.methods {
+            require(METHODS.contains(&method.as_str()), "--methods", || {
+                format!(
+                    "--methods: no method {method:?}; the methods are {}",
+                    METHODS.join(", ")
+                )
+            })?;
+        }
         if let Some(json) = &self.json {
             let folder = json.parent().filter(|p| !p.as_os_str().is_empty());
             require(folder.is_none_or(|f| f.is_dir()), "--json", || {
@@ -153,6 +178,8 @@ pub struct MethodFigures {
     pub occupied_precision: Option<f64>,
     /// Wall surface cells the map holds occupied (within a cell).
     pub occupied_recall: Option<f64>,
+    /// The same over the wall surface cells the map observed.
+    pub observed_occupied_recall: Option<f64>,
     /// Reachable free space the map holds free.
     pub coverage: Option<f64>,
 }
@@ -206,7 +233,10 @@ pub fn run(options: SonarMappingOptions) -> Result<()> {
             began.elapsed().as_secs_f64()
         );
         let mut methods = Vec::new();
-        for method in METHODS {
+        for method in METHODS
+            .into_iter()
+            .filter(|m| options.methods.iter().any(|chosen| chosen == m))
+        {
             let (map, seconds) = build(method, &frames, &options)?;
             let input = QualityInput {
                 map: &map,
@@ -231,6 +261,7 @@ pub fn run(options: SonarMappingOptions) -> Result<()> {
                 fraction_correct: quality.fraction_correct(),
                 occupied_precision: quality.occupied_precision(),
                 occupied_recall: quality.occupied_recall(),
+                observed_occupied_recall: quality.observed_occupied_recall(),
                 coverage: quality.coverage(),
             });
         }
@@ -320,16 +351,23 @@ fn build(
 ) -> Result<(TileMap, f64)> {
     let (res, size) = (Resolution::DEFAULT, TileSize::new(64)?);
     let rig = deog_rig::scout();
-    let mut params = mapping_sonar_model();
-    let sonar_method = if method.starts_with("thesis") {
-        SonarMethod::Thesis
+    let (sonar_method, params) = if method == "directional-specular" {
+        specular_sonar_mapping()
     } else {
-        SonarMethod::KeepWalls
+        let mut params = mapping_sonar_model();
+        params.max_free_range = options.max_free_range;
+        if method.ends_with("no-echo-ignored") {
+            params.no_echo_free_range = 0.0;
+        }
+        let sonar_method = if method.starts_with("thesis") {
+            SonarMethod::Thesis
+        } else if method.starts_with("directional") {
+            SonarMethod::Directional
+        } else {
+            SonarMethod::KeepWalls
+        };
+        (sonar_method, params)
     };
-    if method.ends_with("no-echo-ignored") {
-        params.no_echo_free_range = 0.0;
-    }
-    params.max_free_range = options.max_free_range;
     let view = MapViewSettings {
         wall_probability: options.wall_probability,
         shadow_probability: options.wall_probability,
@@ -365,13 +403,13 @@ fn build(
 fn table(worlds: &[WorldFigures]) -> String {
     let percent = |v: Option<f64>| v.map_or("—".to_owned(), |v| format!("{:.1} %", 100.0 * v));
     let mut out = String::from(
-        "| world | robots | frames | method | right | occupied precision | occupied recall | coverage | cells observed | frames/s |\n\
-         |---|---|---|---|---|---|---|---|---|---|\n",
+        "| world | robots | frames | method | right | occupied precision | occupied recall | recall of observed walls | coverage | cells observed | frames/s |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for w in worlds {
         for m in &w.methods {
             out += &format!(
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.0} |\n",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.0} |\n",
                 w.world,
                 w.robots,
                 w.frames,
@@ -379,6 +417,7 @@ fn table(worlds: &[WorldFigures]) -> String {
                 percent(Some(m.fraction_correct)),
                 percent(m.occupied_precision),
                 percent(m.occupied_recall),
+                percent(m.observed_occupied_recall),
                 percent(m.coverage),
                 m.cells_observed,
                 m.frames_per_s
@@ -423,6 +462,7 @@ mod tests {
         assert_eq!(flag(&["--minutes", "0"]), "--minutes");
         assert_eq!(flag(&["--wall-probability", "1"]), "--wall-probability");
         assert_eq!(flag(&["--json", "/no/such/folder/x.json"]), "--json");
+        assert_eq!(flag(&["--methods", "thesis,nosuch"]), "--methods");
     }
 
     #[test]

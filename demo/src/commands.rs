@@ -7,6 +7,7 @@ use std::net::SocketAddr;
 use std::path::Path;
 
 use deog_harness::os;
+use deog_mapping::specular_sonar_mapping;
 
 use crate::plan::{DemoPlan, PlannedRobot};
 use deog_simulator::SonarPreset;
@@ -96,12 +97,20 @@ pub(crate) fn wander(
 }
 
 /// A cartographer adding `robot`'s frames to the shared map; with a
-/// specular sonar, cones stop at the walls the map holds and no-echo
-/// readings (mostly lost echoes) are ignored, the best sonar maps measured
-/// on such readings (BENCHMARKS.md, sonar mapping).
+/// specular sonar, evidence is kept by direction, no-echo readings (mostly
+/// lost echoes) are ignored and empty evidence reaches 2 m, the best sonar
+/// maps measured on such readings (BENCHMARKS.md, sonar mapping).
 pub(crate) fn map(plan: &DemoPlan, robot: &PlannedRobot, addresses: &Addresses) -> Vec<OsString> {
     let specular = if plan.sonar.specular_angle_deg().is_some() {
-        os(&["--sonar-method", "keep-walls", "--no-echo-free-range", "0"])
+        let (_, params) = specular_sonar_mapping();
+        os(&[
+            "--sonar-method",
+            "directional",
+            "--no-echo-free-range",
+            &params.no_echo_free_range.to_string(),
+            "--max-free-range",
+            &params.max_free_range.to_string(),
+        ])
     } else {
         Vec::new()
     };
@@ -219,7 +228,7 @@ mod tests {
         assert_eq!(
             line(&map(&plan, &plan.robots[0], &addresses)),
             "map --robot scout-1 --map demo --idle-exit 3 --server http://127.0.0.1:5001 \
-             --sonar-method keep-walls --no-echo-free-range 0"
+             --sonar-method directional --no-echo-free-range 0 --max-free-range 2"
         );
         assert_eq!(
             line(&localize(&plan, &plan.robots[0], &addresses)),

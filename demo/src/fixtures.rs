@@ -76,6 +76,8 @@ pub(crate) fn judgement() -> Judgement {
             map_occupied_near_truth: 9,
             surface_cells: 20,
             surface_cells_found: 15,
+            surface_cells_observed: 18,
+            surface_cells_observed_found: 15,
             reachable_cells: 100,
             reachable_cells_free: 80,
         },

@@ -54,7 +54,6 @@ pub trait ConeGuard {
     /// Whether `cell` hides what lies behind it: a cone's evidence stops
     /// a cell past it.
     fn shadows(&self, cell: CellIndex) -> bool;
-    /// Whether `cell` is a wall no reading may free.
     /// Whether `cell` is a wall no reading may free. A kept cell must
     /// also shadow.
     fn keeps(&self, cell: CellIndex) -> bool;

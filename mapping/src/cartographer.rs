@@ -3,10 +3,12 @@
 //! simulator's true pose; a real robot has only its odometry).
 
 use deog_grid::{
-    Pose2, RayModelParams, Resolution, SensorRing, SonarModelParams, TileDelta, TileKey, TileSize,
+    GridError, Pose2, RayModelParams, Resolution, SensorRing, SonarModelParams, TileDelta, TileKey,
+    TileSize,
 };
 use deog_rig::Rig;
 
+use crate::directional::{DirectionalSettings, DirectionalView};
 use crate::error::MappingError;
 use crate::map_view::{MapView, MapViewSettings};
 use crate::sensors::{InverseSensorModel, RigBeams, SonarCone};
@@ -33,6 +35,27 @@ pub fn mapping_sonar_model() -> SonarModelParams {
         ..SonarModelParams::default()
     }
 }
+
+/// How a specular sonar's readings are best mapped, as measured on the
+/// simulator's realistic sonar (BENCHMARKS.md, sonar mapping): evidence
+/// kept by direction ([`SonarMethod::Directional`]), no-echo readings
+/// ignored (most are echoes lost off a grazed wall, not free space) and
+/// empty evidence only out to 2 m (the farther a cell, the likelier a
+/// grazed wall stands before it); echoes are still mapped out to 5 m.
+pub fn specular_sonar_mapping() -> (SonarMethod, SonarModelParams) {
+    (
+        SonarMethod::Directional,
+        SonarModelParams {
+            no_echo_free_range: 0.0,
+            max_free_range: SPECULAR_MAX_FREE_RANGE,
+            ..mapping_sonar_model()
+        },
+    )
+}
+
+/// How far a specular sonar's empty evidence reaches in
+/// [`specular_sonar_mapping`], metres.
+pub const SPECULAR_MAX_FREE_RANGE: f64 = 2.0;
 
 /// Which pose of a frame the map is built from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -93,6 +116,12 @@ pub enum SonarMethod {
     /// clean sonar maps some precision: a cell that reached the wall
     /// belief by mistake is never freed (BENCHMARKS.md, sonar mapping).
     KeepWalls,
+    /// Evidence kept per direction of the surface normal (a bounded
+    /// [`DirectionalView`] of the cartographer's own): a reading that
+    /// sweeps a wall at a grazing angle frees only the directions it
+    /// faces, never the one the wall echoed from; cones stop behind the
+    /// walls the view holds. For a specular sonar.
+    Directional,
 }
 
 /// Turns frames into tile deltas for one map.
@@ -103,6 +132,17 @@ pub struct Cartographer {
     /// With [`SonarMethod::KeepWalls`]: the map being written, and how far
     /// from the robot a frame's cones reach, metres.
     guard: Option<(MapView, f64)>,
+    /// With [`SonarMethod::Directional`]: the beliefs by direction, and
+    /// the plain deltas of the frame being mapped.
+    directional: Option<Directional>,
+}
+
+/// What [`SonarMethod::Directional`] keeps between frames.
+#[derive(Debug)]
+struct Directional {
+    view: DirectionalView,
+    /// The plain deltas of the cones being mapped.
+    plain: Vec<TileDelta>,
 }
 
 impl Cartographer {
@@ -150,6 +190,7 @@ impl Cartographer {
             sensor,
             pose,
             guard: None,
+            directional: None,
         }
     }
 
@@ -162,11 +203,25 @@ impl Cartographer {
         self
     }
 
+    /// Keeps sonar evidence by direction in `view`
+    /// ([`SonarMethod::Directional`]); the deltas the cartographer gives
+    /// are the changes of the view's beliefs.
+    pub fn by_direction(mut self, view: DirectionalView) -> Self {
+        self.directional = Some(Directional {
+            view,
+            plain: Vec::new(),
+        });
+        self
+    }
+
     /// Maps sonar readings by `method`: with [`SonarMethod::KeepWalls`]
     /// and a rig with sonars, guards its cones with a new view of
     /// `settings` reaching as far as `sonar`'s cones can from the rig's
-    /// sensors. A rig of lasers alone, or [`SonarMethod::Thesis`], leaves
-    /// the cartographer as it is.
+    /// sensors; with [`SonarMethod::Directional`], keeps evidence by
+    /// direction in a view of `settings`' size and wall probability (a
+    /// rig with lasers too has their rays kept so as well). A rig of
+    /// lasers alone, or [`SonarMethod::Thesis`], leaves the cartographer
+    /// as it is.
     pub fn with_sonar_method(
         self,
         method: SonarMethod,
@@ -178,6 +233,18 @@ impl Cartographer {
     ) -> Result<Self, MappingError> {
         if method == SonarMethod::Thesis || rig.all_laser() {
             return Ok(self);
+        }
+        if method == SonarMethod::Directional {
+            let view = DirectionalView::new(
+                resolution,
+                tile_size,
+                DirectionalSettings {
+                    wall_probability: settings.wall_probability,
+                    max_tiles: settings.max_tiles,
+                    limits: settings.limits,
+                },
+            )?;
+            return Ok(self.by_direction(view));
         }
         let view = MapView::new(resolution, tile_size, settings)?;
         // A cone reaches its mapped range from a sensor up to `reach` off
@@ -225,13 +292,25 @@ impl Cartographer {
     ) -> Result<usize, MappingError> {
         let pose = self.pose_of(frame)?;
         let start = out.len();
+        let invalid = |e: GridError| {
+            MappingError::invalid(format!("frame {}", frame.sequence), e.to_string())
+        };
+        if let Some(d) = &mut self.directional {
+            d.plain.clear();
+            let cells = self
+                .sensor
+                .integrate_guarded(&pose, frame.ranges, &d.view, &mut d.plain)
+                .map_err(invalid)?;
+            d.view.absorb(&pose, &d.plain, out)?;
+            return Ok(cells);
+        }
         let cells = match &self.guard {
             Some((view, _)) => self
                 .sensor
                 .integrate_guarded(&pose, frame.ranges, view, out),
             None => self.sensor.integrate(&pose, frame.ranges, out),
         }
-        .map_err(|e| MappingError::invalid(format!("frame {}", frame.sequence), e.to_string()))?;
+        .map_err(invalid)?;
         if let Some((view, _)) = &mut self.guard {
             view.apply(&out[start..])?;
         }

@@ -8,6 +8,9 @@
 //! - [`map_view`]: [`MapView`], the cartographer's bounded view of the
 //!   map it writes to, whose walls a sonar cone stops at
 //!   ([`SonarMethod::KeepWalls`]).
+//! - [`directional`]: [`DirectionalView`], sonar evidence kept per
+//!   direction of the surface normal, so that a wall swept at a grazing
+//!   angle keeps the echoes it returned ([`SonarMethod::Directional`]).
 //! - [`estimates`]: [`EstimateBook`], which frames a localizer's converged
 //!   estimates place (mapping without ground truth).
 //! - [`sensors`]: the inverse sensor models behind
@@ -21,6 +24,7 @@
 //! - [`error`]: the crate's one error type, [`MappingError`].
 
 pub mod cartographer;
+pub mod directional;
 pub mod error;
 pub mod estimates;
 pub mod map_export;
@@ -28,7 +32,11 @@ pub mod map_import;
 pub mod map_view;
 pub mod sensors;
 
-pub use cartographer::{Cartographer, FrameInput, PoseChoice, SonarMethod, mapping_sonar_model};
+pub use cartographer::{
+    Cartographer, FrameInput, PoseChoice, SPECULAR_MAX_FREE_RANGE, SonarMethod,
+    mapping_sonar_model, specular_sonar_mapping,
+};
+pub use directional::{DirectionalSettings, DirectionalView};
 pub use error::MappingError;
 pub use estimates::{EstimateBook, EstimateLookup};
 pub use map_export::{ExportCounts, MapExport, export_map};

@@ -126,11 +126,18 @@ async fn the_map_is_the_frames_applied_in_order_and_a_restart_resumes_exactly() 
 /// The Scout at the origin facing +x, its front sonar reading `front`
 /// (a wall stands 1.8 m ahead of it), the others no echo.
 fn facing_wall(robot: &str, sequence: u64, front: f64) -> pb::SonarFrame {
-    let pose = pb::Pose2 {
-        x: 0.0,
-        y: 0.0,
-        theta: 0.0,
-    };
+    front_reading(robot, sequence, (0.0, 0.0, 0.0), front)
+}
+
+/// The Scout at `(x, y, theta)`, its front sonar reading `front`, the
+/// others no echo.
+fn front_reading(
+    robot: &str,
+    sequence: u64,
+    (x, y, theta): (f64, f64, f64),
+    front: f64,
+) -> pb::SonarFrame {
+    let pose = pb::Pose2 { x, y, theta };
     let mut ranges = vec![10.668; 16];
     ranges[0] = front;
     pb::SonarFrame {
@@ -195,5 +202,54 @@ async fn keeping_walls_a_reading_that_missed_the_wall_does_not_erase_it() {
     let (wall, behind) = wall_belief("thesis").await;
     assert!(wall.is_some_and(|p| p < 0.5), "thesis: {wall:?}");
     assert!(behind.is_some(), "the thesis's model maps through the wall");
+    drop(server);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn directional_a_reading_that_swept_along_the_wall_does_not_erase_it() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let server = ServerProcess::start(&dir.path().join("data"), &[]).await;
+    let client = MapClient::connect(ClientConfig::new(server.addr.to_string()))
+        .await
+        .expect("client");
+    // Fifteen echoes off the wall from straight in front of it, then
+    // twenty readings from beside it, looking along it, that heard
+    // something 4 m away: a specular sonar's sweep past a wall.
+    let along = (2.0, -1.5, std::f64::consts::FRAC_PI_2);
+    let frames: Vec<_> = (1..=15)
+        .map(|k| facing_wall("r", k, 1.8))
+        .chain((16..=35).map(|k| front_reading("r", k, along, 4.0)))
+        .collect();
+    client.publish_frames(frames).await.expect("publish");
+    let map_to = |map: &str, extra: &[&str]| {
+        let output = Command::new(deog_binary())
+            .args(["map", "--robot", "r", "--idle-exit", "1", "--map", map])
+            .args(extra)
+            .env("DEOG_SERVER", server.addr.to_string())
+            .env("RUST_LOG", "warn")
+            .output()
+            .expect("run deog map");
+        assert!(
+            output.status.success(),
+            "{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+    };
+    map_to("directional", &["--sonar-method", "directional"]);
+    map_to("thesis", &[]);
+    let wall = |map: &str| {
+        let client = client.clone();
+        let map = map.to_owned();
+        async move {
+            let (_, tiles) = client.download(&map).await.expect("download");
+            let cell = tiles.resolution().cell_of(2.0, 0.0).expect("cell");
+            tiles.get(cell).map(|b| b.probability())
+        }
+    };
+    let kept = wall("directional").await;
+    assert!(kept.is_some_and(|p| p > 0.7), "directional: {kept:?}");
+    let erased = wall("thesis").await;
+    assert!(erased.is_some_and(|p| p < 0.5), "thesis: {erased:?}");
+    drop(client);
     drop(server);
 }

@@ -38,18 +38,12 @@ pub(super) fn build_map(
     let mut state = sim.spawn("cartographer", None)?;
     let mut wanderer = Wanderer::for_rig(WanderParams::default(), &config.rig, 1000)?;
     // The sonar model `deog map` maps with.
-    let mut params = deog_mapping::mapping_sonar_model();
     let specular = !matches!(config.sonar.specular, Specular::Off);
-    if specular {
-        // A specular sonar's no-echo readings are mostly lost echoes, not
-        // free space: the cartographer is told to ignore them, and its
-        // cones stop at the walls it has mapped (as `deog demo` maps).
-        params.no_echo_free_range = 0.0;
-    }
-    let method = if specular {
-        SonarMethod::KeepWalls
+    // A specular sonar's readings are mapped as `deog demo` maps them.
+    let (method, params) = if specular {
+        deog_mapping::specular_sonar_mapping()
     } else {
-        SonarMethod::Thesis
+        (SonarMethod::Thesis, deog_mapping::mapping_sonar_model())
     };
     // The Scout's own path for the Scout (as `deog map` takes it): the
     // same deltas, a little faster.

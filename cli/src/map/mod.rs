@@ -12,7 +12,8 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use deog_grid::{RayModelParams, Resolution, SonarModelParams, TileKey, TileSize};
 use deog_mapping::{
-    FrameInput, MapView, MapViewSettings, PoseChoice, SonarMethod, mapping_sonar_model,
+    DirectionalSettings, FrameInput, MapView, MapViewSettings, PoseChoice, SonarMethod,
+    mapping_sonar_model,
 };
 use deog_proto::names::check_robot_name;
 use deog_proto::v1 as pb;
@@ -137,20 +138,23 @@ pub struct MapArgs {
     #[arg(long, default_value_t = RayModelParams::default().max_mapped_range)]
     pub ray_max_mapped_range: f64,
     /// How sonar readings become evidence: `thesis` (the thesis's model
-    /// alone) or `keep-walls` (each cone stopping at the cells the map
-    /// already holds as walls, so that a reading that glanced off a wall
-    /// cannot erase it: for a specular sonar).
+    /// alone), `directional` (evidence kept per direction of the surface
+    /// normal, so that a reading that glanced off a wall cannot erase the
+    /// echoes it returned head-on: for a specular sonar, best with
+    /// --no-echo-free-range 0 --max-free-range 2) or `keep-walls` (each
+    /// cone stopping at the cells the map already holds as walls).
     #[arg(long, value_enum, default_value_t = SonarMethodChoice::Thesis)]
     pub sonar_method: SonarMethodChoice,
-    /// With --sonar-method keep-walls: the probability of occupancy from
-    /// which a cell is a wall that cones stop at.
+    /// With --sonar-method keep-walls or directional: the probability of
+    /// occupancy from which a cell is a wall that cones stop at.
     #[arg(long, default_value_t = MapViewSettings::default().wall_probability)]
     pub wall_probability: f64,
-    /// With --sonar-method keep-walls: tiles of the map kept in memory
-    /// around the robot (least recently used forgotten first; 8 KiB each
-    /// for 64-cell tiles).
-    #[arg(long, default_value_t = MapViewSettings::default().max_tiles)]
-    pub view_tiles: usize,
+    /// With --sonar-method keep-walls or directional: tiles of the map
+    /// kept in memory around the robot, least recently used forgotten
+    /// first (for 64-cell tiles, keep-walls: 8 KiB each, 4,096 by default;
+    /// directional: 96 KiB each, 1,024 by default).
+    #[arg(long)]
+    pub view_tiles: Option<usize>,
     /// With --sonar-method keep-walls: how often the tiles kept are read
     /// again from the map server, seconds, so that other robots' walls
     /// count too.
@@ -165,6 +169,8 @@ pub struct MapArgs {
 pub enum SonarMethodChoice {
     /// Cones stop at the walls the map already holds.
     KeepWalls,
+    /// Evidence kept per direction of the surface normal.
+    Directional,
     /// The thesis's model alone.
     Thesis,
 }
@@ -173,6 +179,7 @@ impl From<SonarMethodChoice> for SonarMethod {
     fn from(choice: SonarMethodChoice) -> Self {
         match choice {
             SonarMethodChoice::KeepWalls => SonarMethod::KeepWalls,
+            SonarMethodChoice::Directional => SonarMethod::Directional,
             SonarMethodChoice::Thesis => SonarMethod::Thesis,
         }
     }
@@ -229,7 +236,10 @@ pub fn run(args: MapArgs) -> Result<()> {
     let view = MapViewSettings {
         wall_probability: args.wall_probability,
         shadow_probability: args.wall_probability,
-        max_tiles: args.view_tiles,
+        max_tiles: args.view_tiles.unwrap_or(match args.sonar_method {
+            SonarMethodChoice::Directional => DirectionalSettings::default().max_tiles,
+            _ => MapViewSettings::default().max_tiles,
+        }),
         ..MapViewSettings::default()
     }
     .validate()

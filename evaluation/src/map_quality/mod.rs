@@ -40,6 +40,10 @@
 //!   within one cell (their 3 × 3 block) over all map-occupied cells;
 //! - `occupied_recall`: surface cells with a map-occupied cell within one
 //!   cell over all surface cells;
+//! - `observed_occupied_recall`: the same over the surface cells with an
+//!   observed cell within one cell: of the walls the map looked at, the
+//!   share it holds as walls (a wall it erased counts, one no robot came
+//!   near does not);
 //! - `coverage`: reachable cells the map classifies free over all
 //!   reachable cells.
 //!
@@ -138,6 +142,10 @@ pub struct MapQuality {
     pub surface_cells: u64,
     /// Of those, the ones with a map-occupied cell within one cell.
     pub surface_cells_found: u64,
+    /// Surface cells with an observed cell within one cell.
+    pub surface_cells_observed: u64,
+    /// Of those, the ones with a map-occupied cell within one cell.
+    pub surface_cells_observed_found: u64,
     /// Reachable cells.
     pub reachable_cells: u64,
     /// Of those, the ones the map classifies free.
@@ -188,6 +196,16 @@ impl MapQuality {
         ratio(self.surface_cells_found, self.surface_cells)
     }
 
+    /// Observed surface cells found within one cell, over surface cells
+    /// with an observed cell within one cell; `None` when the map observed
+    /// no surface.
+    pub fn observed_occupied_recall(&self) -> Option<f64> {
+        ratio(
+            self.surface_cells_observed_found,
+            self.surface_cells_observed,
+        )
+    }
+
     /// Reachable cells mapped free, over reachable cells; `None` when
     /// nothing is reachable.
     pub fn coverage(&self) -> Option<f64> {
@@ -232,6 +250,8 @@ pub fn map_quality(input: &QualityInput<'_>) -> Result<MapQuality, EvaluationErr
         map_occupied_near_truth: 0,
         surface_cells: 0,
         surface_cells_found: 0,
+        surface_cells_observed: 0,
+        surface_cells_observed_found: 0,
         reachable_cells: 0,
         reachable_cells_free: 0,
     };
@@ -257,8 +277,11 @@ pub fn map_quality(input: &QualityInput<'_>) -> Result<MapQuality, EvaluationErr
     for (cell, flags) in grid.cells() {
         if flags & SURFACE != 0 {
             quality.surface_cells += 1;
-            if block(cell).any(|n| class_at(n) == Some(Class::Occupied)) {
-                quality.surface_cells_found += 1;
+            let found = block(cell).any(|n| class_at(n) == Some(Class::Occupied));
+            quality.surface_cells_found += u64::from(found);
+            if block(cell).any(|n| class_at(n).is_some()) {
+                quality.surface_cells_observed += 1;
+                quality.surface_cells_observed_found += u64::from(found);
             }
         }
         if flags & REACHABLE != 0 {

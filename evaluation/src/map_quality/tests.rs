@@ -281,6 +281,9 @@ fn seeds_choose_the_space_a_robot_could_reach() {
     assert_eq!((q.reachable_cells, q.reachable_cells_free), (60, 36));
     // The right room's walls count too: 8 + 8 + 4 + 4 cells unseen.
     assert_eq!((q.surface_cells, q.surface_cells_found), (52, 28));
+    // Of the walls the map looked at, it found every one.
+    assert_eq!(q.observed_occupied_recall(), Some(1.0));
+    assert!(q.surface_cells_observed < q.surface_cells);
 
     let q = judge(&map, &world, &[left], 0.3);
     assert_eq!((q.seeds_given, q.seeds_used), (1, 1));
