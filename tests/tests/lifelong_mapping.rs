@@ -72,7 +72,8 @@ async fn a_moved_box_appears_in_the_shared_map_through_the_localizers_estimates(
         ("DEOG_SERVER", server.addr.to_string()),
         ("DEOG_SIM", sim.addr.to_string()),
     ];
-    succeeded(&run_deog(
+    let mut log = String::new();
+    log += &succeeded(&run_deog(
         &[
             "wander",
             "--robot",
@@ -85,7 +86,7 @@ async fn a_moved_box_appears_in_the_shared_map_through_the_localizers_estimates(
         ],
         &env,
     ));
-    succeeded(&run_deog(
+    log += &succeeded(&run_deog(
         &["map", "--robot", "mapper", "--map", "m", "--idle-exit", "2"],
         &env,
     ));
@@ -95,7 +96,7 @@ async fn a_moved_box_appears_in_the_shared_map_through_the_localizers_estimates(
     let is = box_faces_occupied(&map, after);
     assert!(
         was > 0.5 && is < 0.1,
-        "before the move: {was:.2} where it was, {is:.2} where it goes"
+        "before the move: {was:.2} where it was, {is:.2} where it goes\n{log}"
     );
 
     // The box moved; another robot drives the room. Its localizer tracks
@@ -110,12 +111,16 @@ async fn a_moved_box_appears_in_the_shared_map_through_the_localizers_estimates(
         ("DEOG_SERVER", server.addr.to_string()),
         ("DEOG_SIM", sim.addr.to_string()),
     ];
-    succeeded(&run_deog(
+    log += &succeeded(&run_deog(
         &[
             "wander",
             "--robot",
             "worker",
             "--spawn",
+            // Facing the walls and the table, which did not move: the
+            // localizer starts from a pose its first frames confirm.
+            "--start",
+            "2.0,2.0,3.1416",
             "--seed",
             "8",
             "--duration",
@@ -126,13 +131,17 @@ async fn a_moved_box_appears_in_the_shared_map_through_the_localizers_estimates(
     // Its frames as a real robot's would be: no true pose anywhere.
     let mut frames = client.read_frames("worker", 1, 0).await.unwrap();
     let start = frames[0].true_pose.unwrap();
+    let truth: std::collections::HashMap<u64, (f64, f64)> = frames
+        .iter()
+        .filter_map(|f| f.true_pose.map(|p| (f.sequence, (p.x, p.y))))
+        .collect();
     for frame in &mut frames {
         frame.robot = "blind".into();
         frame.true_pose = None;
     }
     client.publish_frames(frames).await.unwrap();
     let initial = format!("--initial-pose={},{},{}", start.x, start.y, start.theta);
-    succeeded(&run_deog(
+    log += &succeeded(&run_deog(
         &[
             "localize",
             "--robot",
@@ -168,16 +177,42 @@ async fn a_moved_box_appears_in_the_shared_map_through_the_localizers_estimates(
         &env,
     ));
     assert!(out.contains("frames integrated"), "{out}");
+    // How far the converged estimates the map was built from lay from
+    // the truth.
+    let errors: Vec<f64> = client
+        .read_poses("blind", 1, 0)
+        .await
+        .unwrap()
+        .iter()
+        .filter(|e| e.converged)
+        .filter_map(|e| {
+            let (x, y) = truth.get(&e.frame_sequence)?;
+            let p = e.pose?;
+            Some((p.x - x).hypot(p.y - y))
+        })
+        .collect();
+    let mean_error = errors.iter().sum::<f64>() / errors.len().max(1) as f64;
+    let worst = errors.iter().copied().fold(0.0, f64::max);
+    let summary = format!(
+        "{} converged estimates, mean position error {mean_error:.3} m, largest {worst:.3} m\n",
+        errors.len()
+    );
+    eprint!("{summary}");
+    log += &summary;
+    assert!(
+        errors.len() > 1000 && mean_error < 0.05,
+        "the estimates the map is built from:\n{log}{out}"
+    );
     let (_, map) = client.download("m").await.unwrap();
     let was = box_faces_occupied(&map, before);
     let is = box_faces_occupied(&map, after);
     eprintln!("box faces occupied after the move: new place {is:.2}, old place {was:.2}");
     assert!(
         is > 0.5,
-        "after the move, the box's new place: {is:.2}\n{out}"
+        "after the move, the box's new place: {is:.2}\n{log}{out}"
     );
     assert!(
         was < 0.5,
-        "after the move, the box's old place: {was:.2}\n{out}"
+        "after the move, the box's old place: {was:.2}\n{log}{out}"
     );
 }
