@@ -63,6 +63,18 @@ pub struct LocalizeArgs {
     /// Fewest particles. Default: the preset's (500 sim, 2000 real-laser).
     #[arg(long)]
     pub min_particles: Option<usize>,
+    /// Recovery: how fast the slow average of the frames' fit follows
+    /// them (amcl's recovery_alpha_slow). When the fast average falls
+    /// below the slow one, particles are drawn from free space anywhere
+    /// near: how a kidnapped robot is found again. 0 with
+    /// --recovery-alpha-fast 0 turns recovery off (a robot that is never
+    /// carried off, on a map that may have changed).
+    #[arg(long, default_value_t = FilterSettings::default().alpha_slow)]
+    pub recovery_alpha_slow: f64,
+    /// Recovery: how fast the fast average follows the frames' fit
+    /// (amcl's recovery_alpha_fast); at least --recovery-alpha-slow.
+    #[arg(long, default_value_t = FilterSettings::default().alpha_fast)]
+    pub recovery_alpha_fast: f64,
     /// The beam model's tempering τ: the frame counts as 16·τ independent
     /// beams.
     #[arg(long, default_value_t = FilterSettings::default().beam.tempering)]
@@ -199,6 +211,8 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     settings.kld.max_particles = args.max_particles;
     settings.kld.min_particles = args.min_particles.unwrap_or(preset.min_particles);
     settings.beam.tempering = args.tempering;
+    settings.alpha_slow = args.recovery_alpha_slow;
+    settings.alpha_fast = args.recovery_alpha_fast;
     settings.motion = settings.motion.scaled(motion_noise_scale);
     // The filter is built once the first frame names the rig; its
     // settings are checked now, before anything waits.
