@@ -34,6 +34,7 @@ use deog_grid::{
 };
 
 use crate::error::MappingError;
+use crate::map_view::evict_least_recent;
 
 /// Directions of the surface normal a cell keeps a belief for.
 pub const DIRECTIONS: usize = 12;
@@ -209,18 +210,8 @@ impl DirectionalView {
         Ok(())
     }
 
-    /// Forgets the least recently used tiles down to seven eighths of the
-    /// limit, so that eviction runs once per many tiles.
     fn evict(&mut self) {
-        if self.tiles.len() <= self.settings.max_tiles {
-            return;
-        }
-        let keep = self.settings.max_tiles - self.settings.max_tiles / 8;
-        let mut ages: Vec<(u64, TileKey)> = self.tiles.iter().map(|(k, t)| (t.used, *k)).collect();
-        ages.sort_unstable();
-        for (_, key) in ages.iter().take(self.tiles.len() - keep) {
-            self.tiles.remove(key);
-        }
+        evict_least_recent(&mut self.tiles, self.settings.max_tiles, |t| t.used);
     }
 }
 

@@ -224,18 +224,27 @@ impl MapView {
         Ok(())
     }
 
-    /// Forgets the least recently used tiles down to seven eighths of the
-    /// limit, so that eviction runs once per many tiles.
     fn evict(&mut self) {
-        if self.tiles.len() <= self.settings.max_tiles {
-            return;
-        }
-        let keep = self.settings.max_tiles - self.settings.max_tiles / 8;
-        let mut ages: Vec<(u64, TileKey)> = self.tiles.iter().map(|(k, t)| (t.used, *k)).collect();
-        ages.sort_unstable();
-        for (_, key) in ages.iter().take(self.tiles.len() - keep) {
-            self.tiles.remove(key);
-        }
+        evict_least_recent(&mut self.tiles, self.settings.max_tiles, |t| t.used);
+    }
+}
+
+/// Forgets the least recently used of `tiles` (by `used`, a clock) down to
+/// seven eighths of `max_tiles` once there are more, so that eviction runs
+/// once per many tiles.
+pub(crate) fn evict_least_recent<T>(
+    tiles: &mut HashMap<TileKey, T>,
+    max_tiles: usize,
+    used: impl Fn(&T) -> u64,
+) {
+    if tiles.len() <= max_tiles {
+        return;
+    }
+    let keep = max_tiles - max_tiles / 8;
+    let mut ages: Vec<(u64, TileKey)> = tiles.iter().map(|(k, t)| (used(t), *k)).collect();
+    ages.sort_unstable();
+    for (_, key) in ages.iter().take(tiles.len() - keep) {
+        tiles.remove(key);
     }
 }
 

@@ -123,6 +123,23 @@ async fn the_map_is_the_frames_applied_in_order_and_a_restart_resumes_exactly() 
     drop(server);
 }
 
+/// Maps robot `r`'s frames into `map` with `deog map` and `extra` flags,
+/// to the end of its frames.
+fn map_robot_r(server: &ServerProcess, map: &str, extra: &[&str]) {
+    let output = Command::new(deog_binary())
+        .args(["map", "--robot", "r", "--idle-exit", "1", "--map", map])
+        .args(extra)
+        .env("DEOG_SERVER", server.addr.to_string())
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("run deog map");
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+}
+
 /// The Scout at the origin facing +x, its front sonar reading `front`
 /// (a wall stands 1.8 m ahead of it), the others no echo.
 fn facing_wall(robot: &str, sequence: u64, front: f64) -> pb::SonarFrame {
@@ -178,22 +195,7 @@ async fn keeping_walls_a_reading_that_missed_the_wall_does_not_erase_it() {
             )
         }
     };
-    let map_to = |map: &str, extra: &[&str]| {
-        let mut args = vec!["--map", map];
-        args.extend_from_slice(extra);
-        let output = Command::new(deog_binary())
-            .args(["map", "--robot", "r", "--idle-exit", "1"])
-            .args(&args)
-            .env("DEOG_SERVER", server.addr.to_string())
-            .env("RUST_LOG", "warn")
-            .output()
-            .expect("run deog map");
-        assert!(
-            output.status.success(),
-            "{}",
-            String::from_utf8_lossy(&output.stderr)
-        );
-    };
+    let map_to = |map: &str, extra: &[&str]| map_robot_r(&server, map, extra);
     map_to("kept", &["--sonar-method", "keep-walls"]);
     map_to("thesis", &[]);
     let (wall, behind) = wall_belief("kept").await;
@@ -221,20 +223,7 @@ async fn directional_a_reading_that_swept_along_the_wall_does_not_erase_it() {
         .chain((16..=35).map(|k| front_reading("r", k, along, 4.0)))
         .collect();
     client.publish_frames(frames).await.expect("publish");
-    let map_to = |map: &str, extra: &[&str]| {
-        let output = Command::new(deog_binary())
-            .args(["map", "--robot", "r", "--idle-exit", "1", "--map", map])
-            .args(extra)
-            .env("DEOG_SERVER", server.addr.to_string())
-            .env("RUST_LOG", "warn")
-            .output()
-            .expect("run deog map");
-        assert!(
-            output.status.success(),
-            "{}",
-            String::from_utf8_lossy(&output.stderr)
-        );
-    };
+    let map_to = |map: &str, extra: &[&str]| map_robot_r(&server, map, extra);
     map_to("directional", &["--sonar-method", "directional"]);
     map_to("thesis", &[]);
     let wall = |map: &str| {
