@@ -121,7 +121,7 @@ async fn a_moved_box_appears_in_the_shared_map_through_the_localizers_estimates(
             "--seed",
             "8",
             "--duration",
-            "240",
+            "360",
         ],
         &env,
     ));
