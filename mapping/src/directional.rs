@@ -34,7 +34,7 @@ use deog_grid::{
 };
 
 use crate::error::MappingError;
-use crate::map_view::evict_least_recent;
+use crate::map_view::{check_view, evict_least_recent};
 
 /// Directions of the surface normal a cell keeps a belief for.
 pub const DIRECTIONS: usize = 12;
@@ -70,18 +70,7 @@ impl Default for DirectionalSettings {
 impl DirectionalSettings {
     /// Checks the figures.
     pub fn validate(self) -> Result<Self, MappingError> {
-        if !(self.wall_probability > 0.5 && self.wall_probability < 1.0) {
-            return Err(MappingError::invalid(
-                "wall_probability",
-                format!("must be in (0.5, 1), got {}", self.wall_probability),
-            ));
-        }
-        if self.max_tiles < 16 {
-            return Err(MappingError::invalid(
-                "max_tiles",
-                format!("must be at least 16, got {}", self.max_tiles),
-            ));
-        }
+        check_view(self.wall_probability, self.max_tiles)?;
         Ok(self)
     }
 }

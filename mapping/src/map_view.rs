@@ -52,12 +52,7 @@ impl Default for MapViewSettings {
 impl MapViewSettings {
     /// Checks the figures.
     pub fn validate(self) -> Result<Self, MappingError> {
-        if !(self.wall_probability > 0.5 && self.wall_probability < 1.0) {
-            return Err(MappingError::invalid(
-                "wall_probability",
-                format!("must be in (0.5, 1), got {}", self.wall_probability),
-            ));
-        }
+        check_view(self.wall_probability, self.max_tiles)?;
         if !(self.shadow_probability > 0.5 && self.shadow_probability <= self.wall_probability) {
             return Err(MappingError::invalid(
                 "shadow_probability",
@@ -67,14 +62,26 @@ impl MapViewSettings {
                 ),
             ));
         }
-        if self.max_tiles < 16 {
-            return Err(MappingError::invalid(
-                "max_tiles",
-                format!("must be at least 16, got {}", self.max_tiles),
-            ));
-        }
         Ok(self)
     }
+}
+
+/// Checks what every view of the map is given: the probability from which
+/// a cell is a wall, and how many tiles it may hold.
+pub(crate) fn check_view(wall_probability: f64, max_tiles: usize) -> Result<(), MappingError> {
+    if !(wall_probability > 0.5 && wall_probability < 1.0) {
+        return Err(MappingError::invalid(
+            "wall_probability",
+            format!("must be in (0.5, 1), got {wall_probability}"),
+        ));
+    }
+    if max_tiles < 16 {
+        return Err(MappingError::invalid(
+            "max_tiles",
+            format!("must be at least 16, got {max_tiles}"),
+        ));
+    }
+    Ok(())
 }
 
 /// A tile of the view and when it was last used.
