@@ -25,7 +25,8 @@ pub(crate) fn summary(outcome: &DemoOutcome<'_>) -> String {
         percent(q.occupied_recall()),
     );
     for robot in &outcome.judgement.robots {
-        let _ = writeln!(out, "{}", robot_line(&robot.report));
+        let lag = outcome.max_lag_s(&robot.report.robot);
+        let _ = writeln!(out, "{}", robot_line(&robot.report, lag));
     }
     let _ = writeln!(
         out,
@@ -136,7 +137,7 @@ pub(crate) fn report(outcome: &DemoOutcome<'_>) -> String {
 }
 
 /// One robot's figures on one line.
-fn robot_line(r: &LocalizationReport) -> String {
+fn robot_line(r: &LocalizationReport, max_lag_s: Option<f64>) -> String {
     let mut line = format!("{}: ", r.robot);
     match r.converge_s() {
         Some(s) => {
@@ -163,6 +164,9 @@ fn robot_line(r: &LocalizationReport) -> String {
         }
         Some(false) => line.push_str("; kidnapped, not found again"),
         None => {}
+    }
+    if let Some(lag) = max_lag_s {
+        let _ = write!(line, "; at most {lag:.1} s behind its robot");
     }
     line
 }
@@ -192,6 +196,7 @@ mod tests {
             judgement: &judgement,
             kidnap: Some(&kidnap),
             wall_s: 80.4,
+            max_lags_s: Vec::new(),
             commands: vec![("server".to_string(), "deog server --data d".to_string())],
         };
         let md = report(&outcome);
@@ -219,6 +224,7 @@ mod tests {
             judgement: &judgement,
             kidnap: None,
             wall_s: 1.0,
+            max_lags_s: Vec::new(),
             commands: Vec::new(),
         };
         assert!(report(&outcome).contains("No robot was kidnapped."));
@@ -232,6 +238,7 @@ mod tests {
             judgement: &judgement,
             kidnap: None,
             wall_s: 80.4,
+            max_lags_s: vec![("scout-1".to_string(), Some(0.4))],
             commands: Vec::new(),
         };
         let summary = summary(&outcome);
@@ -244,7 +251,7 @@ mod tests {
         assert_eq!(
             lines[2],
             "scout-1: converged after 0.0 s, mean error 5.0 cm x, 0.0 cm y, 0.00°; \
-             kidnapped, found again after 0.0 s"
+             kidnapped, found again after 0.0 s; at most 0.4 s behind its robot"
         );
         assert_eq!(
             lines[4],

@@ -1,8 +1,9 @@
 //! What the status line says while the robots drive: simulated time,
 //! frames, map cells, and each robot's latest position error, with how
-//! many frames its localizer is behind. Read from the map server each
-//! tick; a read that fails leaves its figure out rather than stopping the
-//! demo.
+//! far its localizer is behind: the simulated seconds between its robot's
+//! clock and the frame of its latest estimate. Read from the map server
+//! each tick; a read that fails leaves its figure out rather than stopping
+//! the demo. The largest lag seen goes in report.json (`max_lag_s`).
 
 use std::fmt::Write as _;
 
@@ -10,16 +11,19 @@ use deog_robot_client::MapClient;
 
 use crate::commands::MAP;
 
-/// A localizer this many frames behind its robot is said to be behind.
-const BEHIND_FRAMES: u64 = 10;
-
 /// What the status line last learnt of one robot's localizer.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 struct Follow {
     /// The frame of the latest estimate read; reading goes on from there.
     cursor: u64,
+    /// That frame's simulated time, seconds.
+    frame_time_s: f64,
     /// That estimate's position error, metres, and the filter's flag.
     error: Option<(f64, bool)>,
+    /// Simulated seconds the localizer was behind its robot at this tick.
+    lag_s: Option<f64>,
+    /// The largest lag seen so far.
+    max_lag_s: Option<f64>,
 }
 
 /// The status line's figures, kept from tick to tick.
@@ -27,6 +31,10 @@ struct Follow {
 pub(crate) struct Progress {
     robots: Vec<(String, Follow)>,
 }
+
+/// A robot's name and its simulated clock, seconds, as the simulator
+/// last told it.
+pub(crate) type RobotClock<'a> = (&'a str, f64);
 
 impl Progress {
     /// Nothing learnt yet of `robots`.
@@ -40,37 +48,61 @@ impl Progress {
     }
 
     /// Reads what is new from the map server and says it on one line, at
-    /// simulated second `now` of `duration`.
-    pub async fn line(&mut self, client: &MapClient, now: f64, duration: f64) -> String {
+    /// simulated second `now` of `duration`, with each robot's clock from
+    /// `clocks`.
+    pub async fn line(
+        &mut self,
+        client: &MapClient,
+        now: f64,
+        duration: f64,
+        clocks: &[RobotClock<'_>],
+    ) -> String {
         let listed = client.robots().await.unwrap_or_default();
         let frames: u64 = listed.iter().map(|r| r.frame_count).sum();
         let cells = client.map_info(MAP).await.ok().map(|info| info.cell_count);
         let mut robots = Vec::with_capacity(self.robots.len());
         for (name, follow) in &mut self.robots {
-            let last = listed
-                .iter()
-                .find(|r| &r.robot == name)
-                .map_or(0, |r| r.last_sequence);
-            if let Some((sequence, error)) = latest_error(client, name, follow.cursor).await {
-                *follow = Follow {
-                    cursor: sequence,
-                    error: Some(error),
-                };
+            if let Some(latest) = latest_error(client, name, follow.cursor).await {
+                follow.cursor = latest.sequence;
+                follow.frame_time_s = latest.time_s;
+                follow.error = Some((latest.metres, latest.converged));
             }
-            robots.push((name.as_str(), last, *follow));
+            let clock = clocks.iter().find(|(robot, _)| robot == name);
+            if let (Some((_, clock)), Some(_)) = (clock, follow.error) {
+                follow.note_lag(clock - follow.frame_time_s);
+            }
+            robots.push((name.as_str(), *follow));
         }
         format_line(now, duration, frames, cells, &robots)
     }
+
+    /// Each robot's largest lag, seconds; `None` for one whose localizer
+    /// never published an estimate.
+    pub fn max_lags(&self) -> impl Iterator<Item = (&str, Option<f64>)> {
+        self.robots
+            .iter()
+            .map(|(name, follow)| (name.as_str(), follow.max_lag_s))
+    }
 }
 
-/// The line from its figures: each robot as its name, the latest frame
-/// the server holds of it, and what its localizer last said.
+impl Follow {
+    /// Records the lag at this tick (never below zero: the robot's clock
+    /// is read a moment before the estimate may be).
+    fn note_lag(&mut self, lag_s: f64) {
+        let lag_s = lag_s.max(0.0);
+        self.lag_s = Some(lag_s);
+        self.max_lag_s = Some(self.max_lag_s.map_or(lag_s, |m| m.max(lag_s)));
+    }
+}
+
+/// The line from its figures: each robot as its name and what its
+/// localizer last said.
 fn format_line(
     now: f64,
     duration: f64,
     frames: u64,
     cells: Option<u64>,
-    robots: &[(&str, u64, Follow)],
+    robots: &[(&str, Follow)],
 ) -> String {
     let mut line = format!("{now:5.0}/{duration:.0} s");
     // Writing to a String cannot fail.
@@ -78,15 +110,14 @@ fn format_line(
     if let Some(cells) = cells {
         let _ = write!(line, " | map {cells} cells");
     }
-    for (robot, last, follow) in robots {
+    for (robot, follow) in robots {
         let _ = write!(line, " | {robot} ");
         match follow.error {
             Some((metres, converged)) => {
                 let flag = if converged { "" } else { "?" };
                 let _ = write!(line, "{metres:.2} m{flag}");
-                let behind = last.saturating_sub(follow.cursor);
-                if behind > BEHIND_FRAMES {
-                    let _ = write!(line, " ({behind} frames behind)");
+                if let Some(lag) = follow.lag_s {
+                    let _ = write!(line, " lag {lag:.1} s");
                 }
             }
             None => line.push('-'),
@@ -95,19 +126,35 @@ fn format_line(
     line
 }
 
-/// The frame and position error of a robot's latest estimate after frame
-/// `after`, and whether the filter called itself converged.
-async fn latest_error(client: &MapClient, robot: &str, after: u64) -> Option<(u64, (f64, bool))> {
+/// A robot's latest estimate, judged against its frame's true pose.
+struct Latest {
+    /// The estimate's frame.
+    sequence: u64,
+    /// That frame's simulated time, seconds.
+    time_s: f64,
+    /// The position error, metres.
+    metres: f64,
+    /// Whether the filter called itself converged.
+    converged: bool,
+}
+
+/// A robot's latest estimate after frame `after`.
+async fn latest_error(client: &MapClient, robot: &str, after: u64) -> Option<Latest> {
     let poses = client.read_poses(robot, after + 1, 0).await.ok()?;
     let estimate = poses.iter().rev().find(|p| p.map == MAP)?;
     let frame = client
         .read_frames(robot, estimate.frame_sequence, estimate.frame_sequence)
         .await
         .ok()?;
-    let truth = frame.first()?.true_pose?;
+    let frame = frame.first()?;
+    let truth = frame.true_pose?;
     let pose = estimate.pose?;
-    let metres = (pose.x - truth.x).hypot(pose.y - truth.y);
-    Some((estimate.frame_sequence, (metres, estimate.converged)))
+    Some(Latest {
+        sequence: estimate.frame_sequence,
+        time_s: frame.time_s,
+        metres: (pose.x - truth.x).hypot(pose.y - truth.y),
+        converged: estimate.converged,
+    })
 }
 
 #[cfg(test)]
@@ -115,31 +162,42 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_line_names_time_frames_cells_and_each_robots_error() {
+    fn the_line_names_time_frames_cells_and_each_robots_error_and_lag() {
+        let mut behind = Follow {
+            cursor: 480,
+            frame_time_s: 48.0,
+            error: Some((2.5, false)),
+            ..Follow::default()
+        };
+        behind.note_lag(1.3);
         let robots = [
-            ("scout-1", 500, Follow::default()),
+            ("scout-1", Follow::default()),
             (
                 "scout-2",
-                500,
                 Follow {
                     cursor: 495,
                     error: Some((0.034, true)),
+                    lag_s: Some(0.0),
+                    ..Follow::default()
                 },
             ),
-            (
-                "scout-3",
-                500,
-                Follow {
-                    cursor: 480,
-                    error: Some((2.5, false)),
-                },
-            ),
+            ("scout-3", behind),
         ];
         assert_eq!(
             format_line(61.4, 240.0, 1500, Some(12345), &robots),
-            "   61/240 s | 1500 frames | map 12345 cells | scout-1 - | scout-2 0.03 m \
-             | scout-3 2.50 m? (20 frames behind)"
+            "   61/240 s | 1500 frames | map 12345 cells | scout-1 - | scout-2 0.03 m lag 0.0 s \
+             | scout-3 2.50 m? lag 1.3 s"
         );
+    }
+
+    #[test]
+    fn the_largest_lag_is_kept() {
+        let mut follow = Follow::default();
+        for lag in [0.2, 3.5, 0.1, -0.05] {
+            follow.note_lag(lag);
+        }
+        assert_eq!(follow.lag_s, Some(0.0));
+        assert_eq!(follow.max_lag_s, Some(3.5));
     }
 
     #[test]

@@ -26,8 +26,21 @@ pub(crate) struct DemoOutcome<'a> {
     pub kidnap: Option<&'a KidnapDone>,
     /// Wall-clock seconds from start to the end of the judging.
     pub wall_s: f64,
+    /// Each robot's largest localizer lag, simulated seconds (`None`: its
+    /// localizer never published an estimate while the robots drove).
+    pub max_lags_s: Vec<(String, Option<f64>)>,
     /// Each process's name and command line, in the order they started.
     pub commands: Vec<(String, String)>,
+}
+
+impl DemoOutcome<'_> {
+    /// `robot`'s largest localizer lag, simulated seconds.
+    pub fn max_lag_s(&self, robot: &str) -> Option<f64> {
+        self.max_lags_s
+            .iter()
+            .find(|(name, _)| name == robot)
+            .and_then(|(_, lag)| *lag)
+    }
 }
 
 /// report.json: the robots' and the map's figures, with the run's
@@ -35,7 +48,7 @@ pub(crate) struct DemoOutcome<'a> {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct DemoReport {
     /// Each robot's localization figures, in order from `scout-1`.
-    pub robots: Vec<LocalizationRecord>,
+    pub robots: Vec<DemoRobotRecord>,
     /// The map against the world's ground truth.
     pub map: MapQualityRecord,
     /// Wall-clock seconds the demo took, up to the end of the judging.
@@ -55,6 +68,19 @@ pub struct DemoReport {
     pub localize_at_s: f64,
     /// The kidnap; `null` when nobody was kidnapped.
     pub kidnap: Option<DemoKidnapRecord>,
+}
+
+/// One robot in report.json: the localization library's record, and how
+/// far its localizer fell behind while the robots drove.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DemoRobotRecord {
+    /// The localization figures, their keys unchanged.
+    #[serde(flatten)]
+    pub localization: LocalizationRecord,
+    /// The largest lag seen, simulated seconds between the robot's clock
+    /// and the frame of its localizer's latest estimate, sampled at every
+    /// status line; `null` when no estimate came while the robots drove.
+    pub max_lag_s: Option<f64>,
 }
 
 /// The kidnap the demo made, in report.json.
@@ -79,7 +105,10 @@ impl DemoReport {
                 .judgement
                 .robots
                 .iter()
-                .map(|r| r.report.record())
+                .map(|r| DemoRobotRecord {
+                    localization: r.report.record(),
+                    max_lag_s: outcome.max_lag_s(&r.report.robot),
+                })
                 .collect(),
             map: outcome.judgement.quality.record(),
             duration_s: outcome.wall_s,
@@ -140,6 +169,7 @@ mod tests {
             judgement: &judgement,
             kidnap: Some(&kidnap),
             wall_s: 80.5,
+            max_lags_s: vec![("scout-1".to_string(), Some(0.75))],
             commands: Vec::new(),
         };
         let text = DemoReport::new(&outcome).to_json().expect("serialises");
@@ -175,12 +205,19 @@ mod tests {
         assert_eq!(k["to"]["x"], 4.0);
         assert_eq!(k["to"]["theta"], -1.0);
 
-        // The libraries' own JSON, nested unchanged.
+        // The libraries' own JSON, its keys unchanged, and the lag.
         let robots = json["robots"].as_array().expect("robots");
         for (robot, judged) in robots.iter().zip(&judgement.robots) {
             let alone: Value = serde_json::from_str(&judged.report.to_json()).expect("JSON");
-            assert_eq!(robot, &alone);
+            let mut robot = robot.clone();
+            robot
+                .as_object_mut()
+                .and_then(|o| o.remove("max_lag_s"))
+                .expect("max_lag_s");
+            assert_eq!(robot, alone);
         }
+        assert_eq!(robots[0]["max_lag_s"], 0.75);
+        assert_eq!(robots[1]["max_lag_s"], Value::Null);
         assert_eq!(robots[0]["kidnapped"], true);
         assert_eq!(robots[1]["recovered"], Value::Null);
         let map: Value = serde_json::from_str(&judgement.quality.to_json()).expect("JSON");
@@ -195,6 +232,7 @@ mod tests {
             judgement: &judgement,
             kidnap: None,
             wall_s: 1.0,
+            max_lags_s: Vec::new(),
             commands: Vec::new(),
         };
         let json: Value = serde_json::from_str(&DemoReport::new(&outcome).to_json().expect("JSON"))

@@ -50,7 +50,7 @@ struct Demo<'a> {
 async fn demo(plan: &DemoPlan) -> Result<()> {
     let started = Instant::now();
     let mut demo = Demo::start(plan).await?;
-    let kidnap = demo.drive().await?;
+    let (kidnap, max_lags_s) = demo.drive().await?;
     demo.drain().await?;
 
     let out = &plan.out;
@@ -60,6 +60,7 @@ async fn demo(plan: &DemoPlan) -> Result<()> {
         judgement: &judgement,
         kidnap: kidnap.as_ref(),
         wall_s: started.elapsed().as_secs_f64(),
+        max_lags_s,
         commands: demo
             .children
             .command_lines()
@@ -148,8 +149,9 @@ impl<'a> Demo<'a> {
 impl Demo<'_> {
     /// Until every wanderer has finished its simulated time: starts the
     /// localizers and makes the kidnap when their times come, and keeps
-    /// the status line. Returns the kidnap, if one was made.
-    async fn drive(&mut self) -> Result<Option<KidnapDone>> {
+    /// the status line. Returns the kidnap, if one was made, and each
+    /// robot's largest localizer lag.
+    async fn drive(&mut self) -> Result<(Option<KidnapDone>, Vec<(String, Option<f64>)>)> {
         let plan = self.plan;
         let mut progress = Progress::new(plan.robot_names());
         let mut localizing = false;
@@ -188,12 +190,17 @@ impl Demo<'_> {
                 ));
                 kidnap = Some(done);
             }
+            let clocks: Vec<_> = states.iter().map(|s| (s.name.as_str(), s.time_s)).collect();
             let line = progress
-                .line(&self.map_client, now, plan.schedule.duration_s)
+                .line(&self.map_client, now, plan.schedule.duration_s, &clocks)
                 .await;
             self.status.show(&line);
             if self.children.all_done("wander-") {
-                return Ok(kidnap);
+                let lags = progress
+                    .max_lags()
+                    .map(|(robot, lag)| (robot.to_string(), lag))
+                    .collect();
+                return Ok((kidnap, lags));
             }
         }
     }
