@@ -16,9 +16,10 @@
 //!   fast falls below the slow (the scene no longer fits the map where the
 //!   particles are: kidnapping, or a wrong early convergence), a share
 //!   `max(0, 1 − w_fast / w_slow)` of the particles drawn at the next
-//!   resampling come from the known-free cells of the map instead (of the
-//!   tiles nearest the estimate when the map is larger than the cache
-//!   can hold range tables for);
+//!   resampling, once it passes `recovery_threshold` (smaller drops are
+//!   the noise of a filter tracking well), come from the known-free cells
+//!   of the map instead (of the tiles nearest the estimate when the map
+//!   is larger than the cache can hold range tables for);
 //! - the particles are clustered (bins that touch, [`crate::cluster`]) and
 //!   the estimate is the heaviest cluster by weight;
 //! - resampling happens only when the effective sample size, counted
@@ -77,6 +78,14 @@ pub struct FilterSettings {
     pub alpha_slow: f64,
     /// Smoothing rate of the short-term likelihood average.
     pub alpha_fast: f64,
+    /// Particles are injected only when their share, `1 − w_fast /
+    /// w_slow`, is above this: the frames fitting a few tens of percent
+    /// worse for a while is noise a settled filter sees all the time, and
+    /// each injection grows the set towards the most particles allowed
+    /// (KLD-sampling counts the bins injected particles open). A real
+    /// kidnap drops the fit far further. 0 injects at any drop, as amcl
+    /// does.
+    pub recovery_threshold: f64,
     /// The heaviest cluster must hold this share of the weight to count as
     /// converged…
     pub converged_weight: f64,
@@ -107,6 +116,7 @@ impl Default for FilterSettings {
             resample_below: 0.5,
             alpha_slow: 0.01,
             alpha_fast: 0.1,
+            recovery_threshold: 0.2,
             converged_weight: 0.6,
             converged_spread_m: 0.2,
             converged_spread_rad: 0.2,
@@ -130,6 +140,7 @@ impl FilterSettings {
         within("resample_below", self.resample_below, 0.0, 1.0)?;
         within("alpha_slow", self.alpha_slow, 0.0, 1.0)?;
         within("alpha_fast", self.alpha_fast, 0.0, 1.0)?;
+        within("recovery_threshold", self.recovery_threshold, 0.0, 1.0)?;
         if self.alpha_fast < self.alpha_slow {
             return Err(LocalizerError::Invalid(format!(
                 "alpha_fast ({}) must be at least alpha_slow ({})",
@@ -525,7 +536,12 @@ impl Mcl {
     /// The share of particles the next resampling draws from free space.
     pub fn injection_share(&self) -> f64 {
         if self.w_slow > 0.0 {
-            (1.0 - self.w_fast / self.w_slow).clamp(0.0, 1.0)
+            let share = (1.0 - self.w_fast / self.w_slow).clamp(0.0, 1.0);
+            if share > self.settings.recovery_threshold {
+                share
+            } else {
+                0.0
+            }
         } else {
             0.0
         }
@@ -664,8 +680,8 @@ impl Mcl {
     /// Draws more particles for each cluster of the old set that holds at
     /// least `cluster_keep_weight` of the weight but got fewer than
     /// `cluster_min_particles`, heaviest first while the set is below the
-    /// most particles allowed: a systematic sample of the cluster's own
-    /// particles by their weights.
+    /// most particles allowed (twice the draws, once settled): a
+    /// systematic sample of the cluster's own particles by their weights.
     fn top_up_clusters(
         &mut self,
         clusters: &Clusters,
@@ -699,8 +715,19 @@ impl Mcl {
         }
         let mut weights = Vec::new();
         let mut picks = Vec::new();
+        // A settled filter's top-ups at most double the draws: particles
+        // it injected a frame ago are clusters of one with a share of the
+        // weight, and topping each up to the floor would grow it many
+        // times over whenever it injects a few. The heaviest clusters,
+        // modes the frames have favoured, come first. A filter searching
+        // (after a kidnap, say) keeps every mode it can.
+        let most = if self.settled() {
+            (2 * next.len()).min(self.settings.kld.max_particles)
+        } else {
+            self.settings.kld.max_particles
+        };
         for c in short {
-            let room = self.settings.kld.max_particles.saturating_sub(next.len());
+            let room = most.saturating_sub(next.len());
             let need = (least - drawn[c]).min(room);
             if need == 0 {
                 break;
@@ -849,6 +876,19 @@ mod tests {
         let best = heaviest_cluster(&mcl.particles, &mcl.weights, mcl.settings.bins).unwrap();
         assert_abs_diff_eq!(best.pose.x, 2.0, epsilon = 0.05);
         assert!(best.weight > 0.9, "{best:?}");
+    }
+
+    #[test]
+    fn only_a_drop_past_the_threshold_injects() {
+        let mut mcl = Mcl::new(FilterSettings::default()).unwrap();
+        mcl.w_slow = 1.0;
+        for (fast, share) in [(1.1, 0.0), (0.9, 0.0), (0.8, 0.0), (0.5, 0.5), (0.1, 0.9)] {
+            mcl.w_fast = fast;
+            assert_abs_diff_eq!(mcl.injection_share(), share, epsilon = 1e-12);
+        }
+        mcl.settings.recovery_threshold = 0.0;
+        mcl.w_fast = 0.9;
+        assert_abs_diff_eq!(mcl.injection_share(), 0.1, epsilon = 1e-12);
     }
 
     #[test]

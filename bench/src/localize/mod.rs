@@ -129,6 +129,10 @@ pub struct LocalizeOptions {
     /// Smoothing rate of the short-term likelihood average.
     #[arg(long, default_value_t = FilterSettings::default().alpha_fast)]
     pub alpha_fast: f64,
+    /// Particles are injected only when the fast average has fallen more
+    /// than this share below the slow one.
+    #[arg(long, default_value_t = FilterSettings::default().recovery_threshold)]
+    pub recovery_threshold: f64,
     /// A cluster holding at least this share of the weight keeps at least
     /// `--cluster-min-particles` through a resampling.
     #[arg(long, default_value_t = FilterSettings::default().cluster_keep_weight)]
@@ -331,9 +335,10 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
             map.tile_count()
         );
         let mut all = Vec::new();
+        let mut particles = Vec::new();
         for seed in options.seed..options.seed + options.runs {
             let t0 = Instant::now();
-            let (figures, held) = seeded_run::run_once(
+            let (figures, extras, held) = seeded_run::run_once(
                 world.clone(),
                 &config,
                 setup.sensor,
@@ -355,6 +360,7 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
                 );
             }
             all.push(figures);
+            particles.push(extras.most_particles_settled);
         }
         let summary = summarize(&all, CONVERGE_LIMIT_S);
         println!(
@@ -369,11 +375,23 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
             summary.mean_heading_deg.unwrap_or(0.0),
             started.elapsed().as_secs_f64()
         );
+        let settled_15 = all
+            .iter()
+            .filter(|r| r.converge_s.is_some_and(|s| s <= SETTLE_TARGET_S))
+            .count();
+        let most = particles.iter().flatten().max();
+        println!(
+            "{world_name}: settled within {SETTLE_TARGET_S:.0} s {settled_15}/{} ({:.0} %); most particles from 10 s after settling to the kidnap {}",
+            all.len(),
+            100.0 * settled_15 as f64 / all.len().max(1) as f64,
+            most.map_or("-".to_string(), |n| n.to_string())
+        );
         if let Some(path) = &options.json {
             report.worlds.push(report::WorldFigures::new(
                 world_name,
                 options.seed,
                 &all,
+                &particles,
                 &summary,
             ));
             // Rewritten after each world, so a long bench leaves the
@@ -387,6 +405,9 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
     }
     Ok(())
 }
+
+/// Seconds within which a global localization should settle.
+const SETTLE_TARGET_S: f64 = 15.0;
 
 /// A time to a tenth of a second, or `-` for none.
 fn fmt_opt(v: Option<f64>) -> String {

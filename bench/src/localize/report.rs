@@ -57,12 +57,21 @@ pub(super) struct RunRow {
     pub mean_abs_error_deg: Option<f64>,
     /// Frames judged after convergence.
     pub samples: u64,
+    /// The most particles the filter held from 10 s after it settled to
+    /// the kidnap (null: it never settled that long before).
+    pub most_particles_settled: Option<usize>,
 }
 
 impl WorldFigures {
     /// A world's figures from its runs (seeds from `first_seed`) and their
     /// summary.
-    pub fn new(world: &str, first_seed: u64, runs: &[RunFigures], summary: &RunsSummary) -> Self {
+    pub fn new(
+        world: &str,
+        first_seed: u64,
+        runs: &[RunFigures],
+        particles: &[Option<usize>],
+        summary: &RunsSummary,
+    ) -> Self {
         Self {
             world: world.to_string(),
             runs: summary.runs,
@@ -73,13 +82,15 @@ impl WorldFigures {
             per_run: runs
                 .iter()
                 .zip(first_seed..)
-                .map(|(run, seed)| RunRow {
+                .zip(particles.iter().chain(std::iter::repeat(&None)))
+                .map(|((run, seed), &most_particles_settled)| RunRow {
                     seed,
                     converge_s: run.converge_s,
                     recover_s: run.recover_s,
                     mean_abs_error_m: run.mean_position_m,
                     mean_abs_error_deg: run.mean_heading_deg,
                     samples: run.samples,
+                    most_particles_settled,
                 })
                 .collect(),
         }
@@ -125,7 +136,13 @@ mod tests {
             seconds: 180.0,
             kidnap_at_s: 90.0,
             converge_limit_s: 60.0,
-            worlds: vec![WorldFigures::new("map1", 7, &runs, &summary)],
+            worlds: vec![WorldFigures::new(
+                "map1",
+                7,
+                &runs,
+                &[Some(812), None],
+                &summary,
+            )],
         };
         let json: serde_json::Value =
             serde_json::from_str(&report.json().expect("serializes")).expect("valid JSON");
@@ -138,6 +155,11 @@ mod tests {
         assert!(world["mean_abs_error_deg"].is_number());
         assert_eq!(world["per_run"][1]["seed"], 8);
         assert_eq!(world["per_run"][1]["converge_s"], serde_json::Value::Null);
+        assert_eq!(world["per_run"][0]["most_particles_settled"], 812);
+        assert_eq!(
+            world["per_run"][1]["most_particles_settled"],
+            serde_json::Value::Null
+        );
         assert_eq!(json["sonar"], "realistic");
     }
 }

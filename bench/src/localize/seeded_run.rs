@@ -35,11 +35,25 @@ fn filter_settings(options: &LocalizeOptions, seed: u64) -> FilterSettings {
     settings.beam.hit_sigma_m = options.hit_sigma;
     settings.beam.hit_sigma_per_m = options.hit_sigma_per_m;
     settings.alpha_fast = options.alpha_fast;
+    settings.recovery_threshold = options.recovery_threshold;
     settings.motion = settings.motion.scaled(options.motion_noise_scale);
     settings.alpha_slow = options.alpha_slow;
     settings.cluster_keep_weight = options.cluster_keep_weight;
     settings.cluster_min_particles = options.cluster_min_particles;
     settings
+}
+
+/// Seconds after settling from which the particle count is watched: the
+/// filter has had time to shed the particles it searched with.
+const SHRINK_S: f64 = 10.0;
+
+/// What one run gives besides the judge's figures.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct RunExtras {
+    /// The most particles the filter held from [`SHRINK_S`] after it
+    /// settled to the kidnap (or the end); `None` if it never settled
+    /// that long before.
+    pub most_particles_settled: Option<usize>,
 }
 
 /// One seeded run on `map` (its tiles from `tiles`), the robot carrying
@@ -53,7 +67,7 @@ pub(super) fn run_once(
     tiles: &mut TileMap,
     seed: u64,
     options: &LocalizeOptions,
-) -> Result<(RunFigures, LocalMap)> {
+) -> Result<(RunFigures, RunExtras, LocalMap)> {
     let mut sim = Simulation::new(world, config.clone(), seed)?;
     let mut state = sim.spawn(ROBOT, None)?;
     let rig = &config.rig;
@@ -79,6 +93,8 @@ pub(super) fn run_once(
     let period = sim.config().sonar_period_s;
     let mut truth = Vec::new();
     let mut estimates = Vec::new();
+    // Each estimate's time and the particles behind it.
+    let mut counts: Vec<(f64, usize)> = Vec::new();
     let mut mirror_sums = (0.0, 0.0, 0u64, 0u64);
     // Particles injected since the last trace line.
     let mut injected_since_trace = 0usize;
@@ -170,6 +186,7 @@ pub(super) fn run_once(
                 );
                 injected_since_trace = 0;
             }
+            counts.push((state.time_s, e.particle_count));
             estimates.push(EstimateSample {
                 sequence: state.sequence,
                 pose: e.pose,
@@ -189,5 +206,17 @@ pub(super) fn run_once(
     })
     .with_context(|| format!("judging seed {seed}"))?;
     let figures = RunFigures::from(&report);
-    Ok((figures, localizer.into_map()))
+    let most_particles_settled = report.convergence.and_then(|settled| {
+        let from = settled.time_s + SHRINK_S;
+        let to = kidnapped_at.unwrap_or(f64::INFINITY);
+        counts
+            .iter()
+            .filter(|(t, _)| (from..to).contains(t))
+            .map(|(_, n)| *n)
+            .max()
+    });
+    let extras = RunExtras {
+        most_particles_settled,
+    };
+    Ok((figures, extras, localizer.into_map()))
 }

@@ -75,6 +75,12 @@ pub struct LocalizeArgs {
     /// (amcl's recovery_alpha_fast); at least --recovery-alpha-slow.
     #[arg(long, default_value_t = FilterSettings::default().alpha_fast)]
     pub recovery_alpha_fast: f64,
+    /// Recovery: particles are drawn from free space only when the fast
+    /// average has fallen more than this share below the slow one (0:
+    /// at any drop, as amcl does). Smaller drops are noise a tracking
+    /// filter sees all the time.
+    #[arg(long, default_value_t = FilterSettings::default().recovery_threshold)]
+    pub recovery_threshold: f64,
     /// The beam model's tempering τ: the frame counts as 16·τ independent
     /// beams.
     #[arg(long, default_value_t = FilterSettings::default().beam.tempering)]
@@ -213,6 +219,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     settings.beam.tempering = args.tempering;
     settings.alpha_slow = args.recovery_alpha_slow;
     settings.alpha_fast = args.recovery_alpha_fast;
+    settings.recovery_threshold = args.recovery_threshold;
     settings.motion = settings.motion.scaled(motion_noise_scale);
     // The filter is built once the first frame names the rig; its
     // settings are checked now, before anything waits.
