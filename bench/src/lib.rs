@@ -1,8 +1,8 @@
 //! deog's release benchmarks, one module a benchmark, each the library
 //! half of a `deog bench` subcommand: its options (clap-derived, so the
 //! binary only parses them and calls [`map_server::run`],
-//! [`localize::run`], [`localize_memory::run`], [`laser_mapping::run`] or
-//! [`real::run`]), their checks, the run, and the figures it prints and
+//! [`localize::run`], [`localize_peers::run`], [`localize_memory::run`],
+//! [`laser_mapping::run`] or [`real::run`]), their checks, the run, and the figures it prints and
 //! writes. What each measures, and the figures of record, are in
 //! BENCHMARKS.md.
 //!
