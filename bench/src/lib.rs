@@ -1,8 +1,8 @@
 //! deog's release benchmarks, one module a benchmark, each the library
 //! half of a `deog bench` subcommand: its options (clap-derived, so the
 //! binary only parses them and calls [`map_server::run`],
-//! [`localize::run`], [`localize_memory::run`], [`laser_mapping::run`] or
-//! [`real::run`]), their checks, the run, and the figures it prints and
+//! [`localize::run`], [`localize_peers::run`], [`localize_memory::run`],
+//! [`laser_mapping::run`] or [`real::run`]), their checks, the run, and the figures it prints and
 //! writes. What each measures, and the figures of record, are in
 //! BENCHMARKS.md.
 //!
@@ -19,6 +19,10 @@
 //! - [`localize`]: `deog bench localize`, localization accuracy over
 //!   seeded runs per world, in one process: global convergence, error
 //!   after convergence, kidnap recovery.
+//! - [`localize_peers`]: `deog bench localize-peers`, deog's localizer
+//!   beside nav2's amcl (`bench/localize_peers_amcl.py`, a child Python
+//!   process) on the same sonar frames and sonar-built map: CPU per
+//!   update, particle-beams per second, accuracy and time to settle.
 //! - [`localize_memory`]: `deog bench localize-memory`, the localizer's
 //!   memory against its cache setting, with the real processes, on a
 //!   generated city far larger than the cache.
@@ -37,6 +41,7 @@
 pub mod laser_mapping;
 pub mod localize;
 pub mod localize_memory;
+pub mod localize_peers;
 pub mod map_server;
 pub mod option_error;
 pub mod real;

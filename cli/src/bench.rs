@@ -6,6 +6,7 @@ use clap::{Args, Subcommand};
 use deog_bench::laser_mapping::LaserMappingOptions;
 use deog_bench::localize::LocalizeOptions;
 use deog_bench::localize_memory::LocalizeMemoryOptions;
+use deog_bench::localize_peers::LocalizePeersOptions;
 use deog_bench::map_server::MapServerOptions;
 use deog_bench::real::RealOptions;
 use deog_bench::sonar_mapping::SonarMappingOptions;
@@ -26,6 +27,10 @@ enum BenchTarget {
     /// Localization accuracy over seeded runs per world, in one process:
     /// global convergence, error after convergence, kidnap recovery.
     Localize(LocalizeOptions),
+    /// deog's localizer beside nav2's amcl (a Python child process) on the
+    /// same sonar frames and map: CPU per update, particle-beams/s,
+    /// accuracy and time to settle.
+    LocalizePeers(LocalizePeersOptions),
     /// The localizer's memory against its cache setting, with the real
     /// processes, on a generated city map at least 100 times the cache.
     LocalizeMemory(LocalizeMemoryOptions),
@@ -48,6 +53,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     match args.target {
         BenchTarget::MapServer(options) => deog_bench::map_server::run(options),
         BenchTarget::Localize(options) => deog_bench::localize::run(options),
+        BenchTarget::LocalizePeers(options) => deog_bench::localize_peers::run(options),
         BenchTarget::LocalizeMemory(options) => deog_bench::localize_memory::run(options),
         BenchTarget::LaserMapping(options) => deog_bench::laser_mapping::run(options),
         BenchTarget::Real(options) => deog_bench::real::run(options),

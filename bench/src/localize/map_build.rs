@@ -13,7 +13,7 @@ use deog_simulator::{SonarPreset, Specular, WanderParams, Wanderer};
 
 /// The simulator's settings for a robot carrying `rig`, with the sonar of
 /// `preset`.
-pub(super) fn sim_config(rig: &Rig, preset: SonarPreset) -> SimConfig {
+pub(crate) fn sim_config(rig: &Rig, preset: SonarPreset) -> SimConfig {
     SimConfig {
         rig: rig.clone(),
         sonar: preset.params(),
@@ -24,7 +24,7 @@ pub(super) fn sim_config(rig: &Rig, preset: SonarPreset) -> SimConfig {
 /// The map a wandering robot's frames give, as the cartographer builds it
 /// from the rig and sonar of `config`, with range tables (for `sensor`'s
 /// cone) for the sonar of `localize_config`.
-pub(super) fn build_map(
+pub(crate) fn build_map(
     world: deog_world::World,
     config: &SimConfig,
     localize_config: &SimConfig,

@@ -26,7 +26,7 @@
 //! mirror images and the particles).
 
 mod diagnostics;
-mod map_build;
+pub(crate) mod map_build;
 mod report;
 mod seeded_run;
 
