@@ -40,14 +40,14 @@
 //!
 //! Deterministic for a given seed: one ChaCha stream drives every draw.
 
-use std::collections::{HashMap, HashSet};
-
 use deog_grid::{CellIndex, Pose2, SensorRing, TileKey, normalize_angle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::beam_model::BeamModelParams;
-use crate::cluster::{BinSize, ClusterEstimate, Clusters, cluster_particles, heaviest_cluster};
+use crate::cluster::{
+    BinMap, BinSet, BinSize, ClusterEstimate, Clusters, cluster_particles, heaviest_cluster,
+};
 use crate::error::{LocalizerError, within};
 use crate::local_map::LocalMap;
 use crate::motion::{MotionNoise, OdometryMove};
@@ -599,7 +599,7 @@ impl Mcl {
         } else {
             Vec::new()
         };
-        let mut bins = HashSet::new();
+        let mut bins = BinSet::default();
         let mut next = Vec::with_capacity(self.particles.len());
         // Where each new particle came from: its cluster, or INJECTED.
         let mut source: Vec<u32> = Vec::with_capacity(self.particles.len());
@@ -706,7 +706,7 @@ impl Mcl {
                 .total_cmp(&clusters.weights[*a])
                 .then(a.cmp(b))
         });
-        let mut members: HashMap<u32, Vec<usize>> =
+        let mut members: BinMap<u32, Vec<usize>> =
             short.iter().map(|&c| (c as u32, Vec::new())).collect();
         for (i, c) in clusters.of.iter().enumerate() {
             if let Some(m) = members.get_mut(c) {

@@ -80,6 +80,10 @@ pub(super) struct WorldFigures {
     pub grid_occupied: u64,
     pub grid_free: u64,
     pub grid_unknown: u64,
+    /// deog's CPU seconds to build the range tables of every tile (and
+    /// score two frames from the uniform prior), before and apart from
+    /// the runs; null without a uniform run.
+    pub table_cpu_s: Option<f64>,
     pub runs: Vec<RunRow>,
 }
 
@@ -317,6 +321,7 @@ mod tests {
                 grid_occupied: 1,
                 grid_free: 2,
                 grid_unknown: 197,
+                table_cpu_s: Some(0.5),
                 runs: vec![row, uniform],
             }],
         };
