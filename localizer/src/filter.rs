@@ -19,7 +19,11 @@
 //!   resampling, once it passes `recovery_threshold` (smaller drops are
 //!   the noise of a filter tracking well), come from the known-free cells
 //!   of the map instead (of the tiles nearest the estimate when the map
-//!   is larger than the cache can hold range tables for);
+//!   is larger than the cache can hold range tables for). A settled
+//!   filter injecting less than `search_share` trickles (the injected
+//!   particles come on top and do not grow the set); a larger drop, or a
+//!   filter not settled, searches (the set grows towards the most
+//!   allowed);
 //! - the particles are clustered (bins that touch, [`crate::cluster`]) and
 //!   the estimate is the heaviest cluster by weight;
 //! - resampling happens only when the effective sample size, counted
@@ -86,6 +90,12 @@ pub struct FilterSettings {
     /// kidnap drops the fit far further. 0 injects at any drop, as amcl
     /// does.
     pub recovery_threshold: f64,
+    /// A settled filter injecting a share below this trickles: the
+    /// injected particles come on top of the draws and do not grow the
+    /// set. At or above it, or while not settled, it searches: injected
+    /// particles open bins as drawn ones do, and the set grows towards
+    /// the most particles allowed.
+    pub search_share: f64,
     /// The heaviest cluster must hold this share of the weight to count as
     /// converged…
     pub converged_weight: f64,
@@ -117,6 +127,7 @@ impl Default for FilterSettings {
             alpha_slow: 0.01,
             alpha_fast: 0.1,
             recovery_threshold: 0.2,
+            search_share: 0.5,
             converged_weight: 0.6,
             converged_spread_m: 0.2,
             converged_spread_rad: 0.2,
@@ -141,6 +152,7 @@ impl FilterSettings {
         within("alpha_slow", self.alpha_slow, 0.0, 1.0)?;
         within("alpha_fast", self.alpha_fast, 0.0, 1.0)?;
         within("recovery_threshold", self.recovery_threshold, 0.0, 1.0)?;
+        within("search_share", self.search_share, 0.0, 1.0)?;
         if self.alpha_fast < self.alpha_slow {
             return Err(LocalizerError::Invalid(format!(
                 "alpha_fast ({}) must be at least alpha_slow ({})",
@@ -619,12 +631,31 @@ impl Mcl {
         // At most half the set, so a spread filter's many small clusters
         // still leave the draw its share.
         let most = pool - reserved.min(pool / 2);
-        while next.len() < bound.min(most) && taken < pool {
+        // A settled filter whose frames fit a little worse injects a
+        // trickle: its particles come on top of the draws KLD-sampling
+        // calls for and open no bins (each would call for the particles a
+        // new bin asks for, and the set would grow to the most allowed at
+        // every dip of the fit). A large drop, or a filter not settled,
+        // searches: injected particles count, and the set grows.
+        let search = !self.settled() || inject >= self.settings.search_share;
+        let counted = |next: &Vec<Pose2>, injected: usize| {
+            if search {
+                next.len()
+            } else {
+                next.len() - injected
+            }
+        };
+        while counted(&next, injected) < bound && next.len() < most && taken < pool {
             let pose = if !free.is_empty() && self.rng.random_bool(inject) {
                 injected += 1;
                 source.push(INJECTED);
                 let cell = free[self.rng.random_range(0..free.len())];
-                random_pose_in(cell, res, &mut self.rng)
+                let pose = random_pose_in(cell, res, &mut self.rng);
+                if !search {
+                    next.push(pose);
+                    continue;
+                }
+                pose
             } else {
                 let j = self.rng.random_range(taken..pool);
                 self.scratch_indices.swap(taken, j);
@@ -878,6 +909,47 @@ mod tests {
         assert!(best.weight > 0.9, "{best:?}");
     }
 
+    /// An empty map but for one tile of free space to inject into.
+    fn map_with_free_tile() -> LocalMap {
+        let mut map = empty_map();
+        let size = TileSize::new(64).unwrap();
+        let key = TileKey::new(-1, -1);
+        let free = deog_grid::TileDelta::from_raw(key, size, vec![-2000; size.area()]).unwrap();
+        let mut tile = deog_grid::Tile::unknown(size);
+        tile.apply(&free, deog_grid::ClampLimits::default())
+            .unwrap();
+        map.insert_tile(key, 1, Some(&tile)).unwrap();
+        map
+    }
+
+    #[test]
+    fn a_settled_filter_trickles_and_a_large_drop_searches() {
+        let map = map_with_free_tile();
+        let settled = || {
+            let mut mcl = two_modes(0, 0.0);
+            mcl.cluster = heaviest_cluster(&mcl.particles, &mcl.weights, mcl.settings.bins);
+            assert!(mcl.settled());
+            mcl
+        };
+        // A dip of the fit: the injected share comes on top of the draws.
+        let mut mcl = settled();
+        let clusters = cluster_particles(&mcl.particles, &mcl.weights, mcl.settings.bins).unwrap();
+        let injected = mcl.resample(&map, 0.3, &clusters).unwrap();
+        let drawn = mcl.particles.len() - injected;
+        let share = injected as f64 / mcl.particles.len() as f64;
+        assert!(
+            (0.2..0.4).contains(&share),
+            "{injected} of {}",
+            mcl.particles.len()
+        );
+        assert!(drawn < 2_000, "{drawn} drawn");
+        // A large drop searches: the injected particles' bins call for
+        // the most particles allowed.
+        let mut mcl = settled();
+        let injected = mcl.resample(&map, 0.6, &clusters).unwrap();
+        assert!(injected > 5_000, "{injected} injected");
+    }
+
     #[test]
     fn only_a_drop_past_the_threshold_injects() {
         let mut mcl = Mcl::new(FilterSettings::default()).unwrap();
@@ -910,14 +982,7 @@ mod tests {
         // Free space to inject into, away from both modes: half of each
         // resampling comes from it, and KLD-sampling's bound for all the
         // bins injected particles open is the most particles allowed.
-        let mut map = empty_map();
-        let size = TileSize::new(64).unwrap();
-        let key = TileKey::new(-1, -1);
-        let free = deog_grid::TileDelta::from_raw(key, size, vec![-2000; size.area()]).unwrap();
-        let mut tile = deog_grid::Tile::unknown(size);
-        tile.apply(&free, deog_grid::ClampLimits::default())
-            .unwrap();
-        map.insert_tile(key, 1, Some(&tile)).unwrap();
+        let map = map_with_free_tile();
         let mut mcl = two_modes(40, 0.002);
         let clusters = cluster_particles(&mcl.particles, &mcl.weights, mcl.settings.bins).unwrap();
         let injected = mcl.resample(&map, 0.5, &clusters).unwrap();

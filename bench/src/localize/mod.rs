@@ -133,6 +133,10 @@ pub struct LocalizeOptions {
     /// than this share below the slow one.
     #[arg(long, default_value_t = FilterSettings::default().recovery_threshold)]
     pub recovery_threshold: f64,
+    /// A settled filter injecting less than this share adds the injected
+    /// particles without growing its set; more searches.
+    #[arg(long, default_value_t = FilterSettings::default().search_share)]
+    pub search_share: f64,
     /// A cluster holding at least this share of the weight keeps at least
     /// `--cluster-min-particles` through a resampling.
     #[arg(long, default_value_t = FilterSettings::default().cluster_keep_weight)]

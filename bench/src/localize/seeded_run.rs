@@ -36,6 +36,7 @@ fn filter_settings(options: &LocalizeOptions, seed: u64) -> FilterSettings {
     settings.beam.hit_sigma_per_m = options.hit_sigma_per_m;
     settings.alpha_fast = options.alpha_fast;
     settings.recovery_threshold = options.recovery_threshold;
+    settings.search_share = options.search_share;
     settings.motion = settings.motion.scaled(options.motion_noise_scale);
     settings.alpha_slow = options.alpha_slow;
     settings.cluster_keep_weight = options.cluster_keep_weight;

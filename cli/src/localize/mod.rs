@@ -27,6 +27,10 @@ use crate::rig_args::{load_rig, publish_rig};
 use deog_localizer::sensors::{LikelihoodFieldParams, SensorChoice};
 use deog_proto::rig::frame_rig_name;
 
+/// A sensor update that takes this long is logged with what it did: the
+/// robot's frames come ten a second.
+const SLOW_STEP: Duration = Duration::from_millis(100);
+
 /// Options of `deog localize`.
 #[derive(Debug, Args)]
 pub struct LocalizeArgs {
@@ -81,6 +85,12 @@ pub struct LocalizeArgs {
     /// filter sees all the time.
     #[arg(long, default_value_t = FilterSettings::default().recovery_threshold)]
     pub recovery_threshold: f64,
+    /// Recovery: a settled filter drawing less than this share from free
+    /// space adds those particles to its set without growing it; a larger
+    /// share (or a filter not settled) searches, growing the set towards
+    /// --max-particles.
+    #[arg(long, default_value_t = FilterSettings::default().search_share)]
+    pub recovery_search_share: f64,
     /// The beam model's tempering τ: the frame counts as 16·τ independent
     /// beams.
     #[arg(long, default_value_t = FilterSettings::default().beam.tempering)]
@@ -220,6 +230,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     settings.alpha_slow = args.recovery_alpha_slow;
     settings.alpha_fast = args.recovery_alpha_fast;
     settings.recovery_threshold = args.recovery_threshold;
+    settings.search_share = args.recovery_search_share;
     settings.motion = settings.motion.scaled(motion_noise_scale);
     // The filter is built once the first frame names the rig; its
     // settings are checked now, before anything waits.
@@ -427,11 +438,25 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             .odometry
             .map(pose_from_wire)
             .with_context(|| format!("frame {} has no odometry pose", frame.sequence))?;
+        let particles = localizer.mcl().particles().len();
+        let started = Instant::now();
         let report = localizer
-            .step(&odometry, &frame.ranges, Instant::now(), &mut tiles)
+            .step(&odometry, &frame.ranges, started, &mut tiles)
             .with_context(|| format!("frame {}", frame.sequence))?;
-        if report.correction.is_some() {
+        let took = started.elapsed();
+        if let Some(correction) = &report.correction {
             corrections += 1;
+            if took >= SLOW_STEP {
+                tracing::info!(
+                    frame = frame.sequence,
+                    ms = took.as_millis() as u64,
+                    particles,
+                    injected = correction.injected,
+                    tables_built = correction.tables_built,
+                    tiles_fetched = report.tiles_fetched,
+                    "slow sensor update"
+                );
+            }
         }
         processed += 1;
         if let Some(estimate) = report.estimate {
