@@ -35,6 +35,8 @@
 //!   log with the real processes: the reference map from the log's
 //!   reference poses, tracking over the whole log and seeded global
 //!   starts, judged against the reference poses.
+//! - `python_script`: a peer's side as a child Python process (OctoMap's,
+//!   amcl's): the built-in script written out, probed, run.
 //! - [`option_error`]: [`OptionError`], an option out of its range or
 //!   options that do not go together.
 
@@ -43,7 +45,9 @@ pub mod localize;
 pub mod localize_memory;
 pub mod localize_peers;
 pub mod map_server;
+
 pub mod option_error;
+mod python_script;
 pub mod real;
 pub mod sonar_mapping;
 

@@ -4,7 +4,7 @@
 //!
 //! A table is built from an [`OccupancyRaster`] that covers the tile and
 //! everything within the sonar's range of it. For each cell,
-//! [`ConeGeometry::rays`] rays leave its centre at equal angles; each
+//! [`ConeGeometry::rays`] rays leave its centre at equal angles. A ray
 //! marches over the raster, skipping ahead by the Euclidean distance field
 //! where the nearest wall is far (sphere tracing) and cell by cell where it
 //! is near, to the first occupied cell. A ray's range is the distance from
@@ -12,6 +12,14 @@
 //! measures it. A heading's expected range is the least range of the rays
 //! within the cone's half-angle of it: the nearest echo in the cone,
 //! moved [`ConeGeometry::surface_depth`] on to where the surface likely is.
+//!
+//! [`fill_table`] does not march each cell's rays: the rays of one
+//! direction from every cell of the tile lie on parallel lines half a cell
+//! apart, and one march along a line serves every cell on it up to the
+//! first wall (a cell's ray moves sideways by at most a quarter of a
+//! cell). That is 8 times quicker than [`fill_table_ray_by_ray`], which
+//! marches each cell's own rays, and agrees with it to a centimetre in 96 %
+//! of a furnished room's entries and to a cell in 99.8 % (BENCHMARKS.md).
 //!
 //! Ranges are stored as whole millimetres in a `u16`: [`NO_ECHO`] when no
 //! occupied cell lies within the maximum range, 0 for a cell that is itself

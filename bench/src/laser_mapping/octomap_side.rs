@@ -5,19 +5,18 @@
 use std::ffi::OsString;
 use std::fs::File;
 use std::io::BufReader;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
+use std::process::Command;
 
 use anyhow::{Context, Result, bail};
+
+use crate::python_script::{PythonScript, failure};
 use serde::Deserialize;
 
 use super::cell_list::{ExportedCell, read_cells};
 
 /// The script, as kept in the repository.
 const SCRIPT: &str = include_str!("../../octomap_insert.py");
-
-/// The script's exit code when numpy or the `octomap` module is missing.
-const MISSING_EXIT: i32 = 3;
 
 /// How to install what the script needs.
 pub(super) const INSTALL_HINT: &str = "pip install octomap-python numpy";
@@ -82,43 +81,26 @@ pub(super) struct OctomapSettings {
 }
 
 /// The interpreter `python` with the script written into `work`.
-pub(super) struct OctomapScript {
-    python: OsString,
-    script: PathBuf,
-}
+pub(super) struct OctomapScript(PythonScript);
 
 impl OctomapScript {
     /// Writes the script into `work` (a temporary directory) for `python`.
     pub fn new(python: impl Into<OsString>, work: &Path) -> Result<Self> {
-        let script = work.join("octomap_insert.py");
-        std::fs::write(&script, SCRIPT).with_context(|| format!("writing {}", script.display()))?;
-        Ok(Self {
-            python: python.into(),
-            script,
-        })
+        PythonScript::new(
+            python,
+            work,
+            "octomap_insert.py",
+            SCRIPT,
+            "OctoMap's side",
+            INSTALL_HINT,
+        )
+        .map(Self)
     }
 
     /// The versions, or why the script cannot run: no such interpreter, or
-    /// numpy or octomap missing (the reason then says how to install them).
+    /// a module it needs missing (the reason then says how to install it).
     pub fn probe(&self) -> Result<Versions, String> {
-        let output = self
-            .command()
-            .arg("--probe")
-            .output()
-            .map_err(|e| format!("cannot run {}: {e}", self.python.to_string_lossy()))?;
-        if output.status.code() == Some(MISSING_EXIT) {
-            return Err(format!(
-                "{} lacks what OctoMap's side needs ({}); install it with `{} -m {INSTALL_HINT}`",
-                self.python.to_string_lossy(),
-                String::from_utf8_lossy(&output.stderr).trim(),
-                self.python.to_string_lossy(),
-            ));
-        }
-        if !output.status.success() {
-            return Err(failure("the probe", &output));
-        }
-        serde_json::from_slice(&output.stdout)
-            .map_err(|e| format!("the probe printed no versions: {e}"))
+        self.0.probe()
     }
 
     /// Inserts the scans of `scans_file` as `settings` say; the final map's
@@ -151,7 +133,7 @@ impl OctomapScript {
                 &settings.passes.to_string(),
             ])
             .output()
-            .with_context(|| format!("running {}", self.python.to_string_lossy()))?;
+            .with_context(|| format!("running {}", self.0.python()))?;
         if !output.status.success() {
             bail!("{}", failure("OctoMap's insertion", &output));
         }
@@ -169,16 +151,6 @@ impl OctomapScript {
     }
 
     fn command(&self) -> Command {
-        let mut command = Command::new(&self.python);
-        command.arg(&self.script);
-        command
+        self.0.command()
     }
-}
-
-/// A failed child's exit status and the end of what it wrote on stderr.
-fn failure(what: &str, output: &Output) -> String {
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    let tail: Vec<&str> = stderr.lines().rev().take(10).collect();
-    let tail: Vec<&str> = tail.into_iter().rev().collect();
-    format!("{what} failed ({}):\n{}", output.status, tail.join("\n"))
 }

@@ -4,10 +4,12 @@
 //! report as one JSON object.
 
 use std::ffi::OsString;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
+use std::process::Command;
 
 use anyhow::{Context, Result, bail, ensure};
+
+use crate::python_script::{PythonScript, failure};
 use deog_grid::Pose2;
 use serde::{Deserialize, Serialize};
 
@@ -15,9 +17,6 @@ use super::deog_side::{FilterRun, Prior, RunSpec};
 
 /// The script, as kept in the repository.
 const SCRIPT: &str = include_str!("../../localize_peers_amcl.py");
-
-/// The script's exit code when numpy or the `amcl` module is missing.
-const MISSING_EXIT: i32 = 3;
 
 /// How to install what the script needs.
 pub(super) const INSTALL_HINT: &str = "pip install amcl numpy";
@@ -210,43 +209,26 @@ impl ScriptReport {
 }
 
 /// The interpreter `python` with the script written into `work`.
-pub(super) struct AmclScript {
-    python: OsString,
-    script: PathBuf,
-}
+pub(super) struct AmclScript(PythonScript);
 
 impl AmclScript {
     /// Writes the script into `work` (a temporary directory) for `python`.
     pub fn new(python: impl Into<OsString>, work: &Path) -> Result<Self> {
-        let script = work.join("localize_peers_amcl.py");
-        std::fs::write(&script, SCRIPT).with_context(|| format!("writing {}", script.display()))?;
-        Ok(Self {
-            python: python.into(),
-            script,
-        })
+        PythonScript::new(
+            python,
+            work,
+            "localize_peers_amcl.py",
+            SCRIPT,
+            "amcl's side",
+            INSTALL_HINT,
+        )
+        .map(Self)
     }
 
     /// The versions, or why the script cannot run: no such interpreter, or
-    /// numpy or amcl missing (the reason then says how to install them).
+    /// a module it needs missing (the reason then says how to install it).
     pub fn probe(&self) -> Result<Versions, String> {
-        let output = self
-            .command()
-            .arg("--probe")
-            .output()
-            .map_err(|e| format!("cannot run {}: {e}", self.python.to_string_lossy()))?;
-        if output.status.code() == Some(MISSING_EXIT) {
-            return Err(format!(
-                "{} lacks what amcl's side needs ({}); install it with `{} -m {INSTALL_HINT}`",
-                self.python.to_string_lossy(),
-                String::from_utf8_lossy(&output.stderr).trim(),
-                self.python.to_string_lossy(),
-            ));
-        }
-        if !output.status.success() {
-            return Err(failure("the probe", &output));
-        }
-        serde_json::from_slice(&output.stdout)
-            .map_err(|e| format!("the probe printed no versions: {e}"))
+        self.0.probe()
     }
 
     /// Runs amcl over the frames of `frames_file` on the grid of
@@ -264,7 +246,7 @@ impl AmclScript {
             .arg(grid_file)
             .arg(runs_file)
             .output()
-            .with_context(|| format!("running {}", self.python.to_string_lossy()))?;
+            .with_context(|| format!("running {}", self.0.python()))?;
         if !output.status.success() {
             bail!("{}", failure("amcl's runs", &output));
         }
@@ -272,18 +254,8 @@ impl AmclScript {
     }
 
     fn command(&self) -> Command {
-        let mut command = Command::new(&self.python);
-        command.arg(&self.script);
-        command
+        self.0.command()
     }
-}
-
-/// A failed child's exit status and the end of what it wrote on stderr.
-fn failure(what: &str, output: &Output) -> String {
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    let tail: Vec<&str> = stderr.lines().rev().take(10).collect();
-    let tail: Vec<&str> = tail.into_iter().rev().collect();
-    format!("{what} failed ({}):\n{}", output.status, tail.join("\n"))
 }
 
 #[cfg(test)]
