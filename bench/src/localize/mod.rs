@@ -44,7 +44,7 @@ use deog_rig::{BUILT_IN_RIGS, Rig, RigError, load_rig_spec};
 use deog_simulator::SonarPreset;
 use deog_world::load_world_spec;
 
-use crate::option_error::{OptionError, require};
+use crate::option_error::{OptionError, require, require_folder_of};
 
 /// Options of `deog bench localize`.
 #[derive(Debug, Clone, Args)]
@@ -199,18 +199,7 @@ impl LocalizeOptions {
             },
         )?;
         // A JSON file that cannot be written fails now, not after the runs.
-        if let Some(json) = &self.json
-            && let Some(parent) = json.parent()
-            && !parent.as_os_str().is_empty()
-        {
-            require(parent.is_dir(), "--json", || {
-                format!(
-                    "--json {}: folder {} does not exist",
-                    json.display(),
-                    parent.display()
-                )
-            })?;
-        }
+        require_folder_of(self.json.as_deref(), "--json")?;
         Ok(())
     }
 

@@ -42,11 +42,13 @@ mod sampling;
 mod server_reads;
 mod table;
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{Context, Result, ensure};
+use anyhow::{Context, Result};
 use clap::Args;
+
+use crate::option_error::require_folder_of;
 
 pub use plan::CityPlan;
 
@@ -126,16 +128,7 @@ impl LocalizeMemoryOptions {
 pub fn run(options: LocalizeMemoryOptions) -> Result<()> {
     let plan = CityPlan::new(&options)?;
     // A JSON file that cannot be written fails now, not after the run.
-    if let Some(parent) = options.out_json.as_deref().and_then(Path::parent)
-        && !parent.as_os_str().is_empty()
-    {
-        ensure!(
-            parent.is_dir(),
-            "--out-json {}: folder {} does not exist",
-            options.out_json.as_deref().unwrap_or(parent).display(),
-            parent.display()
-        );
-    }
+    require_folder_of(options.out_json.as_deref(), "--out-json")?;
     let (work, temporary) = match &options.out {
         Some(dir) => {
             deog_harness::prepare_run_folder(dir)?;

@@ -52,7 +52,7 @@ use deog_simulator::SonarPreset;
 use deog_world::load_world_spec;
 
 use crate::localize::map_build;
-use crate::option_error::{OptionError, require};
+use crate::option_error::{OptionError, require, require_folder_of};
 use amcl_input::CentreBeams;
 use amcl_side::{AmclScript, AmclSettings};
 use cpu_clock::thread_cpu_s;
@@ -158,18 +158,7 @@ impl LocalizePeersOptions {
             )?;
         }
         // A JSON file that cannot be written fails now, not after the runs.
-        if let Some(json) = &self.json
-            && let Some(parent) = json.parent()
-            && !parent.as_os_str().is_empty()
-        {
-            require(parent.is_dir(), "--json", || {
-                format!(
-                    "--json {}: folder {} does not exist",
-                    json.display(),
-                    parent.display()
-                )
-            })?;
-        }
+        require_folder_of(self.json.as_deref(), "--json")?;
         Ok(())
     }
 }

@@ -81,12 +81,12 @@ mod starts;
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, ensure};
+use anyhow::{Context, Result};
 use clap::Args;
 use deog_localizer::preset::{Preset, Tuning};
 use serde::Serialize;
 
-use crate::option_error::{OptionError, require};
+use crate::option_error::{OptionError, require, require_folder_of};
 
 /// The recipe's defaults.
 fn real_laser() -> Tuning {
@@ -317,17 +317,7 @@ pub fn run(options: RealOptions) -> Result<()> {
     options.validate()?;
     options.check_log()?;
     // A JSON file that cannot be written fails now, not after the run.
-    if let Some(json) = &options.json
-        && let Some(parent) = json.parent()
-        && !parent.as_os_str().is_empty()
-    {
-        ensure!(
-            parent.is_dir(),
-            "--json {}: folder {} does not exist",
-            json.display(),
-            parent.display()
-        );
-    }
+    require_folder_of(options.json.as_deref(), "--json")?;
     deog_harness::prepare_run_folder(&options.out)?;
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     let figures = runtime
