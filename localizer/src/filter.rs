@@ -84,11 +84,9 @@ pub struct FilterSettings {
     pub alpha_fast: f64,
     /// Particles are injected only when their share, `1 − w_fast /
     /// w_slow`, is above this: the frames fitting a few tens of percent
-    /// worse for a while is noise a settled filter sees all the time, and
-    /// each injection grows the set towards the most particles allowed
-    /// (KLD-sampling counts the bins injected particles open). A real
-    /// kidnap drops the fit far further. 0 injects at any drop, as amcl
-    /// does.
+    /// worse for a while is noise a settled filter sees all the time. A
+    /// real kidnap drops the fit far further. 0 injects at any drop, as
+    /// amcl does.
     pub recovery_threshold: f64,
     /// A settled filter injecting a share below this trickles: the
     /// injected particles come on top of the draws and do not grow the
