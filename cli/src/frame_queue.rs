@@ -7,6 +7,9 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use deog_proto::v1 as pb;
 
+/// Frames read ahead at most.
+const QUEUE_CAPACITY: usize = 1024;
+
 /// Frames read ahead from a `SubscribeFrames` stream.
 pub(crate) struct FrameQueue {
     frames: tokio::sync::mpsc::Receiver<pb::SonarFrame>,
@@ -18,7 +21,7 @@ impl FrameQueue {
     /// Starts reading `stream`; with `idle_exit_s` > 0, [`Self::next`]
     /// ends once no frame has come for that long.
     pub(crate) fn spawn(mut stream: tonic::Streaming<pb::SonarFrame>, idle_exit_s: f64) -> Self {
-        let (tx, frames) = tokio::sync::mpsc::channel(1024);
+        let (tx, frames) = tokio::sync::mpsc::channel(QUEUE_CAPACITY);
         let reader = tokio::spawn(async move {
             while let Some(frame) = stream.message().await.context("the frame stream failed")? {
                 if tx.send(frame).await.is_err() {
@@ -58,6 +61,25 @@ impl FrameQueue {
     /// A frame that has already arrived, if any.
     pub(crate) fn try_next(&mut self) -> Option<pb::SonarFrame> {
         self.frames.try_recv().ok()
+    }
+
+    /// The frames that have arrived, oldest first, once the reader has
+    /// caught up with what the connection already holds: the runtime is
+    /// given a few turns until one brings nothing new. At most the
+    /// queue's capacity.
+    pub(crate) async fn ready(&mut self) -> Vec<pb::SonarFrame> {
+        const QUIET_TURNS: usize = 3;
+        let mut frames = Vec::new();
+        let mut quiet = 0;
+        while quiet < QUIET_TURNS && frames.len() < QUEUE_CAPACITY {
+            tokio::task::yield_now().await;
+            let before = frames.len();
+            while let Ok(frame) = self.frames.try_recv() {
+                frames.push(frame);
+            }
+            quiet = if frames.len() == before { quiet + 1 } else { 0 };
+        }
+        frames
     }
 }
 

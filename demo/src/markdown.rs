@@ -48,13 +48,15 @@ pub(crate) fn report(outcome: &DemoOutcome<'_>) -> String {
         md,
         "{} robots drove {} simulated seconds at {}x (seed {}), in {:.0} s of wall-clock time. \
          Each robot had its own wanderer, cartographer and localizer process; the \
-         localizers started at {:.0} s with no idea where their robots were.",
+         localizers started from {:.0} s, one after another {:.0} s apart, with no idea \
+         where their robots were.",
         plan.robots.len(),
         plan.schedule.duration_s,
         plan.schedule.speed,
         plan.seed,
         outcome.wall_s,
         plan.schedule.localize_at_s,
+        plan.schedule.localizer_start_s(1, plan.robots.len()) - plan.schedule.localize_at_s,
     );
     match outcome.kidnap {
         Some(k) => {

@@ -72,11 +72,28 @@ pub(crate) struct Schedule {
     pub duration_s: f64,
     /// Simulated seconds per wall-clock second; above 0, at most 100.
     pub speed: f64,
-    /// Simulated second the localizers start; within `0..duration_s`.
+    /// Simulated second the first localizer starts (the others follow,
+    /// [`Schedule::localizer_start_s`]); within `0..duration_s`.
     pub localize_at_s: f64,
     /// Simulated second the first robot is kidnapped, after `localize_at_s`
     /// and before `duration_s`; `None` for no kidnap.
     pub kidnap_at_s: Option<f64>,
+}
+
+/// Most simulated seconds between the starts of two robots' localizers.
+const LOCALIZER_STAGGER_S: f64 = 4.0;
+
+impl Schedule {
+    /// Simulated second the localizer of robot `index` (of `robots`)
+    /// starts: one after another, a few seconds apart (a global start
+    /// builds the whole map's range tables and weighs its widest particle
+    /// set; several at once on a small machine would each fall behind
+    /// their robot), all of them within the first half of what is left of
+    /// the run after `localize_at_s`.
+    pub(crate) fn localizer_start_s(&self, index: usize, robots: usize) -> f64 {
+        let room = (self.duration_s - self.localize_at_s) / 2.0 / robots.max(1) as f64;
+        self.localize_at_s + LOCALIZER_STAGGER_S.min(room) * index as f64
+    }
 }
 
 impl DemoOptions {
@@ -157,6 +174,20 @@ mod tests {
                 kidnap_at_s: Some(120.0),
             }
         );
+    }
+
+    #[test]
+    fn localizers_start_apart_and_all_within_the_run() {
+        let schedule = parse(&[]).expect("defaults").schedule().expect("valid");
+        let starts: Vec<f64> = (0..3).map(|i| schedule.localizer_start_s(i, 3)).collect();
+        assert_eq!(starts, vec![60.0, 64.0, 68.0]);
+        // A short run squeezes them into the first half of what is left.
+        let short = parse(&["--duration", "20", "--localize-at", "14"])
+            .expect("valid flags")
+            .schedule()
+            .expect("valid times");
+        let last = short.localizer_start_s(7, 8);
+        assert!(last > 14.0 && last <= 17.0, "last localizer at {last} s");
     }
 
     #[test]

@@ -64,7 +64,8 @@ pub struct DemoReport {
     /// The simulated sonar's preset (`--sonar`): `default`, `realistic`
     /// or `specular60`.
     pub sonar: String,
-    /// Simulated second the localizers started.
+    /// Simulated second the first localizer started (the others a few
+    /// seconds apart after it).
     pub localize_at_s: f64,
     /// The kidnap; `null` when nobody was kidnapped.
     pub kidnap: Option<DemoKidnapRecord>,

@@ -154,27 +154,30 @@ impl Demo<'_> {
     async fn drive(&mut self) -> Result<(Option<KidnapDone>, Vec<(String, Option<f64>)>)> {
         let plan = self.plan;
         let mut progress = Progress::new(plan.robot_names());
-        let mut localizing = false;
+        let mut localizers_started = 0;
         let mut kidnap: Option<KidnapDone> = None;
         loop {
             self.pacer.next(&mut self.status).await?;
             self.children.check()?;
             let states = self.sim.robots().await.context("asking the simulator")?;
             let now = states.iter().map(|s| s.time_s).fold(0.0, f64::max);
-            if !localizing
-                && now >= plan.schedule.localize_at_s
+            while localizers_started < plan.robots.len()
                 && states.len() == plan.robots.len()
+                && now
+                    >= plan
+                        .schedule
+                        .localizer_start_s(localizers_started, plan.robots.len())
             {
-                for robot in &plan.robots {
-                    self.children.start(
-                        &format!("localize-{}", robot.name),
-                        Role::Task,
-                        &commands::localize(plan, robot, &self.addresses),
-                    )?;
-                }
-                localizing = true;
+                let robot = &plan.robots[localizers_started];
+                self.children.start(
+                    &format!("localize-{}", robot.name),
+                    Role::Task,
+                    &commands::localize(plan, robot, &self.addresses),
+                )?;
+                localizers_started += 1;
                 self.status.note(&format!(
-                    "{now:.0} s: localizers started, knowing nothing of where their robots are"
+                    "{now:.0} s: {}'s localizer started, knowing nothing of where the robot is",
+                    robot.name
                 ));
             }
             if let Some(at) = plan.schedule.kidnap_at_s

@@ -7,8 +7,11 @@
 //! stale through [`LocalMap::tile_changed`] (the watch stream); the edge
 //! fetches [`LocalMap::stale_tiles`] again. A tile's range table reads the
 //! occupied cells of every tile within the sonar's range of it, so a tile
-//! whose occupied cells changed drops the tables of its neighbours too;
-//! they are rebuilt when a particle next needs them. A tile's distance
+//! whose occupied cells changed outdates the tables of its neighbours too;
+//! an outdated table keeps scoring until it is rebuilt: at once under a
+//! large share of the particles, elsewhere one per correction that needs
+//! it (oldest first), so that a change never stalls the filter while a
+//! whole neighbourhood is rebuilt. A tile's distance
 //! field ([`crate::distance_field`], for the likelihood field) reads the
 //! tiles within its maximum distance, and is dropped and rebuilt by the
 //! same rule; fields are small (a byte a cell) and live in the same
@@ -39,6 +42,13 @@ use crate::range_table::{ConeGeometry, NO_ECHO, OccupancyRaster, RangeTable, fil
 const UNKNOWN: u8 = 0;
 const FREE: u8 = 1;
 const OCCUPIED: u8 = 2;
+
+/// Outdated range tables [`LocalMap::ensure_tables`] rebuilds per call
+/// beyond those under the particles: one is a few tens of milliseconds,
+/// and a map being built outdates the tables of a whole neighbourhood at
+/// once, so rebuilding them all in one correction would stall the filter
+/// for as long as a global start does.
+const OUTDATED_REBUILDS_PER_CALL: usize = 1;
 
 /// Largest raster built in one go, cells; bigger batches are split.
 const MAX_RASTER_CELLS: u64 = 4_000_000;
@@ -80,12 +90,16 @@ struct MapTile {
     cells: Option<Box<[u8]>>,
     free_cells: u32,
     ranges: Option<RangeTable>,
+    /// When its range table stopped matching the cells it reads (the
+    /// clock's tick), `None` while it matches: the table still scores,
+    /// until [`LocalMap::ensure_tables`] rebuilds it.
+    outdated_since: Option<u64>,
     /// Its distance field, for [`LocalMap::field_spec`].
     field: Option<DistanceField>,
     last_used: u64,
     /// The server changed it since it was fetched.
     stale: bool,
-    /// Its occupied cells when the tables near it were last dropped, one
+    /// Its occupied cells when the tables near it were last outdated, one
     /// bit per cell: what later versions are compared with.
     reference: Box<[u64]>,
 }
@@ -245,6 +259,7 @@ impl LocalMap {
                         cells: Some(cells),
                         free_cells,
                         ranges: None,
+                        outdated_since: None,
                         field: None,
                         last_used: now,
                         stale: false,
@@ -264,7 +279,7 @@ impl LocalMap {
     /// The server says tile `key` changed. A held tile goes stale and
     /// keeps its tables until it is fetched again and its occupied cells
     /// turn out to differ; for a tile not held, whose cells are unknown,
-    /// the tables that read it are dropped at once.
+    /// the tables that read it are outdated at once.
     pub fn tile_changed(&mut self, key: TileKey) {
         match self.tiles.get_mut(&key) {
             Some(tile) if tile.cells.is_some() => tile.stale = true,
@@ -272,16 +287,17 @@ impl LocalMap {
         }
     }
 
-    /// Every held tile goes stale and every table and field is dropped (after the
-    /// watch stream lost events, tiles never held may have changed too).
+    /// Every held tile goes stale, every table is outdated and every field
+    /// dropped (after the watch stream lost events, tiles never held may
+    /// have changed too).
     pub fn all_changed(&mut self) {
+        let now = self.tick();
         let keys: Vec<TileKey> = self.tiles.keys().copied().collect();
         for key in keys {
             if let Some(tile) = self.tiles.get_mut(&key) {
                 tile.stale = tile.cells.is_some();
-                if let Some(table) = tile.ranges.take() {
-                    self.spare.push(table);
-                    self.stats.tables_dropped += 1;
+                if tile.ranges.is_some() {
+                    tile.outdated_since.get_or_insert(now);
                 }
                 if let Some(field) = tile.field.take() {
                     self.bytes -= field.bytes();
@@ -317,7 +333,11 @@ impl LocalMap {
     pub fn missing_tiles(&self, keys: impl IntoIterator<Item = TileKey>) -> Vec<TileKey> {
         let mut missing = HashSet::new();
         for key in keys {
-            if self.tiles.get(&key).is_some_and(|t| t.ranges.is_some()) {
+            if self
+                .tiles
+                .get(&key)
+                .is_some_and(|t| t.ranges.is_some() && t.outdated_since.is_none())
+            {
                 continue;
             }
             for near in self.neighbourhood(key) {
@@ -347,18 +367,32 @@ impl LocalMap {
             .collect();
         keys.sort();
         keys.dedup();
-        self.ensure_tables(keys.iter().copied())?;
+        self.ensure_tables(keys.iter().copied(), std::slice::from_ref(pose))?;
         Ok(keys)
     }
 
-    /// Builds the range tables `keys` lack, from the tiles held (tiles not
-    /// held count as unknown), first dropping least recently used tables
-    /// of other tiles as the budget requires. Returns how many were built.
+    /// Builds the range tables `keys` lack, and rebuilds outdated ones
+    /// among them: those under a large share of `particles` (where the
+    /// filter's weight is) and the oldest of the rest, one a call. From the
+    /// tiles held (tiles not held count as unknown), first dropping least
+    /// recently used tables of other tiles as the budget requires. Returns
+    /// how many were built.
     pub fn ensure_tables(
         &mut self,
         keys: impl IntoIterator<Item = TileKey>,
+        particles: &[Pose2],
     ) -> Result<usize, LocalizerError> {
         let keep: HashSet<TileKey> = keys.into_iter().collect();
+        let rebuild = self.outdated_to_rebuild(&keep, particles);
+        // Their tables go back to the spares they are rebuilt in.
+        for key in rebuild {
+            if let Some(t) = self.tiles.get_mut(&key)
+                && let Some(table) = t.ranges.take()
+            {
+                self.spare.push(table);
+                self.stats.tables_dropped += 1;
+            }
+        }
         let mut todo: Vec<TileKey> = keep
             .iter()
             .filter(|k| self.tiles.get(k).is_none_or(|t| t.ranges.is_none()))
@@ -415,12 +449,14 @@ impl LocalMap {
                     cells: None,
                     free_cells: 0,
                     ranges: None,
+                    outdated_since: None,
                     field: None,
                     last_used: now,
                     stale: false,
                     reference: Box::default(),
                 });
                 tile.ranges = Some(table);
+                tile.outdated_since = None;
                 tile.last_used = now;
                 self.bytes += bytes;
                 self.stats.tables_built += 1;
@@ -429,6 +465,38 @@ impl LocalMap {
             remaining = &remaining[taken..];
         }
         Ok(count)
+    }
+
+    /// The outdated tables among `keys` to rebuild now: every one under
+    /// at least a quarter of `particles` (sampled), then the oldest
+    /// [`OUTDATED_REBUILDS_PER_CALL`] of the others.
+    fn outdated_to_rebuild(&self, keys: &HashSet<TileKey>, particles: &[Pose2]) -> Vec<TileKey> {
+        const SAMPLE: usize = 4096;
+        let mut outdated: Vec<(u64, TileKey)> = keys
+            .iter()
+            .filter_map(|k| Some((self.tiles.get(k)?.outdated_since?, *k)))
+            .collect();
+        if outdated.is_empty() {
+            return Vec::new();
+        }
+        outdated.sort();
+        let step = particles.len().div_ceil(SAMPLE).max(1);
+        let mut under: HashMap<TileKey, usize> = HashMap::new();
+        let mut sampled = 0;
+        for p in particles.iter().step_by(step) {
+            sampled += 1;
+            if let Ok(key) = self.tile_at(p.x, p.y) {
+                *under.entry(key).or_default() += 1;
+            }
+        }
+        let (heavy, rest): (Vec<_>, Vec<_>) = outdated
+            .into_iter()
+            .partition(|(_, k)| under.get(k).is_some_and(|&n| 4 * n >= sampled));
+        heavy
+            .into_iter()
+            .chain(rest.into_iter().take(OUTDATED_REBUILDS_PER_CALL))
+            .map(|(_, k)| k)
+            .collect()
     }
 
     /// A fast read-only view of the tables of the tiles in `keys`' bounding
@@ -703,6 +771,7 @@ impl LocalMap {
                     cells: None,
                     free_cells: 0,
                     ranges: None,
+                    outdated_since: None,
                     field: None,
                     last_used: now,
                     stale: false,
@@ -913,15 +982,16 @@ impl LocalMap {
         tiles_around(key, self.margin_tiles)
     }
 
-    /// Drops the range tables and distance fields that read tile `key`.
+    /// Marks the range tables that read tile `key` outdated and drops the
+    /// distance fields that read it.
     fn drop_tables_near(&mut self, key: TileKey) {
+        let now = self.tick();
         let near: Vec<TileKey> = self.neighbourhood(key).collect();
         for k in near {
             if let Some(t) = self.tiles.get_mut(&k)
-                && let Some(table) = t.ranges.take()
+                && t.ranges.is_some()
             {
-                self.spare.push(table);
-                self.stats.tables_dropped += 1;
+                t.outdated_since.get_or_insert(now);
             }
         }
         if self.field_spec.is_some() {

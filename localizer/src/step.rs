@@ -139,6 +139,24 @@ impl Localizer {
         self.mcl.start_global(&self.map)
     }
 
+    /// Fetches the tiles and builds the tables (or fields) a frame like
+    /// `readings` needs with the particles where they are, without
+    /// weighing them: a process calls it once started, before it takes
+    /// the frame to correct with, so that a global start's tables (all
+    /// of the map's) are not built while frames wait. Returns how many
+    /// tiles it fetched.
+    pub fn prepare(
+        &mut self,
+        readings: &[f64],
+        tiles: &mut impl TileSource,
+    ) -> Result<usize, LocalizerError> {
+        let needed = self.mcl.tiles_for_frame(&self.map, readings);
+        let missing = self.mcl.missing_tiles(&self.map, &needed);
+        let fetched = fetch_into(tiles, &missing, &mut self.map)?;
+        self.mcl.score(&mut self.map, readings)?;
+        Ok(fetched)
+    }
+
     /// The server reported that tile `key` changed: it is fetched again at
     /// the next refresh.
     pub fn tile_changed(&mut self, key: TileKey) {

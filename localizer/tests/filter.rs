@@ -262,12 +262,12 @@ fn a_changed_tile_keeps_the_tables_while_its_walls_stay_put() {
     let mut map = room();
     let here = TileKey::new(0, 0);
     let next = TileKey::new(1, 0);
-    assert_eq!(map.ensure_tables([here]).unwrap(), 1);
+    assert_eq!(map.ensure_tables([here], &[]).unwrap(), 1);
 
     // The server reports a change: the tile goes stale, the table stays.
     map.tile_changed(next);
     assert_eq!(map.stale_tiles(), vec![next]);
-    assert_eq!(map.ensure_tables([here]).unwrap(), 0);
+    assert_eq!(map.ensure_tables([here], &[]).unwrap(), 0);
 
     // Fetched again with other log-odds but the same occupied cells.
     let firmer = tile_of(next, |x, y| {
@@ -276,7 +276,7 @@ fn a_changed_tile_keeps_the_tables_while_its_walls_stay_put() {
     });
     map.insert_tile(next, 2, Some(&firmer)).unwrap();
     assert!(map.stale_tiles().is_empty());
-    assert_eq!(map.ensure_tables([here]).unwrap(), 0, "table kept");
+    assert_eq!(map.ensure_tables([here], &[]).unwrap(), 0, "table kept");
     assert_eq!(map.version(next), Some(2));
 
     // The block's edge a cell thicker, as sonar noise makes it: kept.
@@ -289,7 +289,7 @@ fn a_changed_tile_keeps_the_tables_while_its_walls_stay_put() {
         }
     });
     map.insert_tile(next, 3, Some(&ragged)).unwrap();
-    assert_eq!(map.ensure_tables([here]).unwrap(), 0, "table kept");
+    assert_eq!(map.ensure_tables([here], &[]).unwrap(), 0, "table kept");
 
     // A new obstacle: the tables that read the tile are rebuilt.
     map.tile_changed(next);
@@ -301,18 +301,88 @@ fn a_changed_tile_keeps_the_tables_while_its_walls_stay_put() {
         }
     });
     map.insert_tile(next, 4, Some(&with_box)).unwrap();
-    assert_eq!(map.ensure_tables([here]).unwrap(), 1, "table rebuilt");
+    assert_eq!(map.ensure_tables([here], &[]).unwrap(), 1, "table rebuilt");
 
     // A tile never held that changes drops the tables near it at once.
     let beyond = TileKey::new(4, 0);
     map.tile_changed(beyond);
     assert!(map.stale_tiles().is_empty());
-    assert_eq!(map.ensure_tables([here]).unwrap(), 1);
+    assert_eq!(map.ensure_tables([here], &[]).unwrap(), 1);
 
     // Lost events: every held tile is stale and every table dropped.
     map.all_changed();
     assert_eq!(map.stale_tiles().len(), 20);
-    assert_eq!(map.ensure_tables([here]).unwrap(), 1);
+    assert_eq!(map.ensure_tables([here], &[]).unwrap(), 1);
+}
+
+#[test]
+fn a_new_obstacle_outdates_a_neighbourhood_rebuilt_one_table_a_call() {
+    let mut map = room();
+    let keys: Vec<TileKey> = (0..3)
+        .flat_map(|x| (0..2).map(move |y| TileKey::new(x, y)))
+        .collect();
+    assert_eq!(map.ensure_tables(keys.iter().copied(), &[]).unwrap(), 6);
+    // A sonar at (4.1, 1.2) looking up the room: its expected range in
+    // centimetres, as the tables have it.
+    let up = std::f64::consts::FRAC_PI_2;
+    let forward = |map: &mut LocalMap| {
+        map.window(&keys)
+            .expected_slot(4.1, 1.2, up, (up.cos(), up.sin()), 2000)
+    };
+    let before = forward(&mut map);
+    // The cone (15° each side) meets the block at (5, 4.6) first.
+    assert!((330..355).contains(&before), "{before} cm to the block");
+
+    // A box in front of the robot, in a tile every table reads.
+    let boxed = TileKey::new(1, 0);
+    map.tile_changed(boxed);
+    let with_box = tile_of(boxed, |x, y| {
+        if (4.0..4.2).contains(&x) && (2.0..2.2).contains(&y) {
+            OCCUPIED
+        } else {
+            room_log_odds(x, y)
+        }
+    });
+    map.insert_tile(boxed, 2, Some(&with_box)).unwrap();
+
+    // Each call rebuilds one outdated table, and those under a quarter of
+    // the particles or more; the others still score. A tile without any
+    // table is built at once whatever the count.
+    let fresh = TileKey::new(3, 0);
+    let mut with_fresh = keys.clone();
+    with_fresh.push(fresh);
+    let crowd: Vec<Pose2> = (0..100)
+        .map(|i| Pose2::new(7.0 + 0.001 * f64::from(i), 4.0, 0.0))
+        .chain((0..300).map(|i| Pose2::new(10.0, 0.5 + 0.01 * f64::from(i % 200), 0.0)))
+        .collect();
+    assert_eq!(map.tile_at(7.0, 4.0).unwrap(), TileKey::new(2, 1));
+    assert_eq!(
+        map.ensure_tables(with_fresh.iter().copied(), &crowd)
+            .unwrap(),
+        3,
+        "the fresh tile, (2, 1) under a quarter of the particles, and the oldest"
+    );
+    let mut rebuilt_at = None;
+    for call in 2..=5 {
+        if rebuilt_at.is_none() && forward(&mut map) != before {
+            rebuilt_at = Some(call);
+        }
+        assert_eq!(
+            map.ensure_tables(keys.iter().copied(), &[]).unwrap(),
+            1,
+            "call {call}"
+        );
+    }
+    assert_eq!(map.ensure_tables(keys.iter().copied(), &[]).unwrap(), 0);
+    assert!(
+        rebuilt_at.is_some_and(|call| call > 1),
+        "the outdated table scored until rebuilt (first seen new at call {rebuilt_at:?})"
+    );
+
+    // Rebuilt, the tables see the box: the sonar's expected range shrinks
+    // to it.
+    let after = forward(&mut map);
+    assert!((70..90).contains(&after), "{after} cm to the box");
 }
 
 #[test]
@@ -331,6 +401,6 @@ fn tables_under_a_pose_are_the_tiles_under_its_sensors_built_once() {
     assert_eq!(keys.iter().copied().collect::<HashSet<_>>(), expected);
     assert!(keys.windows(2).all(|w| w[0] < w[1]), "sorted, no repeats");
     // Every table is already built: asking again builds none.
-    assert_eq!(map.ensure_tables(keys.iter().copied()).unwrap(), 0);
+    assert_eq!(map.ensure_tables(keys.iter().copied(), &[]).unwrap(), 0);
     assert_eq!(map.tables_under(&ring, &pose).unwrap(), keys);
 }

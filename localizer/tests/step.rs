@@ -239,3 +239,38 @@ fn a_new_sensor_plugs_into_the_filter_unchanged() {
     // The frame check is the sensor's: three readings, not sixteen.
     assert!(mcl.correct(&mut map, &[1.0; 16]).is_err());
 }
+
+#[test]
+fn prepared_global_start_builds_every_table_so_the_first_correction_builds_none() {
+    let reference = room();
+    let steps = path(20);
+    let ranges = frame(&reference, &steps[0].0);
+    let mut source = room_tiles();
+    let now = Instant::now();
+    let mcl = filter(20_000, 7);
+    let map = LocalMap::new(settings(1 << 30)).unwrap();
+    let mut localizer = Localizer::new(mcl, map, Duration::from_secs(5), now);
+    let keys: Vec<TileKey> = source.tiles().map(|(key, _)| *key).collect();
+    let whole = source.fetch(&keys).unwrap();
+    localizer.start_global(whole).unwrap();
+    let before: Vec<Pose2> = localizer.mcl().particles().to_vec();
+    localizer.prepare(&ranges, &mut source).unwrap();
+    assert!(
+        localizer.map().stats().tables_built > 0,
+        "preparing built no table"
+    );
+    assert_eq!(
+        localizer.mcl().particles(),
+        before.as_slice(),
+        "preparing moved the particles"
+    );
+    let first = steps
+        .iter()
+        .find_map(|(truth, odometry)| {
+            let ranges = frame(&reference, truth);
+            let report = localizer.step(odometry, &ranges, now, &mut source).unwrap();
+            report.correction
+        })
+        .expect("no correction in 20 frames");
+    assert_eq!(first.tables_built, 0, "the first correction built tables");
+}

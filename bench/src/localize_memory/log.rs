@@ -16,8 +16,8 @@ pub(super) struct LocalizerSummary {
     pub cache_mib: f64,
 }
 
-/// The localizer's last line: "R on M: N frames, U sensor updates, T range
-/// tables built, cache X MiB".
+/// The localizer's last line: "R on M: N frames, U sensor updates, S frames
+/// skipped to keep up, T range tables built, cache X MiB".
 pub(super) fn parse_summary(log: &str) -> Option<LocalizerSummary> {
     let line = log
         .lines()
@@ -108,7 +108,7 @@ mod tests {
     fn the_summary_line_is_read() {
         let log = "2026 INFO estimate cache_mb=\"12.5\"\n\
                    2026 INFO estimate cache_mb=15.9 x=1\n\
-                   scout-1 on bench: 3000 frames, 2900 sensor updates, 57 range tables built, cache 15.2 MiB\n";
+                   scout-1 on bench: 3000 frames, 2900 sensor updates, 40 frames skipped to keep up, 57 range tables built, cache 15.2 MiB\n";
         let s = parse_summary(log).unwrap();
         assert_eq!(
             (s.frames, s.sensor_updates, s.tables_built),

@@ -7,6 +7,7 @@ mod server;
 
 use server::{ServerTiles, estimate_message, log_estimate};
 
+use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail, ensure};
@@ -26,10 +27,15 @@ use crate::pose_args::InitialPose;
 use crate::rig_args::{load_rig, publish_rig};
 use deog_localizer::sensors::{LikelihoodFieldParams, SensorChoice};
 use deog_proto::rig::frame_rig_name;
+use deog_proto::v1 as pb;
 
 /// A sensor update that takes this long is logged with what it did: the
 /// robot's frames come ten a second.
 const SLOW_STEP: Duration = Duration::from_millis(100);
+
+/// Frames kept waiting at most while keeping up (at 10 a second, 100 s of
+/// them); older ones are skipped.
+const MOST_PENDING: usize = 1024;
 
 /// Options of `deog localize`.
 #[derive(Debug, Args)]
@@ -163,6 +169,18 @@ pub struct LocalizeArgs {
     /// causes would take more than a fifth of the time.
     #[arg(long, default_value_t = 5.0)]
     pub refresh_s: f64,
+    /// Correct with every frame even when following a live robot and
+    /// falling behind. By default a localizer following new frames (no
+    /// --from, no --to) that finds more frames waiting takes the newest
+    /// within --max-skip-s and moves its particles by the odometry of
+    /// those it skips, so that its estimate is of now, not of the past.
+    #[arg(long)]
+    pub every_frame: bool,
+    /// Most seconds of frames skipped at once to keep up: a longer jump of
+    /// odometry spreads the particles over more of the map, which makes
+    /// the next update slower still.
+    #[arg(long, default_value_t = 1.0)]
+    pub max_skip_s: f64,
     #[command(flatten)]
     pub connection: ConnectionArgs,
 }
@@ -205,6 +223,11 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             "--specular-angle must be in [0, 90] degrees, got {angle}"
         );
     }
+    ensure!(
+        args.max_skip_s.is_finite() && args.max_skip_s > 0.0,
+        "--max-skip-s must be a positive number of seconds, got {}",
+        args.max_skip_s
+    );
     ensure!(
         args.surface_depth.is_finite() && (0.0..=1.0).contains(&args.surface_depth),
         "--surface-depth must be in [0, 1] metres, got {}",
@@ -401,10 +424,24 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             localizer
         }
     };
+    // The tables the first correction needs are built before it takes its
+    // frame: with a global start that is the whole map's.
+    let started = Instant::now();
+    localizer
+        .prepare(&first.ranges, &mut tiles)
+        .context("building the map's range tables")?;
+    tracing::info!(
+        ms = started.elapsed().as_millis() as u64,
+        tables = localizer.map().stats().tables_built,
+        "range tables ready"
+    );
+    let keep_up = !args.every_frame && args.from == 0 && args.to == 0;
     let (mut processed, mut corrections, mut last_sequence) = (0u64, 0u64, 0u64);
+    let mut skipped = 0u64;
     let mut first = Some(first);
+    let mut pending: VecDeque<pb::SonarFrame> = VecDeque::new();
     loop {
-        let next = match first.take() {
+        let next = match first.take().or_else(|| pending.pop_front()) {
             Some(frame) => Ok(Some(frame)),
             None => runtime.block_on(async {
                 tokio::select! {
@@ -413,7 +450,33 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
                 }
             }),
         };
-        let Some(frame) = next? else { break };
+        let Some(mut frame) = next? else { break };
+        if keep_up {
+            // Frames that waited while the filter worked: the newest within
+            // reach is corrected with, the odometry carries the particles
+            // over the others. The first goes straight to the newest: a
+            // filter that has seen no frame has no odometry to carry.
+            pending.extend(runtime.block_on(queue.ready()));
+            let reach = if processed > 0 {
+                frame.time_s + args.max_skip_s
+            } else {
+                f64::INFINITY
+            };
+            while let Some(next) = pending.front() {
+                if next.time_s > reach {
+                    break;
+                }
+                if let Some(next) = pending.pop_front() {
+                    frame = next;
+                    skipped += 1;
+                }
+            }
+            // A localizer far slower than its robot keeps the newest.
+            while pending.len() > MOST_PENDING {
+                pending.pop_front();
+                skipped += 1;
+            }
+        }
         if frame.rig != first_rig_field {
             bail!(
                 "frame {} comes from rig {}, the robot's earlier frames from {rig_name}: restart the localizer for the new rig",
@@ -477,7 +540,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     drop(changes);
     let map = localizer.map();
     println!(
-        "{} on {}: {processed} frames, {corrections} sensor updates, {} range tables built, cache {:.1} MiB",
+        "{} on {}: {processed} frames, {corrections} sensor updates, {skipped} frames skipped to keep up, {} range tables built, cache {:.1} MiB",
         args.robot,
         args.map,
         map.stats().tables_built,

@@ -86,7 +86,7 @@ impl SensorModel for SonarCone {
         out: &mut Vec<f64>,
     ) -> Result<usize, LocalizerError> {
         self.prepare_beams(ranges);
-        let tables_built = map.ensure_tables(tiles.iter().copied())?;
+        let tables_built = map.ensure_tables(tiles.iter().copied(), particles)?;
         let window = map.window(tiles);
         let no_echo = self.model.no_echo_slot();
         // Each mount's offset, the sine and cosine of its heading, and its
