@@ -17,7 +17,7 @@ const MAGIC: &[u8; 8] = b"DEOGOC01";
 
 /// One cell of the exported map.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct ExportedCell {
+pub(crate) struct ExportedCell {
     /// Cell index along x.
     pub x: i32,
     /// Cell index along y.
@@ -27,7 +27,7 @@ pub(super) struct ExportedCell {
 }
 
 /// Reads the file `bench/octomap_insert.py` writes.
-pub(super) fn read_cells(mut input: impl Read) -> io::Result<Vec<ExportedCell>> {
+pub(crate) fn read_cells(mut input: impl Read) -> io::Result<Vec<ExportedCell>> {
     let mut magic = [0u8; 8];
     input.read_exact(&mut magic)?;
     if &magic != MAGIC {

@@ -19,11 +19,11 @@ use super::cell_list::{ExportedCell, read_cells};
 const SCRIPT: &str = include_str!("../../octomap_insert.py");
 
 /// How to install what the script needs.
-pub(super) const INSTALL_HINT: &str = "pip install octomap-python numpy";
+pub(crate) const INSTALL_HINT: &str = "pip install octomap-python numpy";
 
 /// The versions the script reports.
 #[derive(Debug, Clone, Deserialize)]
-pub(super) struct Versions {
+pub(crate) struct Versions {
     /// The interpreter's.
     pub python: String,
     /// numpy's.
@@ -34,7 +34,7 @@ pub(super) struct Versions {
 
 /// The script's report of a run.
 #[derive(Debug, Clone, Deserialize)]
-pub(super) struct ScriptReport {
+pub(crate) struct ScriptReport {
     /// The versions it ran with.
     #[serde(flatten)]
     pub versions: Versions,
@@ -56,7 +56,7 @@ pub(super) struct ScriptReport {
 
 /// OctoMap's run: its report and its final map's cells.
 #[derive(Debug, Clone)]
-pub(super) struct OctomapRun {
+pub(crate) struct OctomapRun {
     /// What the script printed.
     pub report: ScriptReport,
     /// The final map's z = 0 layer.
@@ -65,7 +65,7 @@ pub(super) struct OctomapRun {
 
 /// What the OctoMap run needs beyond the scans.
 #[derive(Debug, Clone)]
-pub(super) struct OctomapSettings {
+pub(crate) struct OctomapSettings {
     /// Metres per voxel.
     pub resolution: f64,
     /// OctoMap's `prob_hit`.
@@ -81,7 +81,7 @@ pub(super) struct OctomapSettings {
 }
 
 /// The interpreter `python` with the script written into `work`.
-pub(super) struct OctomapScript(PythonScript);
+pub(crate) struct OctomapScript(PythonScript);
 
 impl OctomapScript {
     /// Writes the script into `work` (a temporary directory) for `python`.
