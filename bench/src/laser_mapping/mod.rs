@@ -185,6 +185,7 @@ pub fn run(options: LaserMappingOptions) -> Result<()> {
                     clamp,
                     max_range: mapped_range,
                     passes: options.passes,
+                    time_empty_calls: false,
                 };
                 Ok(script.run(&scans_file, &cells_file, &settings)?)
             }

@@ -12,4 +12,4 @@ pub(crate) mod cell_list;
 pub(crate) mod point_cloud;
 mod script;
 
-pub(crate) use script::{OctomapRun, OctomapScript, OctomapSettings};
+pub(crate) use script::{OctomapRun, OctomapScript, OctomapSettings, Versions};
