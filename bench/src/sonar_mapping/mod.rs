@@ -113,7 +113,8 @@ pub struct SonarMappingOptions {
     #[arg(long, default_value_t = MapViewSettings::default().wall_probability)]
     pub wall_probability: f64,
     /// How far a reading's empty evidence reaches, metres, for every
-    /// method (`deog map --max-free-range`).
+    /// method of deog's (`deog map --max-free-range`); not OctoMap's,
+    /// whose rays stop at 5 m, hit and free space alike.
     #[arg(long, default_value_t = mapping_sonar_model().max_free_range)]
     pub max_free_range: f64,
     /// Seed of the simulator and the wanderers.
