@@ -31,6 +31,10 @@
 //!   cell updates per second on each side, their ratio, and how alike the
 //!   two final maps are. OctoMap runs in `bench/octomap_insert.py`, a child
 //!   Python process.
+//! - [`sonar_mapping`]: `deog bench sonar-mapping`, deog's sonar mapping
+//!   methods and OctoMap (one ray per echo, `bench/octomap_insert.py`) on
+//!   the same simulated frames: frames and cell updates per second, each
+//!   map judged against the world.
 //! - [`real`]: `deog bench real`, the whole real-data recipe on one CARMEN
 //!   log with the real processes: the reference map from the log's
 //!   reference poses, tracking over the whole log and seeded global

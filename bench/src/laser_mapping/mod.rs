@@ -25,7 +25,7 @@
 //! `deog_side`, `agreement` (the two maps compared) and `report` (the table
 //! and the JSON, whose keys its docs list); the scans file, the script as a
 //! child process and the cells file it writes back are
-//! [`crate::octomap`]'s, which `deog bench sonar-mapping` shares.
+//! the `octomap` module's, which `deog bench sonar-mapping` shares.
 
 mod agreement;
 mod deog_side;
