@@ -13,6 +13,14 @@ scan the origin (f64 x, f64 y), u32 point count and the points (f64 x,
 f64 y each). The cells file: magic "DEOGOC01", u64 cell count, then per
 cell i32 x, i32 y (floor(metres / resolution)) and f32 log-odds (nats).
 
+A scan is one origin with its points, so rays from several origins (a
+sonar ring's transducers) come as several scans, one reading each
+(`deog bench sonar-mapping`). With --time-empty-calls it then times the
+same insertPointCloud calls again with no points, at the same origins,
+and reports that as `empty_call_seconds`: what the calls cost beyond
+OctoMap's own work on the rays (Python's loop, the call, the conversion of
+the arguments), to tell apart when a scan is a single ray.
+
 Needs numpy and the `octomap` module (`pip install octomap-python numpy`).
 With --probe it only imports them and prints their versions: exit 3 if
 either is missing.
@@ -116,11 +124,12 @@ def main():
     parser.add_argument("--clamp-max", type=float, default=0.97)
     parser.add_argument("--max-range", type=float, default=20.0)
     parser.add_argument("--passes", type=int, default=1)
+    parser.add_argument("--time-empty-calls", action="store_true")
     parser.add_argument("--probe", action="store_true")
     args = parser.parse_args()
 
     try:
-        import numpy  # noqa: F401
+        import numpy
         import octomap
     except ImportError as e:
         print(e, file=sys.stderr)
@@ -148,6 +157,16 @@ def main():
             tree.insertPointCloud(points, origin, maxrange=args.max_range)
         pass_seconds.append(time.perf_counter() - start)
 
+    empty_call_seconds = None
+    if args.time_empty_calls:
+        # The same calls with nothing to insert: the tree is not touched.
+        empty = numpy.zeros((0, 3), dtype=numpy.float64)
+        start = time.perf_counter()
+        for _ in range(args.passes):
+            for origin, _points in work:
+                tree.insertPointCloud(empty, origin, maxrange=args.max_range)
+        empty_call_seconds = time.perf_counter() - start
+
     exported = export_cells(tree, args.resolution, args.cells_out)
     seconds = sum(pass_seconds)
     scans_done = len(scans) * args.passes
@@ -162,7 +181,10 @@ def main():
         "tree_nodes": tree.size(),
         "exported_cells": exported,
         "memory_bytes": tree.memoryUsage(),
+        "calls": len(work) * args.passes,
     }
+    if empty_call_seconds is not None:
+        report["empty_call_seconds"] = empty_call_seconds
     print(json.dumps(report))
     return 0
 

@@ -31,10 +31,17 @@
 //!   cell updates per second on each side, their ratio, and how alike the
 //!   two final maps are. OctoMap runs in `bench/octomap_insert.py`, a child
 //!   Python process.
+//! - [`sonar_mapping`]: `deog bench sonar-mapping`, deog's sonar mapping
+//!   methods and OctoMap (one ray per echo, `bench/octomap_insert.py`) on
+//!   the same simulated frames: frames and cell updates per second, each
+//!   map judged against the world.
 //! - [`real`]: `deog bench real`, the whole real-data recipe on one CARMEN
 //!   log with the real processes: the reference map from the log's
 //!   reference poses, tracking over the whole log and seeded global
 //!   starts, judged against the reference poses.
+//! - `octomap`: OctoMap as a peer (laser-mapping's and sonar-mapping's):
+//!   `bench/octomap_insert.py` as a child process, the point-cloud file it
+//!   reads and the cell file it writes.
 //! - `python_script`: a peer's side as a child Python process (OctoMap's,
 //!   amcl's): the built-in script written out, probed, run.
 //! - [`option_error`]: [`OptionError`], an option out of its range or
@@ -45,6 +52,7 @@ pub mod localize;
 pub mod localize_memory;
 pub mod localize_peers;
 pub mod map_server;
+mod octomap;
 
 pub mod option_error;
 mod python_script;

@@ -42,9 +42,11 @@ enum BenchTarget {
     /// the reference map, tracking over the whole log and seeded global
     /// starts, judged against the log's reference poses.
     Real(RealOptions),
-    /// The sonar mapping methods side by side (the thesis's model, and
-    /// cones that stop at known walls) on the same simulated readings,
-    /// each map judged against the world.
+    /// The sonar mapping methods side by side (the thesis's model, cones
+    /// that stop at known walls, evidence by direction, and OctoMap as a
+    /// Python child process, one ray per echo) on the same simulated
+    /// readings: frames/s, cell updates/s, each map judged against the
+    /// world.
     SonarMapping(SonarMappingOptions),
 }
 

@@ -11,7 +11,7 @@ use std::collections::HashMap;
 
 use deog_grid::{CellOffset, TileMap};
 
-use super::cell_list::ExportedCell;
+use crate::octomap::cell_list::ExportedCell;
 
 /// The two maps compared, cell by cell.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -9,7 +9,7 @@ use deog_grid::Pose2;
 use deog_logs::{CarmenLog, LaserSource};
 use deog_rig::{Reading, Rig};
 
-use super::point_cloud::ScanCloud;
+use crate::octomap::point_cloud::ScanCloud;
 
 /// How close, metres, the beams' starting points must be to count as one
 /// sensor origin (OctoMap takes one origin per point cloud).

@@ -22,17 +22,14 @@
 //! demands OctoMap's side: then it is an error.
 //!
 //! Its parts: `laser_log` (the log's scans, placed, and as point clouds),
-//! `point_cloud` (the scans file the script reads), `deog_side`,
-//! `octomap_side` (the script as a child process), `cell_list` (the cells
-//! file it writes back), `agreement` (the two maps compared) and `report`
-//! (the table and the JSON, whose keys its docs list).
+//! `deog_side`, `agreement` (the two maps compared) and `report` (the table
+//! and the JSON, whose keys its docs list); the scans file, the script as a
+//! child process and the cells file it writes back are
+//! the `octomap` module's, which `deog bench sonar-mapping` shares.
 
 mod agreement;
-mod cell_list;
 mod deog_side;
 mod laser_log;
-mod octomap_side;
-mod point_cloud;
 mod report;
 
 use std::fs::File;
@@ -43,9 +40,9 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use deog_grid::{ClampLimits, Resolution};
 
+use crate::octomap::{OctomapScript, OctomapSettings, point_cloud};
 use crate::option_error::{OptionError, require};
 use laser_log::LaserLog;
-use octomap_side::{OctomapScript, OctomapSettings};
 use report::{ConfigRecord, LaserMappingFigures};
 
 /// Options of `deog bench laser-mapping`.
@@ -188,6 +185,7 @@ pub fn run(options: LaserMappingOptions) -> Result<()> {
                     clamp,
                     max_range: mapped_range,
                     passes: options.passes,
+                    time_empty_calls: false,
                 };
                 Ok(script.run(&scans_file, &cells_file, &settings)?)
             }

@@ -34,7 +34,7 @@ use serde::Serialize;
 
 use super::agreement::Agreement;
 use super::deog_side::DeogRun;
-use super::octomap_side::OctomapRun;
+use crate::octomap::OctomapRun;
 
 /// The settings of a run, as reported.
 #[derive(Debug, Clone, Serialize)]

@@ -10,14 +10,18 @@
 //!           log-odds f32        nats, OctoMap's own value
 //! ```
 
+use std::collections::HashMap;
 use std::io::{self, Read};
+
+use anyhow::{Context, Result};
+use deog_grid::{CellIndex, ClampLimits, LogOdds, Resolution, Tile, TileMap, TileSize};
 
 /// The file's first eight bytes.
 const MAGIC: &[u8; 8] = b"DEOGOC01";
 
 /// One cell of the exported map.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct ExportedCell {
+pub(crate) struct ExportedCell {
     /// Cell index along x.
     pub x: i32,
     /// Cell index along y.
@@ -27,7 +31,7 @@ pub(super) struct ExportedCell {
 }
 
 /// Reads the file `bench/octomap_insert.py` writes.
-pub(super) fn read_cells(mut input: impl Read) -> io::Result<Vec<ExportedCell>> {
+pub(crate) fn read_cells(mut input: impl Read) -> io::Result<Vec<ExportedCell>> {
     let mut magic = [0u8; 8];
     input.read_exact(&mut magic)?;
     if &magic != MAGIC {
@@ -65,6 +69,34 @@ pub(super) fn read_cells(mut input: impl Read) -> io::Result<Vec<ExportedCell>> 
         .collect())
 }
 
+/// The cells as a deog map of `resolution` and `tile_size`, each holding
+/// OctoMap's belief rounded to deog's fixed point (a thousandth of a nat);
+/// the cells OctoMap never observed are unknown. OctoMap clamped the
+/// beliefs already; the map is given the default clamp (OctoMap's too),
+/// which only matters to deltas applied later.
+pub(crate) fn to_tile_map(
+    cells: &[ExportedCell],
+    resolution: Resolution,
+    tile_size: TileSize,
+) -> Result<TileMap> {
+    let mut tiles: HashMap<_, Vec<i16>> = HashMap::new();
+    for cell in cells {
+        let (key, offset) = tile_size.split(CellIndex::new(cell.x, cell.y));
+        let belief = LogOdds::from_nats(f64::from(cell.log_odds))
+            .with_context(|| format!("OctoMap's cell ({}, {})", cell.x, cell.y))?;
+        tiles
+            .entry(key)
+            .or_insert_with(|| vec![LogOdds::UNKNOWN_RAW; tile_size.area()])
+            [offset.index(tile_size)] = belief.raw();
+    }
+    let mut map = TileMap::new(resolution, tile_size, ClampLimits::default());
+    for (key, raw) in tiles {
+        let bytes: Vec<u8> = raw.iter().flat_map(|v| v.to_le_bytes()).collect();
+        map.insert(key, Tile::from_dense_bytes(tile_size, &bytes)?)?;
+    }
+    Ok(map)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -97,6 +129,38 @@ mod tests {
         ];
         assert_eq!(read_cells(file_of(&cells).as_slice()).expect("read"), cells);
         assert_eq!(read_cells(file_of(&[]).as_slice()).expect("empty"), []);
+    }
+
+    #[test]
+    fn cells_become_a_map_with_their_beliefs_and_the_rest_unknown() {
+        let size = TileSize::new(8).expect("size");
+        let cells = [
+            ExportedCell {
+                x: -1,
+                y: 0,
+                log_odds: 0.847_298,
+            },
+            ExportedCell {
+                x: 9,
+                y: -17,
+                log_odds: -0.405_465,
+            },
+            // Evidence that cancelled out is observed all the same.
+            ExportedCell {
+                x: 10,
+                y: -17,
+                log_odds: 0.0,
+            },
+        ];
+        let map = to_tile_map(&cells, Resolution::DEFAULT, size).expect("map");
+        assert_eq!(map.resolution(), Resolution::DEFAULT);
+        assert_eq!((map.tile_count(), map.observed_count()), (2, 3));
+        let raw = |x, y| map.get(CellIndex::new(x, y)).map(LogOdds::raw);
+        assert_eq!(raw(-1, 0), Some(847));
+        assert_eq!(raw(9, -17), Some(-405));
+        assert_eq!(raw(10, -17), Some(0));
+        assert_eq!(raw(0, 0), None);
+        assert_eq!(raw(-2, 0), None);
     }
 
     #[test]

@@ -22,16 +22,43 @@
 //!   ignored;
 //! - `directional-specular`: what `deog demo` maps a specular sonar with
 //!   ([`specular_sonar_mapping`]: directional, no-echo readings ignored,
-//!   empty evidence out to 2 m whatever `--max-free-range` says).
+//!   empty evidence out to 2 m whatever `--max-free-range` says);
+//! - `octomap`: OctoMap, with one ray per reading with an echo, from its
+//!   transducer along its axis to the range read, no-echo readings left
+//!   out, OctoMap's default probabilities (hit 0.7, miss 0.4, clamping
+//!   0.12 and 0.97) and rays cut at the 5 m the cones stop at; it runs in
+//!   `bench/octomap_insert.py`, a child of `--python`, as in
+//!   `deog bench laser-mapping` (details in `octomap_method`). Its final
+//!   map's z = 0 layer, with OctoMap's log-odds, is judged as a deog map.
 //!
-//! `--methods` picks some of them.
+//! `--methods` picks some of them. When the interpreter or its `octomap`
+//! or numpy module is missing, the run says how to install them and
+//! reports deog's methods alone, unless `--octomap` demands OctoMap:
+//! then it is an error. `--no-octomap` leaves it out.
 //!
-//! The JSON (`--json FILE`) holds `options` and `worlds`: per world its
-//! `world`, `robots`, `frames` and `methods`, each with `method`,
-//! `frames_per_s` (mapping alone), and the map quality's `cells_observed`,
+//! Speed is mapping alone, on one thread: for deog's methods the
+//! cartographer's integration and the deltas' application to the map,
+//! for OctoMap the `insertPointCloud` calls (the script's loop included;
+//! the cost of the calls themselves is also timed apart, with the same
+//! calls holding no point, and reported). Cell updates are counted per
+//! method: for deog's, the cells each frame's deltas touch (a frame's
+//! cones folded into one delta per cell, as the cartographer returns
+//! them); for OctoMap, the cells each ray's walk visits (counted in Rust
+//! as OctoMap walks: one axis at a time from the transducer's cell to
+//! the echo's, or to the 5 m cut), so a cell two rays of a frame cross
+//! counts twice there, once on deog's side.
+//!
+//! The JSON (`--json FILE`) holds `options`, `octomap` (its versions and
+//! settings; `null` when it did not run, and `octomap_skipped` says why if
+//! it was chosen) and `worlds`: per world its `world`, `robots`, `frames`,
+//! `methods` and `octomap` (`rays`, `seconds`, `empty_call_seconds`,
+//! `leaf_cells`, `tree_nodes`, `memory_bytes`, or `null`); each method
+//! with `method`, `frames_per_s` and `cell_updates_per_s` (mapping
+//! alone), `cell_updates`, and the map quality's `cells_observed`,
 //! `fraction_correct`, `occupied_precision`, `occupied_recall`,
-//! `observed_occupied_recall` and
-//! `coverage`.
+//! `observed_occupied_recall` and `coverage`.
+
+mod octomap_method;
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -50,9 +77,10 @@ use deog_world::{Point2, load_world_spec};
 use serde::Serialize;
 
 use crate::option_error::{OptionError, require};
+use octomap_method::{OctomapDetails, OctomapRecord, OctomapSide};
 
 /// The methods compared, in the order the table lists them.
-pub const METHODS: [&str; 7] = [
+pub const METHODS: [&str; 8] = [
     "thesis",
     "thesis-no-echo-ignored",
     "keep-walls",
@@ -60,7 +88,11 @@ pub const METHODS: [&str; 7] = [
     "directional",
     "directional-no-echo-ignored",
     "directional-specular",
+    "octomap",
 ];
+
+/// The method OctoMap runs as.
+const OCTOMAP: &str = "octomap";
 
 /// Options of `deog bench sonar-mapping`.
 #[derive(Debug, Clone, Args)]
@@ -81,7 +113,8 @@ pub struct SonarMappingOptions {
     #[arg(long, default_value_t = MapViewSettings::default().wall_probability)]
     pub wall_probability: f64,
     /// How far a reading's empty evidence reaches, metres, for every
-    /// method (`deog map --max-free-range`).
+    /// method of deog's (`deog map --max-free-range`); not OctoMap's,
+    /// whose rays stop at 5 m, hit and free space alike.
     #[arg(long, default_value_t = mapping_sonar_model().max_free_range)]
     pub max_free_range: f64,
     /// Seed of the simulator and the wanderers.
@@ -97,6 +130,17 @@ pub struct SonarMappingOptions {
     /// this folder, `WORLD-METHOD.png`, made if missing.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// The Python interpreter that runs the octomap method (it needs
+    /// `pip install octomap-python numpy`).
+    #[arg(long, default_value = "python3")]
+    pub python: PathBuf,
+    /// Leave the octomap method out.
+    #[arg(long, conflicts_with = "octomap")]
+    pub no_octomap: bool,
+    /// Fail when the octomap method cannot run, rather than reporting
+    /// deog's methods alone.
+    #[arg(long)]
+    pub octomap: bool,
 }
 
 impl SonarMappingOptions {
@@ -135,6 +179,14 @@ impl SonarMappingOptions {
                 )
             })?;
         }
+        require(
+            !self.octomap || self.methods.iter().any(|m| m == OCTOMAP),
+            "--octomap",
+            || "--octomap demands the octomap method, which --methods leaves out".into(),
+        )?;
+        require(!self.chosen_methods().is_empty(), "--no-octomap", || {
+            "--no-octomap leaves no method of --methods to run".into()
+        })?;
         if let Some(json) = &self.json {
             let folder = json.parent().filter(|p| !p.as_os_str().is_empty());
             require(folder.is_none_or(|f| f.is_dir()), "--json", || {
@@ -161,6 +213,15 @@ impl SonarMappingOptions {
             })
             .collect()
     }
+
+    /// The methods to run, in [`METHODS`]' order.
+    fn chosen_methods(&self) -> Vec<&'static str> {
+        METHODS
+            .into_iter()
+            .filter(|m| self.methods.iter().any(|chosen| chosen == m))
+            .filter(|m| !(self.no_octomap && *m == OCTOMAP))
+            .collect()
+    }
 }
 
 /// One method's map of one world.
@@ -170,6 +231,11 @@ pub struct MethodFigures {
     pub method: &'static str,
     /// Frames mapped per second, mapping alone.
     pub frames_per_s: f64,
+    /// Cells updated, all frames (see the module docs for how each method
+    /// counts).
+    pub cell_updates: u64,
+    /// Cell updates per second, mapping alone.
+    pub cell_updates_per_s: f64,
     /// Cells the map observed.
     pub cells_observed: u64,
     /// Observed cells classified as the world has them.
@@ -195,11 +261,15 @@ pub struct WorldFigures {
     pub frames: usize,
     /// Each method's map.
     pub methods: Vec<MethodFigures>,
+    /// OctoMap's run beyond its map's figures, when it ran.
+    octomap: Option<OctomapDetails>,
 }
 
 #[derive(Debug, Serialize)]
 struct Report<'a> {
     options: OptionsRecord,
+    octomap: Option<OctomapRecord>,
+    octomap_skipped: Option<&'a str>,
     worlds: &'a [WorldFigures],
 }
 
@@ -219,9 +289,50 @@ struct RecordedFrame {
     ranges: Vec<f64>,
 }
 
+/// One method's map of one world, and what making it took.
+struct Built {
+    map: TileMap,
+    /// Seconds of mapping alone.
+    seconds: f64,
+    /// Cells updated (see the module docs).
+    cell_updates: u64,
+    /// OctoMap's figures beyond those, for its method.
+    octomap: Option<OctomapDetails>,
+}
+
 /// Runs `deog bench sonar-mapping`.
 pub fn run(options: SonarMappingOptions) -> Result<()> {
     let worlds = options.validate()?;
+    let mut methods = options.chosen_methods();
+    let (res, size) = (Resolution::DEFAULT, TileSize::new(64)?);
+    let mut octomap_skipped = None;
+    let octomap = if methods.contains(&OCTOMAP) {
+        match OctomapSide::new(&options.python, res)? {
+            Ok(side) => {
+                let r = side.record();
+                eprintln!(
+                    "octomap: octomap-python {} on Python {} (numpy {})",
+                    r.octomap, r.python, r.numpy
+                );
+                Some(side)
+            }
+            Err(reason) if options.octomap => {
+                bail!("--octomap: OctoMap's side cannot run: {reason}")
+            }
+            Err(reason) => {
+                methods.retain(|m| *m != OCTOMAP);
+                if methods.is_empty() {
+                    bail!("the octomap method cannot run, and no other was chosen: {reason}");
+                }
+                eprintln!("octomap: not run: {reason}; reporting deog's methods alone");
+                octomap_skipped = Some(reason);
+                None
+            }
+        }
+    } else {
+        None
+    };
+    let rig = deog_rig::scout();
     let mut figures = Vec::new();
     for (name, robots) in worlds {
         let world = load_world_spec(&name).with_context(|| format!("world {name}"))?;
@@ -232,17 +343,31 @@ pub fn run(options: SonarMappingOptions) -> Result<()> {
             frames.len(),
             began.elapsed().as_secs_f64()
         );
-        let mut methods = Vec::new();
-        for method in METHODS
-            .into_iter()
-            .filter(|m| options.methods.iter().any(|chosen| chosen == m))
-        {
-            let (map, seconds) = build(method, &frames, &options)?;
+        let mut world_figures = WorldFigures {
+            world: name.clone(),
+            robots,
+            frames: frames.len(),
+            methods: Vec::new(),
+            octomap: None,
+        };
+        for &method in &methods {
+            let built = match (&octomap, method) {
+                (Some(side), OCTOMAP) => {
+                    let o = side.build(&rig, &frames, size)?;
+                    Built {
+                        map: o.map,
+                        seconds: o.seconds,
+                        cell_updates: o.cell_updates,
+                        octomap: Some(o.details),
+                    }
+                }
+                _ => build(method, &frames, &options, res, size)?,
+            };
             let input = QualityInput {
-                map: &map,
+                map: &built.map,
                 world: &world,
                 seeds: &seeds,
-                robot_radius_m: deog_rig::scout().body_radius(),
+                robot_radius_m: rig.body_radius(),
             };
             let quality = map_quality(&input)
                 .with_context(|| format!("judging the {method} map of {name}"))?;
@@ -254,9 +379,12 @@ pub fn run(options: SonarMappingOptions) -> Result<()> {
                 std::fs::write(&path, png)
                     .with_context(|| format!("writing {}", path.display()))?;
             }
-            methods.push(MethodFigures {
+            let seconds = built.seconds.max(1e-9);
+            world_figures.methods.push(MethodFigures {
                 method,
-                frames_per_s: frames.len() as f64 / seconds.max(1e-9),
+                frames_per_s: frames.len() as f64 / seconds,
+                cell_updates: built.cell_updates,
+                cell_updates_per_s: built.cell_updates as f64 / seconds,
                 cells_observed: quality.cells_observed(),
                 fraction_correct: quality.fraction_correct(),
                 occupied_precision: quality.occupied_precision(),
@@ -264,15 +392,14 @@ pub fn run(options: SonarMappingOptions) -> Result<()> {
                 observed_occupied_recall: quality.observed_occupied_recall(),
                 coverage: quality.coverage(),
             });
+            if built.octomap.is_some() {
+                world_figures.octomap = built.octomap;
+            }
         }
-        figures.push(WorldFigures {
-            world: name,
-            robots,
-            frames: frames.len(),
-            methods,
-        });
+        figures.push(world_figures);
     }
-    print!("{}", table(&figures));
+    let octomap_record = octomap.as_ref().map(OctomapSide::record);
+    print!("{}", table(&figures, octomap_record.as_ref()));
     if let Some(path) = &options.json {
         let report = Report {
             options: OptionsRecord {
@@ -282,6 +409,8 @@ pub fn run(options: SonarMappingOptions) -> Result<()> {
                 max_free_range: options.max_free_range,
                 seed: options.seed,
             },
+            octomap: octomap_record,
+            octomap_skipped: octomap_skipped.as_deref(),
             worlds: &figures,
         };
         let text = serde_json::to_string_pretty(&report).context("encoding the figures")?;
@@ -342,14 +471,18 @@ fn record(
     Ok((frames, seeds))
 }
 
-/// `frames` mapped by `method` into a map of their own; the seconds the
-/// mapping took.
+/// `frames` mapped by deog's `method` into a map of their own, the
+/// seconds the mapping took and the cells it updated.
 fn build(
     method: &str,
     frames: &[RecordedFrame],
     options: &SonarMappingOptions,
-) -> Result<(TileMap, f64)> {
-    let (res, size) = (Resolution::DEFAULT, TileSize::new(64)?);
+    res: Resolution,
+    size: TileSize,
+) -> Result<Built> {
+    if method == OCTOMAP {
+        bail!("the octomap method is OctoMap's side, not deog's");
+    }
     let rig = deog_rig::scout();
     let (sonar_method, params) = if method == "directional-specular" {
         specular_sonar_mapping()
@@ -378,10 +511,11 @@ fn build(
         .with_sonar_method(sonar_method, &rig, &params, view, res, size)?;
     let mut map = TileMap::new(res, size, ClampLimits::default());
     let mut deltas = Vec::new();
+    let mut cell_updates = 0;
     let began = Instant::now();
     for frame in frames {
         deltas.clear();
-        cartographer.integrate(
+        cell_updates += cartographer.integrate(
             &FrameInput {
                 sequence: frame.sequence,
                 true_pose: Some(frame.true_pose),
@@ -391,25 +525,44 @@ fn build(
                 ranges: &frame.ranges,
             },
             &mut deltas,
-        )?;
+        )? as u64;
         for delta in &deltas {
             map.apply(delta)?;
         }
     }
-    Ok((map, began.elapsed().as_secs_f64()))
+    Ok(Built {
+        seconds: began.elapsed().as_secs_f64(),
+        map,
+        cell_updates,
+        octomap: None,
+    })
 }
 
-/// The figures as a Markdown table.
-fn table(worlds: &[WorldFigures]) -> String {
+/// The figures as a Markdown table; OctoMap's settings and runs, when it
+/// ran, on lines before and after.
+fn table(worlds: &[WorldFigures], octomap: Option<&OctomapRecord>) -> String {
     let percent = |v: Option<f64>| v.map_or("—".to_owned(), |v| format!("{:.1} %", 100.0 * v));
-    let mut out = String::from(
-        "| world | robots | frames | method | right | occupied precision | occupied recall | recall of observed walls | coverage | cells observed | frames/s |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|\n",
-    );
+    let mut out = String::new();
+    if let Some(o) = octomap {
+        out += &format!(
+            "octomap: octomap-python {} (Python {}, numpy {}), one insertPointCloud call per echo from its transducer, {} m voxels, hit {} miss {}, clamp {}..{}, rays cut at {} m\n\n",
+            o.octomap,
+            o.python,
+            o.numpy,
+            o.resolution_m,
+            o.prob_hit,
+            o.prob_miss,
+            o.clamp_min,
+            o.clamp_max,
+            o.max_range_m
+        );
+    }
+    out += "| world | robots | frames | method | right | occupied precision | occupied recall | recall of observed walls | coverage | cells observed | frames/s | cell updates/s |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|\n";
     for w in worlds {
         for m in &w.methods {
             out += &format!(
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.0} |\n",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.0} | {:.2} M |\n",
                 w.world,
                 w.robots,
                 w.frames,
@@ -420,15 +573,40 @@ fn table(worlds: &[WorldFigures]) -> String {
                 percent(m.observed_occupied_recall),
                 percent(m.coverage),
                 m.cells_observed,
-                m.frames_per_s
+                m.frames_per_s,
+                m.cell_updates_per_s / 1e6
             );
         }
+    }
+    for w in worlds {
+        if let Some(o) = &w.octomap {
+            let calls = o.empty_call_seconds.map_or(String::new(), |s| {
+                format!(
+                    ", of which about {s:.3} s ({:.0} %) is the calls' own cost (the same calls with no point)",
+                    100.0 * s / o.seconds.max(1e-9)
+                )
+            });
+            out += &format!(
+                "\noctomap, {}: {} rays in {:.3} s{calls}; its tree: {} leaves, {} nodes, {:.1} MB",
+                w.world,
+                o.rays,
+                o.seconds,
+                o.leaf_cells,
+                o.tree_nodes,
+                o.memory_bytes as f64 / 1e6
+            );
+        }
+    }
+    if worlds.iter().any(|w| w.octomap.is_some()) {
+        out += "\n";
     }
     out
 }
 
 #[cfg(test)]
 mod tests {
+    use std::path::Path;
+
     use super::*;
     use clap::Parser;
 
@@ -466,6 +644,136 @@ mod tests {
     }
 
     #[test]
+    fn octomap_is_a_method_its_flags_choose_or_refuse() {
+        let options = parse(&[]);
+        assert_eq!(options.chosen_methods(), METHODS);
+        assert_eq!(METHODS.last(), Some(&"octomap"));
+        assert_eq!(options.python, PathBuf::from("python3"));
+        assert!(!options.octomap && !options.no_octomap);
+
+        let options = parse(&["--no-octomap"]);
+        assert_eq!(options.chosen_methods(), &METHODS[..7]);
+        assert!(options.validate().is_ok());
+        let options = parse(&["--octomap", "--python", "/opt/py/bin/python3"]);
+        assert!(options.octomap && options.validate().is_ok());
+        assert_eq!(options.python, PathBuf::from("/opt/py/bin/python3"));
+        // The table's order, whatever the order asked.
+        let options = parse(&["--methods", "octomap,thesis"]);
+        assert_eq!(options.chosen_methods(), ["thesis", "octomap"]);
+
+        assert!(
+            Cli::try_parse_from(["bench", "--octomap", "--no-octomap"]).is_err(),
+            "demanded and refused at once"
+        );
+        let flag = |args: &[&str]| parse(args).validate().expect_err("refused").flag;
+        assert_eq!(flag(&["--octomap", "--methods", "thesis"]), "--octomap");
+        assert_eq!(
+            flag(&["--no-octomap", "--methods", "octomap"]),
+            "--no-octomap"
+        );
+    }
+
+    #[test]
+    fn without_octomap_the_run_reports_deogs_methods_alone_unless_octomap_is_demanded() {
+        let missing = ["--python", "/nonexistent/python3", "--worlds", "map2:1"];
+        let demanded = parse(&[&missing[..], &["--octomap", "--minutes", "0.2"]].concat());
+        let error = run(demanded).expect_err("demanded").to_string();
+        assert!(
+            error.starts_with("--octomap: OctoMap's side cannot run"),
+            "{error}"
+        );
+        let alone = parse(&[&missing[..], &["--methods", "octomap"]].concat());
+        let error = run(alone).expect_err("nothing left").to_string();
+        assert!(error.contains("no other was chosen"), "{error}");
+
+        let work = tempfile::tempdir().expect("a temporary directory");
+        let json = work.path().join("figures.json");
+        let json_arg = json.to_str().expect("a UTF-8 path");
+        let options = parse(
+            &[
+                &missing[..],
+                &["--methods", "thesis,octomap", "--minutes", "0.2"],
+                &["--json", json_arg],
+            ]
+            .concat(),
+        );
+        run(options).expect("deog's methods alone");
+        let figures: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).expect("read")).expect("JSON");
+        assert!(figures["octomap"].is_null());
+        let skipped = figures["octomap_skipped"].as_str().expect("a reason");
+        assert!(skipped.contains("/nonexistent/python3"), "{skipped}");
+        let methods = figures["worlds"][0]["methods"].as_array().expect("methods");
+        assert_eq!(methods.len(), 1);
+        assert_eq!(methods[0]["method"], "thesis");
+        assert!(methods[0]["cell_updates_per_s"].as_f64().expect("a rate") > 0.0);
+        assert!(figures["worlds"][0]["octomap"].is_null());
+    }
+
+    /// OctoMap's side when `python3` has octomap and numpy; `None`, said
+    /// so, when it has not.
+    fn octomap_side() -> Option<OctomapSide> {
+        match OctomapSide::new(Path::new("python3"), Resolution::DEFAULT).expect("the script") {
+            Ok(side) => Some(side),
+            Err(reason) => {
+                eprintln!("skipped OctoMap's part: it cannot run here: {reason}");
+                None
+            }
+        }
+    }
+
+    #[test]
+    fn octomaps_map_holds_the_cells_its_rays_update() {
+        let Some(side) = octomap_side() else {
+            return;
+        };
+        // Facing +x: sonar 0 reads 1 m ahead, sonar 4 (to the left) 2 m,
+        // sonar 12 (to the right) 7 m, past the 5 m cut; the rays share
+        // no cell.
+        let mut ranges = vec![10.668; 16];
+        ranges[0] = 1.0;
+        ranges[4] = 2.0;
+        ranges[12] = 7.0;
+        let frames = [RecordedFrame {
+            sequence: 1,
+            true_pose: Pose2::new(0.01, 0.01, 0.0),
+            ranges,
+        }];
+        let rig = deog_rig::scout();
+        let built = side
+            .build(&rig, &frames, TileSize::new(64).expect("size"))
+            .expect("OctoMap's map");
+        let details = &built.details;
+        assert_eq!(details.rays, 3);
+        assert!(details.seconds > 0.0 && details.empty_call_seconds.is_some());
+        // Every cell updated once: the map observed just the counted cells.
+        assert_eq!(built.map.observed_count() as u64, built.cell_updates);
+        // 0.2 + 1 m ahead, 0.2 + 2 m left, 0.2 + 5 m right (cut, no hit),
+        // each ray from its transducer's cell: about 20 + 40 + 100 cells.
+        assert!(
+            (150..=175).contains(&built.cell_updates),
+            "{}",
+            built.cell_updates
+        );
+        let res = Resolution::DEFAULT;
+        let belief = |x: f64, y: f64| {
+            built
+                .map
+                .get(res.cell_of(x, y).expect("cell"))
+                .map(|b| b.probability())
+        };
+        let near = |p: Option<f64>, want: f64| {
+            assert!(p.is_some_and(|p| (p - want).abs() < 1e-3), "{p:?}");
+        };
+        near(belief(1.21, 0.01), 0.7); // sonar 0's echo
+        near(belief(0.7, 0.01), 0.4); // on its way
+        near(belief(0.01, 2.21), 0.7); // sonar 4's echo
+        near(belief(0.01, -5.0), 0.4); // sonar 12's ray, freed to 5 m
+        assert_eq!(belief(0.01, -5.25), None, "nothing past the cut");
+        assert_eq!(belief(-1.0, 0.01), None, "sonar 8 heard nothing");
+    }
+
+    #[test]
     fn a_short_run_maps_with_every_method() {
         let options = parse(&[
             "--worlds",
@@ -479,10 +787,32 @@ mod tests {
         let (frames, seeds) = record(&world, 1, &options).expect("record");
         assert!(frames.len() > 250, "{}", frames.len());
         assert_eq!(seeds.len(), 1);
+        let (res, size) = (Resolution::DEFAULT, TileSize::new(64).expect("size"));
+        let octomap = octomap_side();
         for method in METHODS {
-            let (map, _) = build(method, &frames, &options).expect("build");
+            let built = match (method, &octomap) {
+                (OCTOMAP, None) => continue,
+                (OCTOMAP, Some(side)) => {
+                    let o = side
+                        .build(&deog_rig::scout(), &frames, size)
+                        .expect("build");
+                    assert!(o.details.rays > 1000, "{}", o.details.rays);
+                    Built {
+                        map: o.map,
+                        seconds: o.seconds,
+                        cell_updates: o.cell_updates,
+                        octomap: Some(o.details),
+                    }
+                }
+                _ => build(method, &frames, &options, res, size).expect("build"),
+            };
+            assert!(built.seconds > 0.0, "{method}");
+            assert!(
+                built.cell_updates >= built.map.observed_count() as u64,
+                "{method}: every observed cell was updated"
+            );
             let quality = map_quality(&QualityInput {
-                map: &map,
+                map: &built.map,
                 world: &world,
                 seeds: &seeds,
                 robot_radius_m: 0.2,
@@ -490,5 +820,6 @@ mod tests {
             .expect("quality");
             assert!(quality.fraction_correct() > 0.8, "{method}");
         }
+        assert!(build(OCTOMAP, &frames, &options, res, size).is_err());
     }
 }

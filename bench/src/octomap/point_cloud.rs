@@ -22,7 +22,7 @@ const MAGIC: &[u8; 8] = b"DEOGPC01";
 
 /// One scan, world frame.
 #[derive(Debug, Clone, PartialEq)]
-pub(super) struct ScanCloud {
+pub(crate) struct ScanCloud {
     /// Where the rays start, metres.
     pub origin: [f64; 2],
     /// Where each echo is, metres; beams without one are left out.
@@ -30,7 +30,7 @@ pub(super) struct ScanCloud {
 }
 
 /// Writes `scans` in the layout above.
-pub(super) fn write_clouds(mut out: impl Write, scans: &[ScanCloud]) -> io::Result<()> {
+pub(crate) fn write_clouds(mut out: impl Write, scans: &[ScanCloud]) -> io::Result<()> {
     out.write_all(MAGIC)?;
     out.write_all(&count_u32(scans.len())?.to_le_bytes())?;
     for scan in scans {
