@@ -69,13 +69,16 @@ pub fn run(args: FramesArgs) -> Result<()> {
         let Some(robot) = &args.robot else {
             let robots = map.robots().await?;
             if robots.is_empty() {
-                println!("no frames stored yet");
+                print("no frames stored yet")?;
             }
             for r in robots {
-                println!(
+                let listed = format!(
                     "{}: {} frames, sequences {}..={}",
                     r.robot, r.frame_count, r.first_sequence, r.last_sequence
                 );
+                if !print(&listed)? {
+                    break;
+                }
             }
             return Ok(());
         };

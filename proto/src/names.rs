@@ -6,7 +6,7 @@
 //! use deog_proto::names::{NameError, check_client_id, check_robot_name};
 //!
 //! assert_eq!(check_robot_name("scout-1"), Ok(()));
-//! assert_eq!(check_robot_name("scout 1"), Err(NameError::Character(' ')));
+//! assert!(matches!(check_robot_name("scout 1"), Err(NameError::Character(' ', _))));
 //! assert_eq!(check_client_id("carto/scout-1"), Ok(()));
 //! ```
 
@@ -23,28 +23,34 @@ pub enum NameError {
     /// in bytes.
     #[error("must be 1 to 128 characters, got {0}")]
     Length(usize),
-    /// The name holds a character outside the allowed set.
-    #[error("character {0:?} is not allowed (use A-Z a-z 0-9 _ . -)")]
-    Character(char),
+    /// The name holds a character outside the allowed set, which the
+    /// second field spells out.
+    #[error("character {0:?} is not allowed (use {1})")]
+    Character(char, &'static str),
 }
 
 /// A robot name: 1 to 128 characters of `[A-Za-z0-9_.-]`.
 pub fn check_robot_name(name: &str) -> Result<(), NameError> {
-    check(name, &[])
+    check(name, &[], NAME_CHARACTERS)
 }
 
 /// A map name: the same rule as a robot's.
 pub fn check_map_name(name: &str) -> Result<(), NameError> {
-    check(name, &[])
+    check(name, &[], NAME_CHARACTERS)
 }
 
 /// An update client id (`UpdateBatch.client_id`): a name that may also hold
 /// `/` and `:`, so a client can say whose it is (`carto/scout-1`).
 pub fn check_client_id(id: &str) -> Result<(), NameError> {
-    check(id, &['/', ':'])
+    check(id, &['/', ':'], CLIENT_ID_CHARACTERS)
 }
 
-fn check(name: &str, extra: &[char]) -> Result<(), NameError> {
+/// The characters of a name, as the refusal spells them.
+const NAME_CHARACTERS: &str = "A-Z a-z 0-9 _ . -";
+/// The characters of a client id.
+const CLIENT_ID_CHARACTERS: &str = "A-Z a-z 0-9 _ . - / :";
+
+fn check(name: &str, extra: &[char], allowed: &'static str) -> Result<(), NameError> {
     if name.is_empty() || name.len() > MAX_NAME_LEN {
         return Err(NameError::Length(name.len()));
     }
@@ -52,7 +58,7 @@ fn check(name: &str, extra: &[char]) -> Result<(), NameError> {
         .chars()
         .find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '_' | '.' | '-') || extra.contains(c)))
     {
-        Some(bad) => Err(NameError::Character(bad)),
+        Some(bad) => Err(NameError::Character(bad, allowed)),
         None => Ok(()),
     }
 }
@@ -81,8 +87,14 @@ mod tests {
         assert_eq!(check_map_name("map1"), Ok(()));
         for bad in [' ', '/', ':', 'é', '\0', '*'] {
             let name = format!("a{bad}b");
-            assert_eq!(check_robot_name(&name), Err(NameError::Character(bad)));
-            assert_eq!(check_map_name(&name), Err(NameError::Character(bad)));
+            assert_eq!(
+                check_robot_name(&name),
+                Err(NameError::Character(bad, NAME_CHARACTERS))
+            );
+            assert_eq!(
+                check_map_name(&name),
+                Err(NameError::Character(bad, NAME_CHARACTERS))
+            );
         }
     }
 
@@ -90,7 +102,10 @@ mod tests {
     fn client_ids_may_also_hold_slash_and_colon() {
         assert_eq!(check_client_id("carto/scout-1"), Ok(()));
         assert_eq!(check_client_id("import:map1"), Ok(()));
-        assert_eq!(check_client_id("a b"), Err(NameError::Character(' ')));
+        assert_eq!(
+            check_client_id("a b").unwrap_err().to_string(),
+            "character ' ' is not allowed (use A-Z a-z 0-9 _ . - / :)"
+        );
         assert_eq!(check_client_id(""), Err(NameError::Length(0)));
     }
 
@@ -103,7 +118,7 @@ mod tests {
             "must be 1 to 128 characters, got 0"
         );
         assert_eq!(
-            NameError::Character(' ').to_string(),
+            NameError::Character(' ', NAME_CHARACTERS).to_string(),
             "character ' ' is not allowed (use A-Z a-z 0-9 _ . -)"
         );
     }

@@ -352,6 +352,11 @@ mod tests {
             "map: character '/' is not allowed (use A-Z a-z 0-9 _ . -)"
         );
         assert_eq!(client_id("client_id", "carto/a:1").unwrap(), "carto/a:1");
+        // A client id's refusal lists the two marks it may hold beyond a name's.
+        assert_eq!(
+            refused(client_id("client_id", "carto a").unwrap_err()),
+            "client_id: character ' ' is not allowed (use A-Z a-z 0-9 _ . - / :)"
+        );
         assert_eq!(robot_name("robot", "scout-1").unwrap(), "scout-1");
     }
 }

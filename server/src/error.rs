@@ -52,6 +52,10 @@ pub enum StoreError {
     /// The embedded database failed.
     #[error("storage failure: {0}")]
     Backend(String),
+    /// A group of writes was not committed; the message is the error that
+    /// stopped it, already worded (every write of the group gets it).
+    #[error("{0}")]
+    NotCommitted(String),
     /// Stored bytes could not be decoded: the data directory is damaged or
     /// was written by an incompatible version.
     #[error("stored record {what} is corrupt: {reason}")]
@@ -100,7 +104,9 @@ impl From<StoreError> for Status {
             StoreError::RigNotFound(_) => Code::NotFound,
             StoreError::UnknownRig { .. } => Code::FailedPrecondition,
             StoreError::ShuttingDown => Code::Unavailable,
-            StoreError::Backend(_) | StoreError::Corrupt { .. } => Code::Internal,
+            StoreError::Backend(_) | StoreError::NotCommitted(_) | StoreError::Corrupt { .. } => {
+                Code::Internal
+            }
         };
         Status::new(code, error.to_string())
     }

@@ -232,7 +232,7 @@ type Deferred = Box<dyn FnOnce(Option<&str>) + Send>;
 fn defer<T: Send + 'static>(reply: Reply<T>, value: Result<T, StoreError>) -> Deferred {
     Box::new(move |failure| {
         let result = match failure {
-            Some(message) => Err(StoreError::Backend(message.to_string())),
+            Some(message) => Err(StoreError::NotCommitted(message.to_string())),
             None => value,
         };
         let _ = reply.send(result);
@@ -607,4 +607,19 @@ fn evidence_box(size: TileSize, delta: &TileDelta) -> Option<CellBox> {
         CellIndex::new(origin.x + min_x as i32, origin.y + min_y as i32),
         CellIndex::new(origin.x + max_x as i32, origin.y + max_y as i32),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_failed_commit_reaches_each_write_worded_once() {
+        let (reply, answer) = oneshot::channel::<Result<u64, StoreError>>();
+        let failure = StoreError::Backend("disk full".into()).to_string();
+        defer(reply, Ok(7))(Some(&failure));
+        let error = answer.blocking_recv().unwrap().unwrap_err();
+        assert_eq!(error.to_string(), "storage failure: disk full");
+        assert_eq!(tonic::Status::from(error).code(), tonic::Code::Internal);
+    }
 }
