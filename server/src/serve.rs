@@ -21,6 +21,8 @@ use tonic::transport::{Identity, Server, ServerTlsConfig};
 pub const MAP_SERVICE_NAME: &str = "deog.v1.MapService";
 const HEALTH_SERVICE_NAME: &str = "grpc.health.v1.Health";
 const REFLECTION_SERVICE_NAME: &str = "grpc.reflection.v1.ServerReflection";
+/// The reflection service's older name, which many tools still ask first.
+const REFLECTION_V1ALPHA_SERVICE_NAME: &str = "grpc.reflection.v1alpha.ServerReflection";
 
 /// A certificate chain and private key, PEM.
 #[derive(Clone)]
@@ -130,13 +132,22 @@ pub async fn serve<S: Store>(
         .await;
     // Advertise exactly what this process serves: the deog descriptor set
     // also describes the simulator's service, which lives elsewhere.
-    let reflection = tonic_reflection::server::Builder::configure()
-        .register_encoded_file_descriptor_set(deog_proto::FILE_DESCRIPTOR_SET)
-        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
-        .with_service_name(MAP_SERVICE_NAME)
-        .with_service_name(HEALTH_SERVICE_NAME)
-        .with_service_name(REFLECTION_SERVICE_NAME)
+    // Both versions of reflection: grpcurl asks v1, many tools (Python's
+    // grpcio-reflection among them) v1alpha.
+    let reflection_builder = || {
+        tonic_reflection::server::Builder::configure()
+            .register_encoded_file_descriptor_set(deog_proto::FILE_DESCRIPTOR_SET)
+            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+            .with_service_name(MAP_SERVICE_NAME)
+            .with_service_name(HEALTH_SERVICE_NAME)
+            .with_service_name(REFLECTION_SERVICE_NAME)
+            .with_service_name(REFLECTION_V1ALPHA_SERVICE_NAME)
+    };
+    let reflection = reflection_builder()
         .build_v1()
+        .map_err(|e| std::io::Error::other(e.to_string()))?;
+    let reflection_v1alpha = reflection_builder()
+        .build_v1alpha()
         .map_err(|e| std::io::Error::other(e.to_string()))?;
 
     let mut builder = Server::builder();
@@ -151,6 +162,7 @@ pub async fn serve<S: Store>(
     let router = builder
         .add_service(health_service)
         .add_service(reflection)
+        .add_service(reflection_v1alpha)
         .add_service(map_service);
     let cut_connections = CancellationToken::new();
     let incoming = connection::incoming(listener, cut_connections.clone());

@@ -447,18 +447,51 @@ async fn health_and_reflection_describe_the_server_without_a_token() {
     server.stop().await;
 }
 
+/// Every service name that reflection's older version (v1alpha) lists.
+async fn reflected_services_v1alpha(channel: Channel) -> Vec<String> {
+    use tonic_reflection::pb::v1alpha::ServerReflectionRequest;
+    use tonic_reflection::pb::v1alpha::server_reflection_client::ServerReflectionClient;
+    use tonic_reflection::pb::v1alpha::server_reflection_request::MessageRequest;
+    use tonic_reflection::pb::v1alpha::server_reflection_response::MessageResponse;
+    let mut client = ServerReflectionClient::new(channel);
+    let request = ServerReflectionRequest {
+        host: String::new(),
+        message_request: Some(MessageRequest::ListServices(String::new())),
+    };
+    let mut replies = bounded(
+        "reflection v1alpha",
+        client.server_reflection_info(tokio_stream::iter(vec![request])),
+    )
+    .await
+    .unwrap()
+    .into_inner();
+    let reply = bounded("reflection v1alpha reply", replies.message())
+        .await
+        .unwrap()
+        .expect("a reflection reply");
+    match reply.message_response {
+        Some(MessageResponse::ListServicesResponse(list)) => {
+            let mut names: Vec<String> = list.service.into_iter().map(|s| s.name).collect();
+            names.sort();
+            names
+        }
+        other => panic!("unexpected reflection reply {other:?}"),
+    }
+}
+
 #[tokio::test]
-async fn reflection_lists_exactly_the_served_services() {
+async fn reflection_lists_exactly_the_served_services_in_both_versions() {
     let server = TestServer::start().await;
+    let served = [
+        MAP_SERVICE_NAME,
+        "grpc.health.v1.Health",
+        "grpc.reflection.v1.ServerReflection",
+        "grpc.reflection.v1alpha.ServerReflection",
+    ];
     let services = reflected_services(plain_channel(&server).await).await;
-    assert_eq!(
-        services,
-        [
-            MAP_SERVICE_NAME,
-            "grpc.health.v1.Health",
-            "grpc.reflection.v1.ServerReflection"
-        ]
-    );
+    assert_eq!(services, served);
+    let services = reflected_services_v1alpha(plain_channel(&server).await).await;
+    assert_eq!(services, served);
     server.stop().await;
 }
 
