@@ -2,10 +2,11 @@
 
 use anyhow::{Context, Result};
 use clap::Args;
-use deog_server::{Limits, ServerConfig, SledConfig, SledStore, TlsIdentity};
+use deog_server::{ConnectionLimits, Limits, ServerConfig, SledConfig, SledStore, TlsIdentity};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::Arc;
+use std::time::Duration;
 
 /// Options of `deog server`.
 #[derive(Debug, Args)]
@@ -31,10 +32,36 @@ pub struct ServerArgs {
     /// Largest request message accepted, bytes.
     #[arg(long, env = "DEOG_MAX_MESSAGE_BYTES", default_value_t = Limits::default().max_message_bytes)]
     max_message_bytes: usize,
+    /// Connections held at once; one more is closed as soon as it is
+    /// accepted.
+    #[arg(long, env = "DEOG_MAX_CONNECTIONS", default_value_t = ConnectionLimits::default().max_connections)]
+    max_connections: usize,
+    /// Seconds a new connection has to start speaking (HTTP/2 or TLS)
+    /// before it is closed.
+    #[arg(long, env = "DEOG_HANDSHAKE_TIMEOUT_S", default_value_t = ConnectionLimits::default().handshake_timeout.as_secs_f64())]
+    handshake_timeout_s: f64,
+    /// Calls open at once on one connection; a client asking more waits.
+    #[arg(long, env = "DEOG_MAX_STREAMS_PER_CONNECTION", default_value_t = ServerConfig::default().max_streams_per_connection)]
+    max_streams_per_connection: u32,
 }
 
 /// Runs the server until ctrl-c or SIGTERM.
 pub fn run(args: ServerArgs) -> Result<()> {
+    anyhow::ensure!(
+        args.max_connections >= 1,
+        "--max-connections must be at least 1, got {}",
+        args.max_connections
+    );
+    anyhow::ensure!(
+        args.handshake_timeout_s.is_finite() && (0.1..=3600.0).contains(&args.handshake_timeout_s),
+        "--handshake-timeout-s must be within 0.1 and 3600 seconds, got {}",
+        args.handshake_timeout_s
+    );
+    anyhow::ensure!(
+        args.max_streams_per_connection >= 1,
+        "--max-streams-per-connection must be at least 1, got {}",
+        args.max_streams_per_connection
+    );
     let token = args
         .token_file
         .as_ref()
@@ -60,6 +87,11 @@ pub fn run(args: ServerArgs) -> Result<()> {
         },
         token,
         tls,
+        connections: ConnectionLimits {
+            max_connections: args.max_connections,
+            handshake_timeout: Duration::from_secs_f64(args.handshake_timeout_s),
+        },
+        max_streams_per_connection: args.max_streams_per_connection,
         ..ServerConfig::default()
     };
     let store = SledStore::open(&SledConfig {

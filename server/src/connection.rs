@@ -1,32 +1,77 @@
-//! Accepted connections that the server can cut when a shutdown's grace
-//! period runs out.
+//! The connections the server accepts: bounded in number, given a time to
+//! start speaking, paced when the process runs out of file descriptors,
+//! and cut when a shutdown's grace period runs out.
 //!
 //! tonic stops accepting at shutdown but lets open connections run until
 //! their clients leave; a client holding a stream open would keep the
 //! server's tasks, and so the store, alive after `serve` returns. Each
 //! connection here fails its reads and writes once `cut` is cancelled, which
-//! makes hyper drop it.
+//! makes hyper drop it. hyper waits for a connection's first bytes for ever,
+//! so a connection that sends none within the handshake timeout fails the
+//! same way; and an accept loop that retried at once on EMFILE would spin a
+//! core while every new client times out, so it waits, longer each time.
 
 use std::io;
 use std::pin::Pin;
+use std::sync::Arc;
 use std::task::{Context, Poll};
+use std::time::{Duration, Instant};
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::{OwnedSemaphorePermit, Semaphore, mpsc};
+use tokio::time::Sleep;
 use tokio_stream::Stream;
+use tokio_stream::wrappers::ReceiverStream;
 use tokio_util::sync::{CancellationToken, WaitForCancellationFutureOwned};
 use tonic::transport::server::{Connected, TcpConnectInfo};
 
+/// First and longest wait after an accept failed for want of resources.
+const ACCEPT_BACKOFF: (Duration, Duration) = (Duration::from_millis(50), Duration::from_secs(1));
+
+/// How many connections the server holds and how long a new one may stay
+/// silent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ConnectionLimits {
+    /// Connections held at once; one more is closed as soon as it is
+    /// accepted.
+    pub max_connections: usize,
+    /// Time a new connection has to send its first bytes (the HTTP/2
+    /// preface, or a TLS hello) before it is closed.
+    pub handshake_timeout: Duration,
+}
+
+impl Default for ConnectionLimits {
+    fn default() -> Self {
+        Self {
+            max_connections: 1024,
+            handshake_timeout: Duration::from_secs(10),
+        }
+    }
+}
+
 /// A TCP connection that errors once its token is cancelled.
+/// It also errors if its first bytes do not come within the handshake
+/// timeout, and holds one of the server's connection permits.
 pub struct CuttableStream {
     inner: TcpStream,
     cut: Pin<Box<WaitForCancellationFutureOwned>>,
+    /// Until the first bytes are read: when the connection gives up on them.
+    handshake: Option<Pin<Box<Sleep>>>,
+    _permit: OwnedSemaphorePermit,
 }
 
 impl CuttableStream {
-    fn new(inner: TcpStream, cut: &CancellationToken) -> Self {
+    fn new(
+        inner: TcpStream,
+        cut: &CancellationToken,
+        handshake_timeout: Duration,
+        permit: OwnedSemaphorePermit,
+    ) -> Self {
         Self {
             inner,
             cut: Box::pin(cut.clone().cancelled_owned()),
+            handshake: Some(Box::pin(tokio::time::sleep(handshake_timeout))),
+            _permit: permit,
         }
     }
 
@@ -53,7 +98,20 @@ impl AsyncRead for CuttableStream {
         if let Poll::Ready(error) = this.poll_cut(cx) {
             return Poll::Ready(Err(error));
         }
-        Pin::new(&mut this.inner).poll_read(cx, buf)
+        if let Some(handshake) = &mut this.handshake
+            && handshake.as_mut().poll(cx).is_ready()
+        {
+            return Poll::Ready(Err(io::Error::new(
+                io::ErrorKind::TimedOut,
+                "the connection sent nothing within the handshake timeout",
+            )));
+        }
+        let filled = buf.filled().len();
+        let read = Pin::new(&mut this.inner).poll_read(cx, buf);
+        if buf.filled().len() > filled {
+            this.handshake = None;
+        }
+        read
     }
 }
 
@@ -91,17 +149,77 @@ impl Connected for CuttableStream {
     }
 }
 
-/// The listener's connections, each cut when `cut` is cancelled.
+/// The listener's connections, each cut when `cut` is cancelled, at most
+/// `limits.max_connections` at once. Accepting runs in a task of its own
+/// that ends, letting the listener go, once the server drops the stream.
 pub fn incoming(
     listener: TcpListener,
     cut: CancellationToken,
+    limits: ConnectionLimits,
 ) -> impl Stream<Item = io::Result<CuttableStream>> {
-    let accepted = tokio_stream::wrappers::TcpListenerStream::new(listener);
-    tokio_stream::StreamExt::map(accepted, move |stream| {
-        stream.map(|s| {
-            // Small messages (acks) should not wait for Nagle.
-            let _ = s.set_nodelay(true);
-            CuttableStream::new(s, &cut)
-        })
-    })
+    let (tx, rx) = mpsc::channel(16);
+    let permits = Arc::new(Semaphore::new(limits.max_connections));
+    tokio::spawn(async move {
+        let mut backoff = ACCEPT_BACKOFF.0;
+        let mut last_refusal_logged: Option<Instant> = None;
+        loop {
+            let accepted = tokio::select! {
+                () = tx.closed() => break,
+                accepted = listener.accept() => accepted,
+            };
+            match accepted {
+                Ok((stream, peer)) => {
+                    backoff = ACCEPT_BACKOFF.0;
+                    let Ok(permit) = permits.clone().try_acquire_owned() else {
+                        // Logged at most once a second: a flood would
+                        // otherwise fill the log as fast as it connects.
+                        if last_refusal_logged.is_none_or(|t| t.elapsed() >= Duration::from_secs(1))
+                        {
+                            tracing::warn!(
+                                %peer,
+                                max_connections = limits.max_connections,
+                                "connection closed: the server holds as many connections as --max-connections allows"
+                            );
+                            last_refusal_logged = Some(Instant::now());
+                        }
+                        drop(stream);
+                        continue;
+                    };
+                    // Small messages (acks) should not wait for Nagle.
+                    let _ = stream.set_nodelay(true);
+                    let stream =
+                        CuttableStream::new(stream, &cut, limits.handshake_timeout, permit);
+                    if tx.send(Ok(stream)).await.is_err() {
+                        break;
+                    }
+                }
+                Err(error) if out_of_resources(&error) => {
+                    tracing::warn!(
+                        %error,
+                        wait_ms = backoff.as_millis() as u64,
+                        "cannot accept connections: the process is out of file descriptors or memory; waiting"
+                    );
+                    tokio::time::sleep(backoff).await;
+                    backoff = (backoff * 2).min(ACCEPT_BACKOFF.1);
+                }
+                // A connection that failed between the peer's connect and
+                // the accept: nothing to do but take the next.
+                Err(error) => tracing::debug!(%error, "accept failed"),
+            }
+        }
+    });
+    ReceiverStream::new(rx)
+}
+
+/// Whether an accept failed for want of resources (EMFILE, ENFILE,
+/// ENOBUFS, ENOMEM), which retrying at once cannot cure.
+fn out_of_resources(error: &io::Error) -> bool {
+    const EMFILE: i32 = 24;
+    const ENFILE: i32 = 23;
+    const ENOBUFS: i32 = 105;
+    const ENOMEM: i32 = 12;
+    matches!(
+        error.raw_os_error(),
+        Some(EMFILE | ENFILE | ENOBUFS | ENOMEM)
+    ) || error.kind() == io::ErrorKind::OutOfMemory
 }

@@ -30,6 +30,7 @@ pub mod service;
 pub mod store;
 pub mod writer;
 
+pub use connection::ConnectionLimits;
 pub use convert::Limits;
 pub use error::StoreError;
 pub use rigs::RigRegistry;

@@ -1,7 +1,7 @@
 //! Running the map server on a listener until a shutdown future resolves.
 
 use crate::auth::BearerAuth;
-use crate::connection;
+use crate::connection::{self, ConnectionLimits};
 use crate::convert::Limits;
 use crate::events::Events;
 use crate::rigs::RigRegistry;
@@ -23,6 +23,11 @@ const HEALTH_SERVICE_NAME: &str = "grpc.health.v1.Health";
 const REFLECTION_SERVICE_NAME: &str = "grpc.reflection.v1.ServerReflection";
 /// The reflection service's older name, which many tools still ask first.
 const REFLECTION_V1ALPHA_SERVICE_NAME: &str = "grpc.reflection.v1alpha.ServerReflection";
+
+/// Time between keepalive pings on a connection, and how long one may go
+/// unanswered before the connection is dropped.
+const KEEPALIVE_INTERVAL: Duration = Duration::from_secs(30);
+const KEEPALIVE_TIMEOUT: Duration = Duration::from_secs(20);
 
 /// A certificate chain and private key, PEM.
 #[derive(Clone)]
@@ -57,6 +62,12 @@ pub struct ServerConfig {
     pub write_queue: usize,
     /// How long in-flight calls may take to finish after shutdown begins.
     pub shutdown_grace: Duration,
+    /// How many connections are held, and how long a new one may stay
+    /// silent.
+    pub connections: ConnectionLimits,
+    /// Streams (calls) open at once on one connection; a client asking
+    /// more waits for one to end (HTTP/2's own limit, announced to it).
+    pub max_streams_per_connection: u32,
 }
 
 impl Default for ServerConfig {
@@ -69,6 +80,8 @@ impl Default for ServerConfig {
             event_buffer: 1024,
             write_queue: 64,
             shutdown_grace: Duration::from_secs(5),
+            connections: ConnectionLimits::default(),
+            max_streams_per_connection: 256,
         }
     }
 }
@@ -150,7 +163,12 @@ pub async fn serve<S: Store>(
         .build_v1alpha()
         .map_err(|e| std::io::Error::other(e.to_string()))?;
 
-    let mut builder = Server::builder();
+    // Keepalive pings find peers that vanished without closing (a robot
+    // that lost power holds its connection otherwise).
+    let mut builder = Server::builder()
+        .max_concurrent_streams(Some(config.max_streams_per_connection))
+        .http2_keepalive_interval(Some(KEEPALIVE_INTERVAL))
+        .http2_keepalive_timeout(Some(KEEPALIVE_TIMEOUT));
     if let Some(tls) = &config.tls {
         builder = builder
             .tls_config(
@@ -165,7 +183,7 @@ pub async fn serve<S: Store>(
         .add_service(reflection_v1alpha)
         .add_service(map_service);
     let cut_connections = CancellationToken::new();
-    let incoming = connection::incoming(listener, cut_connections.clone());
+    let incoming = connection::incoming(listener, cut_connections.clone(), config.connections);
     let serving = router.serve_with_incoming_shutdown(incoming, async {
         let _ = stop_rx.await;
     });

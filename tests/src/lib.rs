@@ -142,8 +142,35 @@ impl ServerProcess {
         Self::spawn(args, addr, "deog.v1.RobotService").await
     }
 
+    /// As [`ServerProcess::start`], with the process allowed at most
+    /// `open_files` file descriptors (`ulimit -n`).
+    pub async fn start_with_open_files(data: &Path, extra: &[&str], open_files: u32) -> Self {
+        let addr = free_loopback_addr();
+        let mut args: Vec<OsString> = vec![
+            "-c".into(),
+            format!("ulimit -n {open_files} && exec \"$0\" \"$@\"").into(),
+            deog_binary().into(),
+            "server".into(),
+            "--listen".into(),
+            addr.to_string().into(),
+            "--data".into(),
+            data.into(),
+        ];
+        args.extend(extra.iter().map(OsString::from));
+        Self::spawn_program("sh".as_ref(), args, addr, "deog.v1.MapService").await
+    }
+
     async fn spawn(args: Vec<OsString>, addr: SocketAddr, service: &'static str) -> Self {
-        let child = Command::new(deog_binary())
+        Self::spawn_program(&deog_binary(), args, addr, service).await
+    }
+
+    async fn spawn_program(
+        program: &Path,
+        args: Vec<OsString>,
+        addr: SocketAddr,
+        service: &'static str,
+    ) -> Self {
+        let child = Command::new(program)
             .args(&args)
             // Quiet unless a test run asks for more.
             .env(

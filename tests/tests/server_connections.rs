@@ -1,0 +1,156 @@
+//! The map server against clients that connect and say nothing, and more
+//! of them than it can hold, through the real `deog server` process on
+//! 127.0.0.1: silent connections are closed after the handshake timeout,
+//! connections over `--max-connections` are closed at once, and a process
+//! out of file descriptors waits between accepts rather than spinning,
+//! serving again once descriptors are free.
+
+use std::io::Read as _;
+use std::net::TcpStream;
+use std::time::{Duration, Instant};
+
+use deog_robot_client::{ClientConfig, MapClient};
+use deog_tests::ServerProcess;
+
+/// Whether the server closed `stream` (end of file or a reset) within
+/// `within`, reading past what it sends first (its HTTP/2 settings); false
+/// if it was still open then.
+fn closed_within(stream: &mut TcpStream, within: Duration) -> bool {
+    let deadline = Instant::now() + within;
+    let mut buffer = [0u8; 256];
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return false;
+        }
+        stream.set_read_timeout(Some(left)).expect("read timeout");
+        match stream.read(&mut buffer) {
+            Ok(0) => return true,
+            Ok(_) => continue,
+            Err(e) => {
+                return !matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                );
+            }
+        }
+    }
+}
+
+/// Whether a real client gets an answer from the server within `within`.
+async fn answers_within(server: &ServerProcess, within: Duration) -> bool {
+    let attempt = async {
+        let client = MapClient::connect(ClientConfig::new(server.addr.to_string())).await?;
+        client.robots().await
+    };
+    matches!(tokio::time::timeout(within, attempt).await, Ok(Ok(_)))
+}
+
+/// CPU seconds (user and system) the process has used.
+fn cpu_seconds(pid: u32) -> f64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).expect("/proc stat");
+    // The fields after the command's closing parenthesis; utime and stime
+    // are the 14th and 15th of the whole line, in clock ticks (100 a second).
+    let fields: Vec<&str> = stat
+        .rsplit_once(')')
+        .expect("stat format")
+        .1
+        .split_whitespace()
+        .collect();
+    let ticks: f64 = fields[11].parse::<f64>().unwrap() + fields[12].parse::<f64>().unwrap();
+    ticks / 100.0
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_silent_connection_is_closed_after_the_handshake_timeout() {
+    let data = tempfile::tempdir().expect("temp dir");
+    let server = ServerProcess::start(data.path(), &["--handshake-timeout-s", "0.5"]).await;
+    let mut silent = TcpStream::connect(server.addr).expect("connect");
+    let started = Instant::now();
+    let closed =
+        tokio::task::block_in_place(|| closed_within(&mut silent, Duration::from_secs(10)));
+    assert!(
+        closed,
+        "a connection that sent nothing was still open after 10 s"
+    );
+    assert!(
+        started.elapsed() >= Duration::from_millis(400),
+        "closed after {:?}, before its timeout",
+        started.elapsed()
+    );
+    // A client that speaks is served as before.
+    assert!(answers_within(&server, Duration::from_secs(10)).await);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn connections_over_the_limit_are_closed_and_the_server_serves_again_once_they_go() {
+    let data = tempfile::tempdir().expect("temp dir");
+    let server = ServerProcess::start(
+        data.path(),
+        &["--max-connections", "3", "--handshake-timeout-s", "60"],
+    )
+    .await;
+    // The readiness check's connection must be gone before the count.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let held: Vec<TcpStream> = (0..3)
+        .map(|_| TcpStream::connect(server.addr).expect("connect"))
+        .collect();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let mut over = TcpStream::connect(server.addr).expect("the kernel accepts");
+    let closed = tokio::task::block_in_place(|| closed_within(&mut over, Duration::from_secs(5)));
+    assert!(
+        closed,
+        "a fourth connection was held beyond --max-connections 3"
+    );
+    assert!(
+        !answers_within(&server, Duration::from_secs(2)).await,
+        "a client was served with every connection taken"
+    );
+    drop(held);
+    let mut served = false;
+    for _ in 0..20 {
+        if answers_within(&server, Duration::from_secs(2)).await {
+            served = true;
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    assert!(
+        served,
+        "the server did not serve again once connections closed"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn out_of_file_descriptors_the_server_waits_instead_of_spinning() {
+    let data = tempfile::tempdir().expect("temp dir");
+    let server =
+        ServerProcess::start_with_open_files(data.path(), &["--handshake-timeout-s", "60"], 64)
+            .await;
+    // More connections than the process has descriptors for: the ones it
+    // cannot accept wait in the kernel's backlog.
+    let held: Vec<TcpStream> = (0..80)
+        .map(|_| TcpStream::connect(server.addr).expect("connect"))
+        .collect();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let before = cpu_seconds(server.pid());
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let used = cpu_seconds(server.pid()) - before;
+    assert!(
+        used < 0.5,
+        "the server used {used:.2} CPU seconds in 2 s while out of descriptors"
+    );
+    drop(held);
+    let mut served = false;
+    for _ in 0..30 {
+        if answers_within(&server, Duration::from_secs(2)).await {
+            served = true;
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    assert!(
+        served,
+        "the server did not serve again once descriptors were free"
+    );
+}
