@@ -18,10 +18,6 @@ use tonic::transport::{Certificate, Channel, ClientTlsConfig, Endpoint};
 use tonic_health::pb::HealthCheckRequest;
 use tonic_health::pb::health_check_response::ServingStatus;
 use tonic_health::pb::health_client::HealthClient;
-use tonic_reflection::pb::v1::ServerReflectionRequest;
-use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;
-use tonic_reflection::pb::v1::server_reflection_request::MessageRequest;
-use tonic_reflection::pb::v1::server_reflection_response::MessageResponse;
 
 const TOKEN: &str = "s3cret";
 
@@ -386,32 +382,39 @@ async fn tls_and_token_together_need_both() {
     server.stop().await;
 }
 
-/// Every service name that reflection lists.
-async fn reflected_services(channel: Channel) -> Vec<String> {
-    let mut client = ServerReflectionClient::new(channel);
-    let request = ServerReflectionRequest {
-        host: String::new(),
-        message_request: Some(MessageRequest::ListServices(String::new())),
-    };
-    let mut replies = bounded(
-        "reflection",
-        client.server_reflection_info(tokio_stream::iter(vec![request])),
-    )
-    .await
-    .unwrap()
-    .into_inner();
-    let reply = bounded("reflection reply", replies.message())
+/// Every service name that reflection version `$version` (a module of
+/// `tonic_reflection::pb`) lists on `$channel`, sorted.
+macro_rules! reflected_services {
+    ($version:ident, $channel:expr) => {{
+        use tonic_reflection::pb::$version::ServerReflectionRequest;
+        use tonic_reflection::pb::$version::server_reflection_client::ServerReflectionClient;
+        use tonic_reflection::pb::$version::server_reflection_request::MessageRequest;
+        use tonic_reflection::pb::$version::server_reflection_response::MessageResponse;
+        let mut client = ServerReflectionClient::new($channel);
+        let request = ServerReflectionRequest {
+            host: String::new(),
+            message_request: Some(MessageRequest::ListServices(String::new())),
+        };
+        let mut replies = bounded(
+            "reflection",
+            client.server_reflection_info(tokio_stream::iter(vec![request])),
+        )
         .await
         .unwrap()
-        .expect("a reflection reply");
-    match reply.message_response {
-        Some(MessageResponse::ListServicesResponse(list)) => {
-            let mut names: Vec<String> = list.service.into_iter().map(|s| s.name).collect();
-            names.sort();
-            names
+        .into_inner();
+        let reply = bounded("reflection reply", replies.message())
+            .await
+            .unwrap()
+            .expect("a reflection reply");
+        match reply.message_response {
+            Some(MessageResponse::ListServicesResponse(list)) => {
+                let mut names: Vec<String> = list.service.into_iter().map(|s| s.name).collect();
+                names.sort();
+                names
+            }
+            other => panic!("unexpected reflection reply {other:?}"),
         }
-        other => panic!("unexpected reflection reply {other:?}"),
-    }
+    }};
 }
 
 #[tokio::test]
@@ -437,7 +440,7 @@ async fn health_and_reflection_describe_the_server_without_a_token() {
         .unwrap_err();
     assert_eq!(unknown.code(), Code::NotFound);
 
-    let services = reflected_services(channel).await;
+    let services = reflected_services!(v1, channel);
     for name in [MAP_SERVICE_NAME, "grpc.reflection.v1.ServerReflection"] {
         assert!(
             services.iter().any(|s| s == name),
@@ -445,38 +448,6 @@ async fn health_and_reflection_describe_the_server_without_a_token() {
         );
     }
     server.stop().await;
-}
-
-/// Every service name that reflection's older version (v1alpha) lists.
-async fn reflected_services_v1alpha(channel: Channel) -> Vec<String> {
-    use tonic_reflection::pb::v1alpha::ServerReflectionRequest;
-    use tonic_reflection::pb::v1alpha::server_reflection_client::ServerReflectionClient;
-    use tonic_reflection::pb::v1alpha::server_reflection_request::MessageRequest;
-    use tonic_reflection::pb::v1alpha::server_reflection_response::MessageResponse;
-    let mut client = ServerReflectionClient::new(channel);
-    let request = ServerReflectionRequest {
-        host: String::new(),
-        message_request: Some(MessageRequest::ListServices(String::new())),
-    };
-    let mut replies = bounded(
-        "reflection v1alpha",
-        client.server_reflection_info(tokio_stream::iter(vec![request])),
-    )
-    .await
-    .unwrap()
-    .into_inner();
-    let reply = bounded("reflection v1alpha reply", replies.message())
-        .await
-        .unwrap()
-        .expect("a reflection reply");
-    match reply.message_response {
-        Some(MessageResponse::ListServicesResponse(list)) => {
-            let mut names: Vec<String> = list.service.into_iter().map(|s| s.name).collect();
-            names.sort();
-            names
-        }
-        other => panic!("unexpected reflection reply {other:?}"),
-    }
 }
 
 #[tokio::test]
@@ -488,9 +459,9 @@ async fn reflection_lists_exactly_the_served_services_in_both_versions() {
         "grpc.reflection.v1.ServerReflection",
         "grpc.reflection.v1alpha.ServerReflection",
     ];
-    let services = reflected_services(plain_channel(&server).await).await;
+    let services = reflected_services!(v1, plain_channel(&server).await);
     assert_eq!(services, served);
-    let services = reflected_services_v1alpha(plain_channel(&server).await).await;
+    let services = reflected_services!(v1alpha, plain_channel(&server).await);
     assert_eq!(services, served);
     server.stop().await;
 }

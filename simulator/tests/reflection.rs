@@ -22,64 +22,39 @@ async fn bounded<T>(what: &str, step: impl std::future::Future<Output = T>) -> T
         .unwrap_or_else(|_| panic!("{what} took over 10 s"))
 }
 
-async fn listed_v1(channel: Channel) -> Vec<String> {
-    use tonic_reflection::pb::v1::ServerReflectionRequest;
-    use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;
-    use tonic_reflection::pb::v1::server_reflection_request::MessageRequest;
-    use tonic_reflection::pb::v1::server_reflection_response::MessageResponse;
-    let request = ServerReflectionRequest {
-        host: String::new(),
-        message_request: Some(MessageRequest::ListServices(String::new())),
-    };
-    let mut replies = bounded(
-        "reflection v1",
-        ServerReflectionClient::new(channel).server_reflection_info(tokio_stream::iter([request])),
-    )
-    .await
-    .expect("reflection v1 answers")
-    .into_inner();
-    let reply = bounded("reflection v1 reply", replies.message())
+/// Every service name that reflection version `$version` (a module of
+/// `tonic_reflection::pb`) lists on `channel`, sorted.
+macro_rules! listed {
+    ($version:ident, $channel:expr) => {{
+        use tonic_reflection::pb::$version::ServerReflectionRequest;
+        use tonic_reflection::pb::$version::server_reflection_client::ServerReflectionClient;
+        use tonic_reflection::pb::$version::server_reflection_request::MessageRequest;
+        use tonic_reflection::pb::$version::server_reflection_response::MessageResponse;
+        let request = ServerReflectionRequest {
+            host: String::new(),
+            message_request: Some(MessageRequest::ListServices(String::new())),
+        };
+        let mut replies = bounded(
+            "reflection",
+            ServerReflectionClient::new($channel)
+                .server_reflection_info(tokio_stream::iter([request])),
+        )
         .await
-        .expect("a reply")
-        .expect("a message");
-    match reply.message_response {
-        Some(MessageResponse::ListServicesResponse(list)) => {
-            let mut names: Vec<String> = list.service.into_iter().map(|s| s.name).collect();
-            names.sort();
-            names
+        .expect("reflection answers")
+        .into_inner();
+        let reply = bounded("reflection reply", replies.message())
+            .await
+            .expect("a reply")
+            .expect("a message");
+        match reply.message_response {
+            Some(MessageResponse::ListServicesResponse(list)) => {
+                let mut names: Vec<String> = list.service.into_iter().map(|s| s.name).collect();
+                names.sort();
+                names
+            }
+            other => panic!("unexpected reflection reply {other:?}"),
         }
-        other => panic!("unexpected reflection reply {other:?}"),
-    }
-}
-
-async fn listed_v1alpha(channel: Channel) -> Vec<String> {
-    use tonic_reflection::pb::v1alpha::ServerReflectionRequest;
-    use tonic_reflection::pb::v1alpha::server_reflection_client::ServerReflectionClient;
-    use tonic_reflection::pb::v1alpha::server_reflection_request::MessageRequest;
-    use tonic_reflection::pb::v1alpha::server_reflection_response::MessageResponse;
-    let request = ServerReflectionRequest {
-        host: String::new(),
-        message_request: Some(MessageRequest::ListServices(String::new())),
-    };
-    let mut replies = bounded(
-        "reflection v1alpha",
-        ServerReflectionClient::new(channel).server_reflection_info(tokio_stream::iter([request])),
-    )
-    .await
-    .expect("reflection v1alpha answers")
-    .into_inner();
-    let reply = bounded("reflection v1alpha reply", replies.message())
-        .await
-        .expect("a reply")
-        .expect("a message");
-    match reply.message_response {
-        Some(MessageResponse::ListServicesResponse(list)) => {
-            let mut names: Vec<String> = list.service.into_iter().map(|s| s.name).collect();
-            names.sort();
-            names
-        }
-        other => panic!("unexpected reflection reply {other:?}"),
-    }
+    }};
 }
 
 #[tokio::test]
@@ -115,8 +90,8 @@ async fn both_reflection_versions_list_exactly_the_served_services() {
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     let channel = channel.expect("simulator reachable");
-    assert_eq!(listed_v1(channel.clone()).await, SERVED);
-    assert_eq!(listed_v1alpha(channel).await, SERVED);
+    assert_eq!(listed!(v1, channel.clone()), SERVED);
+    assert_eq!(listed!(v1alpha, channel), SERVED);
     let _ = stop.send(());
     bounded("the simulator's stop", task)
         .await
