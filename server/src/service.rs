@@ -385,7 +385,7 @@ impl<S: Store> MapService for MapServer<S> {
         let map = convert::map_name("map", &request.map)?;
         let client = convert::client_id("client_id", &request.client_id)?;
         self.record(&map)?;
-        let last_sequence = self.store.cursor(&map, &client)?;
+        let last_sequence = self.store.cursor(&map, &client)?.last;
         Ok(Response::new(pb::UpdateCursor { last_sequence }))
     }
 

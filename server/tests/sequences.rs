@@ -156,3 +156,97 @@ async fn a_stored_frame_numbered_u64_max_ends_the_replay_without_wrapping() {
     let more = tokio::time::timeout(Duration::from_millis(300), replay.message()).await;
     assert!(more.is_err(), "no replay after u64::MAX: {more:?}");
 }
+
+/// Sends one single-tile batch (tile (x, 0)) on its own stream.
+async fn send_one(
+    client: &mut pb::map_service_client::MapServiceClient<tonic::transport::Channel>,
+    sequence: u64,
+    x: i32,
+) -> Result<pb::UpdateAck, tonic::Status> {
+    let (acks, error) = send_batches(
+        client,
+        vec![batch("m", "c", sequence, vec![dense_delta(x, 0, &[5; 64])])],
+    )
+    .await;
+    match error {
+        Some(status) => Err(status),
+        None => Ok(acks.into_iter().next().expect("one ack")),
+    }
+}
+
+async fn cursor(
+    client: &mut pb::map_service_client::MapServiceClient<tonic::transport::Channel>,
+) -> u64 {
+    client
+        .get_update_cursor(pb::UpdateCursorRequest {
+            map: "m".into(),
+            client_id: "c".into(),
+        })
+        .await
+        .expect("cursor")
+        .into_inner()
+        .last_sequence
+}
+
+#[tokio::test]
+async fn a_batch_out_of_order_is_refused_not_taken_for_a_resend() {
+    let server = TestServer::start().await;
+    let mut client = server.client().await;
+    create_map(&mut client, "m", 8).await;
+    // Gaps are allowed: a client may number batches by its own inputs.
+    for (sequence, x) in [(1, 1), (5, 5), (9, 9)] {
+        let ack = send_one(&mut client, sequence, x).await.expect("applied");
+        assert!(ack.applied, "{ack:?}");
+    }
+    let before = common::all_tiles(&mut client, "m").await;
+
+    let resend = send_one(&mut client, 5, 5).await.expect("a resend");
+    assert!(!resend.applied, "{resend:?}");
+
+    let status = send_one(&mut client, 7, 7)
+        .await
+        .expect_err("7 was never applied and is below 9");
+    assert_eq!(status.code(), Code::FailedPrecondition, "{status:?}");
+    assert!(
+        status.message().contains(
+            "batch sequence 7 of client \"c\" on map \"m\" is below the last applied (9)"
+        ) && status.message().contains("never applied"),
+        "{:?}",
+        status.message()
+    );
+    assert_eq!(common::all_tiles(&mut client, "m").await, before);
+    assert_eq!(cursor(&mut client).await, 9);
+
+    let ack = send_one(&mut client, 10, 10).await.expect("applied");
+    assert!(ack.applied, "the client goes on after a refusal");
+}
+
+#[tokio::test]
+async fn applied_sequences_are_kept_across_a_restart() {
+    let server = TestServer::start().await;
+    let mut client = server.client().await;
+    create_map(&mut client, "m", 8).await;
+    for sequence in [1, 3] {
+        assert!(
+            send_one(&mut client, sequence, 0)
+                .await
+                .expect("ack")
+                .applied
+        );
+    }
+    let dir = server.stop().await.expect("temp dir");
+
+    let server = TestServer::start_at(
+        dir.path().join("store"),
+        deog_server::ServerConfig::default(),
+    )
+    .await;
+    let mut client = server.client().await;
+    let resend = send_one(&mut client, 3, 0).await.expect("a resend");
+    assert!(!resend.applied);
+    let status = send_one(&mut client, 2, 0)
+        .await
+        .expect_err("2 was never applied");
+    assert_eq!(status.code(), Code::FailedPrecondition, "{status:?}");
+    assert_eq!(cursor(&mut client).await, 3);
+}
