@@ -250,3 +250,35 @@ async fn applied_sequences_are_kept_across_a_restart() {
     assert_eq!(status.code(), Code::FailedPrecondition, "{status:?}");
     assert_eq!(cursor(&mut client).await, 3);
 }
+
+#[tokio::test]
+async fn a_pose_for_frame_u64_max_is_refused() {
+    let server = TestServer::start().await;
+    let mut client = server.client().await;
+    create_map(&mut client, "m", 8).await;
+    let estimate = |frame_sequence| pb::PoseEstimate {
+        robot: "r".into(),
+        map: "m".into(),
+        frame_sequence,
+        time_s: 1.0,
+        pose: Some(pb::Pose2 {
+            x: 1.0,
+            y: 2.0,
+            theta: 0.3,
+        }),
+        covariance: Vec::new(),
+        particle_count: 10,
+        converged: false,
+        lost_score: 0.0,
+    };
+    let status = client
+        .publish_pose(estimate(u64::MAX))
+        .await
+        .expect_err("no frame carries u64::MAX");
+    assert_eq!(status.code(), Code::InvalidArgument, "{status:?}");
+    assert!(status.message().contains("frame_sequence"), "{status:?}");
+    client
+        .publish_pose(estimate(u64::MAX - 1))
+        .await
+        .expect("the highest frame sequence");
+}

@@ -1,8 +1,9 @@
 //! The embedded default store, on sled.
 //!
 //! Layout: one sled tree per map, `map/<name>`, holding the record under `m`,
-//! client cursors under `c<client>` (encoded in `cursor.rs`) and tiles under `t<key>` (the key's 8
-//! sortable bytes, so a range of x is a range of keys). Frames live in the
+//! client cursors under `c<client>` (encoded as `cursor.rs` says) and tiles
+//! under `t<key>` (the key's 8 sortable bytes, so a range of x is a range of
+//! keys). Frames live in the
 //! tree `frames` under `f<robot>\0<sequence>` with a summary per robot under
 //! `r<robot>`; poses in `poses` under `<robot>\0<sequence>`; rigs in `rigs`
 //! under their name. Names never hold
