@@ -337,6 +337,12 @@ impl MapClient {
     ) -> Result<UpdateSender, ClientError> {
         let info = self.map_info(map).await?;
         let last = self.update_cursor(map, client_id).await?;
-        UpdateSender::start(self.clone(), info, client_id.to_string(), last + 1, config)
+        let first = last.checked_add(1).ok_or_else(|| {
+            ClientError::Config(format!(
+                "client {client_id:?} on map {map:?} has applied batch sequence {last}, \
+                 the last there is: use another client id"
+            ))
+        })?;
+        UpdateSender::start(self.clone(), info, client_id.to_string(), first, config)
     }
 }

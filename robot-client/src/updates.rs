@@ -157,10 +157,17 @@ impl UpdateSender {
     /// [`UpdateSender::next_sequence`]; later batches follow it. A client
     /// whose batches stand for numbered inputs (the cartographer: a batch
     /// per run of frames, numbered by its last frame) can then resume from
-    /// the server's cursor. Sequences may skip numbers.
+    /// the server's cursor. Sequences may skip numbers; they run from 1 to
+    /// `u64::MAX - 1`, as the server takes them.
     pub async fn send_batch_as(&mut self, sequence: u64) -> Result<(), ClientError> {
         if self.current.is_empty() {
             return Ok(());
+        }
+        if sequence == u64::MAX {
+            return Err(ClientError::Config(format!(
+                "batch sequence {sequence} (u64::MAX) is not allowed: no later batch could \
+                 follow it; sequences run from 1 to u64::MAX - 1"
+            )));
         }
         if sequence < self.next_sequence {
             return Err(ClientError::Config(format!(
@@ -181,6 +188,7 @@ impl UpdateSender {
             sequence: self.next_sequence,
             tiles,
         };
+        // Below u64::MAX, checked above.
         self.next_sequence += 1;
         let inbox = self
             .inbox

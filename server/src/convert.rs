@@ -37,6 +37,17 @@ impl Default for Limits {
 }
 
 impl Limits {
+    /// Largest message the transport decodes at all, bytes. It is a backstop
+    /// well above `max_message_bytes`, so that a message a little too large
+    /// still reaches [`Limits::check_size`] and gets a refusal naming it;
+    /// past this one the transport refuses it (RESOURCE_EXHAUSTED, ending an
+    /// update stream).
+    pub fn transport_message_bytes(&self) -> usize {
+        self.max_message_bytes
+            .saturating_mul(2)
+            .saturating_add(1 << 20)
+    }
+
     /// Refuses a message whose encoding exceeds the configured size.
     pub fn check_size(&self, what: &str, message: &impl prost::Message) -> Result<(), StoreError> {
         let len = message.encoded_len();
@@ -244,9 +255,19 @@ fn pose(field: &str, value: Option<&pb::Pose2>) -> Result<(), StoreError> {
     Ok(())
 }
 
-fn sequence(field: &str, value: u64) -> Result<u64, StoreError> {
+/// A batch's or a frame's sequence: 1 to `u64::MAX - 1`. 0 means "none" on
+/// the wire, and nothing can follow `u64::MAX`: a batch numbered so would
+/// lock its client out of the map for good, a frame would leave its robot no
+/// later frame.
+pub fn sequence(field: &str, value: u64) -> Result<u64, StoreError> {
     if value == 0 {
         return Err(StoreError::invalid(field, "must be at least 1"));
+    }
+    if value == u64::MAX {
+        return Err(StoreError::invalid(
+            field,
+            format!("must be below {value} (u64::MAX): no later sequence could follow it"),
+        ));
     }
     Ok(value)
 }

@@ -46,6 +46,22 @@ pub enum StoreError {
         /// The name.
         rig: String,
     },
+    /// A batch's sequence is below its client's highest applied one and
+    /// was never applied: the client's numbering went backwards.
+    #[error(
+        "batch sequence {sequence} of client {client:?} on map {map:?} is below the last applied \
+         ({last}) and was never applied: sequences must increase"
+    )]
+    SequenceOutOfOrder {
+        /// The map.
+        map: String,
+        /// The client id.
+        client: String,
+        /// The batch's sequence.
+        sequence: u64,
+        /// The client's highest applied sequence.
+        last: u64,
+    },
     /// The server is shutting down and takes no more writes.
     #[error("the map server is shutting down")]
     ShuttingDown,
@@ -102,7 +118,9 @@ impl From<StoreError> for Status {
             StoreError::MapNotFound(_) => Code::NotFound,
             StoreError::MapExists(_) | StoreError::RigExists(_) => Code::AlreadyExists,
             StoreError::RigNotFound(_) => Code::NotFound,
-            StoreError::UnknownRig { .. } => Code::FailedPrecondition,
+            StoreError::UnknownRig { .. } | StoreError::SequenceOutOfOrder { .. } => {
+                Code::FailedPrecondition
+            }
             StoreError::ShuttingDown => Code::Unavailable,
             StoreError::Backend(_) | StoreError::NotCommitted(_) | StoreError::Corrupt { .. } => {
                 Code::Internal

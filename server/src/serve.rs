@@ -125,13 +125,7 @@ pub async fn serve<S: Store>(
         config.stream_buffer,
         stop_streams.clone(),
     );
-    // tonic's own decoder limit is a backstop well above ours, so that an
-    // oversized message reaches our check and gets a message naming it.
-    let transport_limit = config
-        .limits
-        .max_message_bytes
-        .saturating_mul(2)
-        .saturating_add(1 << 20);
+    let transport_limit = config.limits.transport_message_bytes();
     let map_service = tonic::service::interceptor::InterceptedService::new(
         MapServiceServer::new(service)
             .max_decoding_message_size(transport_limit)

@@ -92,9 +92,7 @@ impl<S: Store> MapServer<S> {
         self.limits.check_size("UpdateBatch", &batch)?;
         let map = convert::map_name("map", &batch.map)?;
         let client_id = convert::client_id("client_id", &batch.client_id)?;
-        if batch.sequence == 0 {
-            return Err(StoreError::invalid("sequence", "must be at least 1"));
-        }
+        convert::sequence("sequence", batch.sequence)?;
         if batch.tiles.len() > self.limits.max_tiles_per_batch {
             return Err(StoreError::TooLarge {
                 field: "tiles".into(),
@@ -167,15 +165,40 @@ fn decode<T: prost::Message + Default>(bytes: &[u8], what: &str) -> Result<T, St
     })
 }
 
-/// Reads a robot's stored frames from `from` on, in chunks, sending each;
-/// returns the sequence after the last one sent, or None once the client is gone.
-async fn send_frames_from<S: Store>(
+/// The status that ends an update stream whose next batch (after `read`
+/// good ones) the transport could not decode. Too large a message is
+/// RESOURCE_EXHAUSTED, as the server's own size check answers; any other
+/// failure keeps the transport's code.
+fn unreadable_batch(read: u64, status: &Status) -> Status {
+    let code = match status.code() {
+        tonic::Code::OutOfRange => tonic::Code::ResourceExhausted,
+        code => code,
+    };
+    Status::new(
+        code,
+        format!(
+            "update batch {} of this stream could not be read ({read} read before it; \
+             none after it is applied): {}",
+            read.saturating_add(1),
+            status.message()
+        ),
+    )
+}
+
+/// Reads a robot's stored frames after sequence `after`, in chunks, sending
+/// each; returns the last sequence sent (or `after`), or None once the
+/// client is gone. Nothing follows `u64::MAX`: counting past it would wrap
+/// to 0 and replay the robot's whole history.
+async fn send_frames_after<S: Store>(
     store: &Arc<S>,
     robot: &str,
-    mut next: u64,
+    mut after: u64,
     tx: &mpsc::Sender<Result<pb::SonarFrame, Status>>,
 ) -> Option<u64> {
     loop {
+        let Some(next) = after.checked_add(1) else {
+            return Some(after);
+        };
         let (store, name) = (store.clone(), robot.to_string());
         let chunk = tokio::task::spawn_blocking(move || {
             let mut out = Vec::new();
@@ -207,10 +230,10 @@ async fn send_frames_from<S: Store>(
         let full = chunk.len() == CATCH_UP_CHUNK;
         for (seq, frame) in chunk {
             tx.send(Ok(frame)).await.ok()?;
-            next = seq + 1;
+            after = seq;
         }
         if !full {
-            return Some(next);
+            return Some(after);
         }
     }
 }
@@ -289,6 +312,7 @@ impl<S: Store> MapService for MapServer<S> {
         let server = self.clone();
         // Reads batches and hands them to the writer, in order.
         tokio::spawn(async move {
+            let mut read = 0u64;
             loop {
                 let message = tokio::select! {
                     () = server.shutdown.cancelled() => {
@@ -299,8 +323,17 @@ impl<S: Store> MapService for MapServer<S> {
                 };
                 let batch = match message {
                     Ok(Some(batch)) => batch,
-                    Ok(None) | Err(_) => break,
+                    Ok(None) => break,
+                    Err(status) => {
+                        // Ending with OK here would tell the client that
+                        // everything it sent was taken.
+                        let status = unreadable_batch(read, &status);
+                        tracing::debug!(%status, "update stream unreadable");
+                        let _ = pending_tx.send(Pending::Fail(status)).await;
+                        break;
+                    }
                 };
+                read += 1;
                 let (client, sequence) = (batch.client_id.clone(), batch.sequence);
                 let submitted = match server.check_batch(batch) {
                     Ok(batch) => server.writer.submit_batch(batch).await,
@@ -352,7 +385,7 @@ impl<S: Store> MapService for MapServer<S> {
         let map = convert::map_name("map", &request.map)?;
         let client = convert::client_id("client_id", &request.client_id)?;
         self.record(&map)?;
-        let last_sequence = self.store.cursor(&map, &client)?;
+        let last_sequence = self.store.cursor(&map, &client)?.last;
         Ok(Response::new(pb::UpdateCursor { last_sequence }))
     }
 
@@ -580,9 +613,10 @@ impl<S: Store> MapService for MapServer<S> {
         let robot = convert::robot_name("robot", &request.robot)?;
         // Subscribe before reading the store, so no frame falls in between.
         let mut notes = self.events.watch_frames();
-        let mut next = match request.from_sequence {
-            0 => self.store.robot(&robot)?.map_or(1, |s| s.last_sequence + 1),
-            from => from,
+        // The last sequence sent: the subscriber wants only later ones.
+        let mut after = match request.from_sequence {
+            0 => self.store.robot(&robot)?.map_or(0, |s| s.last_sequence),
+            from => from - 1,
         };
         let (tx, rx) = mpsc::channel(self.stream_buffer);
         let server = self.clone();
@@ -590,8 +624,8 @@ impl<S: Store> MapService for MapServer<S> {
             let mut catch_up = true;
             loop {
                 if catch_up {
-                    match send_frames_from(&server.store, &robot, next, &tx).await {
-                        Some(after) => next = after,
+                    match send_frames_after(&server.store, &robot, after, &tx).await {
+                        Some(sent) => after = sent,
                         None => break,
                     }
                 }
@@ -604,7 +638,7 @@ impl<S: Store> MapService for MapServer<S> {
                     note = notes.recv() => note,
                 };
                 catch_up = match note {
-                    Ok(note) => &*note.robot == robot.as_str() && note.sequence >= next,
+                    Ok(note) => &*note.robot == robot.as_str() && note.sequence > after,
                     // Frames are stored: a subscriber that fell behind re-reads them.
                     Err(broadcast::error::RecvError::Lagged(_)) => true,
                     Err(broadcast::error::RecvError::Closed) => break,

@@ -9,9 +9,12 @@
 
 use crate::error::StoreError;
 use crate::events::{Events, FrameNote, MapEvent};
-use crate::store::{FrameWrite, MapRecord, MapWrite, RobotSummary, Store, StoredTile};
+use crate::store::{
+    ClientCursor, FrameWrite, MapRecord, MapWrite, RobotSummary, SequenceCheck, Store, StoredTile,
+};
 use deog_grid::{CellBox, CellIndex, LogOdds, Tile, TileDelta, TileKey, TileSize};
 use deog_proto::v1::PoseEstimate;
+use std::collections::hash_map::Entry;
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -245,7 +248,7 @@ struct PendingMap {
     tiles: HashMap<TileKey, StoredTile>,
     /// Tiles changed in this group, with the version of their last change.
     dirty: BTreeMap<TileKey, u64>,
-    cursors: HashMap<String, u64>,
+    cursors: HashMap<String, ClientCursor>,
     dirty_cursors: HashSet<String>,
     record_dirty: bool,
 }
@@ -417,19 +420,28 @@ impl<'s, S: Store> Group<'s, S> {
     fn apply_batch(&mut self, batch: Batch) -> Result<Ack, StoreError> {
         let store = self.store;
         let map = self.pending(&batch.map)?;
-        let last = match map.cursors.get(&batch.client_id) {
-            Some(&last) => last,
-            None => {
-                let last = store.cursor(&batch.map, &batch.client_id)?;
-                map.cursors.insert(batch.client_id.clone(), last);
-                last
-            }
+        let cursor = match map.cursors.entry(batch.client_id.clone()) {
+            Entry::Occupied(entry) => entry.into_mut(),
+            Entry::Vacant(entry) => entry.insert(store.cursor(&batch.map, &batch.client_id)?),
         };
-        if batch.sequence <= last {
-            return Ok(Ack {
-                applied: false,
-                map_version: map.record.version,
-            });
+        match cursor.check(batch.sequence) {
+            SequenceCheck::Next => {}
+            // Below the kept sequences a batch out of order cannot be told
+            // from a resend; a resend is the likelier, and the safe answer.
+            SequenceCheck::Applied | SequenceCheck::Unknown => {
+                return Ok(Ack {
+                    applied: false,
+                    map_version: map.record.version,
+                });
+            }
+            SequenceCheck::NeverApplied => {
+                return Err(StoreError::SequenceOutOfOrder {
+                    map: batch.map,
+                    client: batch.client_id,
+                    sequence: batch.sequence,
+                    last: cursor.last,
+                });
+            }
         }
         let size = map.record.settings.tile_size;
         if let Some(delta) = batch.deltas.iter().find(|d| d.raw().len() != size.area()) {
@@ -491,7 +503,7 @@ impl<'s, S: Store> Group<'s, S> {
         }
         map.record.version = version;
         map.record_dirty = true;
-        map.cursors.insert(batch.client_id.clone(), batch.sequence);
+        cursor.applied(batch.sequence);
         map.dirty_cursors.insert(batch.client_id);
         Ok(Ack {
             applied: true,
@@ -514,7 +526,7 @@ impl<'s, S: Store> Group<'s, S> {
             let cursors = map
                 .dirty_cursors
                 .iter()
-                .filter_map(|c| map.cursors.get(c).map(|s| (c.clone(), *s)))
+                .filter_map(|c| map.cursors.get(c).map(|s| (c.clone(), s.clone())))
                 .collect();
             let write = MapWrite {
                 record: Some(map.record),

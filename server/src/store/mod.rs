@@ -6,9 +6,11 @@
 //! [`MapWrite`] lands whole or not at all, and [`Store::flush`] makes every
 //! earlier write durable. The group-commit writer builds on exactly that.
 
+mod cursor;
 mod record;
 mod sled_store;
 
+pub use cursor::{ClientCursor, RECENT_SEQUENCES, SequenceCheck};
 pub use record::{MapRecord, MapSettings, RobotSummary, StoredTile};
 pub use sled_store::{SledConfig, SledStore};
 
@@ -24,8 +26,8 @@ pub struct MapWrite {
     pub clear_tiles: bool,
     /// Tiles to store, replacing what was there.
     pub tiles: Vec<(TileKey, StoredTile)>,
-    /// Per-client highest applied batch sequence.
-    pub cursors: Vec<(String, u64)>,
+    /// Per-client applied batch sequences, replacing what was there.
+    pub cursors: Vec<(String, ClientCursor)>,
 }
 
 /// One robot's frames to add, with the robot's summary after them.
@@ -79,8 +81,9 @@ pub trait Store: Send + Sync + 'static {
         range: TileRange,
         visit: &mut dyn FnMut(TileKey, StoredTile) -> bool,
     ) -> Result<(), StoreError>;
-    /// The highest batch sequence applied for `client` on map `name`; 0 if none.
-    fn cursor(&self, name: &str, client: &str) -> Result<u64, StoreError>;
+    /// The batch sequences applied for `client` on map `name`
+    /// ([`ClientCursor::new`] if none).
+    fn cursor(&self, name: &str, client: &str) -> Result<ClientCursor, StoreError>;
 
     /// Stores frames (atomically per robot).
     fn write_frames(&self, writes: Vec<FrameWrite>) -> Result<(), StoreError>;

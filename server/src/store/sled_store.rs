@@ -1,15 +1,18 @@
 //! The embedded default store, on sled.
 //!
 //! Layout: one sled tree per map, `map/<name>`, holding the record under `m`,
-//! client cursors under `c<client>` and tiles under `t<key>` (the key's 8
-//! sortable bytes, so a range of x is a range of keys). Frames live in the
+//! client cursors under `c<client>` (encoded as `cursor.rs` says) and tiles
+//! under `t<key>` (the key's 8 sortable bytes, so a range of x is a range of
+//! keys). Frames live in the
 //! tree `frames` under `f<robot>\0<sequence>` with a summary per robot under
 //! `r<robot>`; poses in `poses` under `<robot>\0<sequence>`; rigs in `rigs`
 //! under their name. Names never hold
 //! a zero byte (the service checks), and sequences are big-endian, so a
 //! robot's frames sort by sequence.
 
-use super::{FrameWrite, MapRecord, MapWrite, RobotSummary, Store, StoredTile, TileRange};
+use super::{
+    ClientCursor, FrameWrite, MapRecord, MapWrite, RobotSummary, Store, StoredTile, TileRange,
+};
 use crate::error::StoreError;
 use deog_grid::TileKey;
 use std::collections::HashMap;
@@ -231,8 +234,8 @@ impl Store for SledStore {
         for (key, tile) in &write.tiles {
             batch.insert(&tile_key_bytes(*key)[..], tile.encode());
         }
-        for (client, sequence) in &write.cursors {
-            batch.insert(cursor_key(client), &sequence.to_le_bytes()[..]);
+        for (client, cursor) in &write.cursors {
+            batch.insert(cursor_key(client), cursor.encode());
         }
         if let Some(record) = &write.record {
             batch.insert(RECORD_KEY, record.encode());
@@ -276,16 +279,12 @@ impl Store for SledStore {
         Ok(())
     }
 
-    fn cursor(&self, name: &str, client: &str) -> Result<u64, StoreError> {
+    fn cursor(&self, name: &str, client: &str) -> Result<ClientCursor, StoreError> {
         let tree = self.tree(name)?;
-        Ok(tree
-            .get(cursor_key(client))?
-            .and_then(|b| {
-                b.as_ref()
-                    .first_chunk::<8>()
-                    .map(|b| u64::from_le_bytes(*b))
-            })
-            .unwrap_or(0))
+        match tree.get(cursor_key(client))? {
+            Some(bytes) => ClientCursor::decode(client, &bytes),
+            None => Ok(ClientCursor::new()),
+        }
     }
 
     fn write_frames(&self, writes: Vec<FrameWrite>) -> Result<(), StoreError> {
@@ -377,5 +376,33 @@ impl Store for SledStore {
     fn flush(&self) -> Result<(), StoreError> {
         self.db.flush()?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::store::{MapSettings, SequenceCheck};
+    use deog_grid::{Resolution, TileSize};
+
+    #[test]
+    fn a_cursor_written_before_the_applied_list_still_loads() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = SledStore::open(&SledConfig::new(dir.path())).unwrap();
+        let settings =
+            MapSettings::new(Resolution::DEFAULT, TileSize::DEFAULT, (0.1, 0.9)).unwrap();
+        store
+            .create_map(&MapRecord::new("m".into(), settings))
+            .unwrap();
+        // The highest sequence alone, as servers before the list wrote it.
+        store
+            .tree("m")
+            .unwrap()
+            .insert(cursor_key("old"), &41u64.to_le_bytes()[..])
+            .unwrap();
+        let cursor = store.cursor("m", "old").unwrap();
+        assert_eq!((cursor.last, cursor.recent.len()), (41, 0));
+        assert_eq!(cursor.check(40), SequenceCheck::Unknown);
+        assert_eq!(store.cursor("m", "new").unwrap(), ClientCursor::new());
     }
 }

@@ -9,7 +9,9 @@
 use deog_grid::TileKey;
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_client::MapServiceClient;
-use deog_server::store::{FrameWrite, MapRecord, MapWrite, RobotSummary, StoredTile, TileRange};
+use deog_server::store::{
+    ClientCursor, FrameWrite, MapRecord, MapWrite, RobotSummary, StoredTile, TileRange,
+};
 use deog_server::{ServerConfig, SledConfig, SledStore, Store, StoreError};
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -195,7 +197,7 @@ impl<S: Store> Store for CountingStore<S> {
     ) -> Result<(), StoreError> {
         self.inner.tiles_in(map, range, visit)
     }
-    fn cursor(&self, name: &str, client: &str) -> Result<u64, StoreError> {
+    fn cursor(&self, name: &str, client: &str) -> Result<ClientCursor, StoreError> {
         self.inner.cursor(name, client)
     }
     fn write_frames(&self, writes: Vec<FrameWrite>) -> Result<(), StoreError> {
