@@ -2,7 +2,9 @@
 
 use anyhow::{Context, Result};
 use clap::Args;
-use deog_server::{ConnectionLimits, Limits, ServerConfig, SledConfig, SledStore, TlsIdentity};
+use deog_server::{
+    ConnectionLimits, Limits, ReadStreamLimits, ServerConfig, SledConfig, SledStore, TlsIdentity,
+};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -43,6 +45,14 @@ pub struct ServerArgs {
     /// Calls open at once on one connection; a client asking more waits.
     #[arg(long, env = "DEOG_MAX_STREAMS_PER_CONNECTION", default_value_t = ServerConfig::default().max_streams_per_connection)]
     max_streams_per_connection: u32,
+    /// Read streams (GetTiles, ReadFrames, ReadPoses) at once; one more is
+    /// refused with RESOURCE_EXHAUSTED.
+    #[arg(long, env = "DEOG_MAX_READ_STREAMS", default_value_t = ReadStreamLimits::default().max_streams)]
+    max_read_streams: usize,
+    /// Seconds a read stream waits for a client that takes nothing before
+    /// it ends.
+    #[arg(long, env = "DEOG_STALLED_READ_TIMEOUT_S", default_value_t = ReadStreamLimits::default().stalled_timeout.as_secs_f64())]
+    stalled_read_timeout_s: f64,
 }
 
 /// Runs the server until ctrl-c or SIGTERM.
@@ -56,6 +66,17 @@ pub fn run(args: ServerArgs) -> Result<()> {
         args.handshake_timeout_s.is_finite() && (0.1..=3600.0).contains(&args.handshake_timeout_s),
         "--handshake-timeout-s must be within 0.1 and 3600 seconds, got {}",
         args.handshake_timeout_s
+    );
+    anyhow::ensure!(
+        args.max_read_streams >= 1,
+        "--max-read-streams must be at least 1, got {}",
+        args.max_read_streams
+    );
+    anyhow::ensure!(
+        args.stalled_read_timeout_s.is_finite()
+            && (0.1..=3600.0).contains(&args.stalled_read_timeout_s),
+        "--stalled-read-timeout-s must be within 0.1 and 3600 seconds, got {}",
+        args.stalled_read_timeout_s
     );
     anyhow::ensure!(
         args.max_streams_per_connection >= 1,
@@ -92,6 +113,10 @@ pub fn run(args: ServerArgs) -> Result<()> {
             handshake_timeout: Duration::from_secs_f64(args.handshake_timeout_s),
         },
         max_streams_per_connection: args.max_streams_per_connection,
+        reads: ReadStreamLimits {
+            max_streams: args.max_read_streams,
+            stalled_timeout: Duration::from_secs_f64(args.stalled_read_timeout_s),
+        },
         ..ServerConfig::default()
     };
     let store = SledStore::open(&SledConfig {

@@ -35,4 +35,5 @@ pub use convert::Limits;
 pub use error::StoreError;
 pub use rigs::RigRegistry;
 pub use serve::{MAP_SERVICE_NAME, ServeError, ServerConfig, TlsIdentity, serve};
+pub use service::ReadStreamLimits;
 pub use store::{SledConfig, SledStore, Store};

@@ -5,7 +5,7 @@ use crate::connection::{self, ConnectionLimits};
 use crate::convert::Limits;
 use crate::events::Events;
 use crate::rigs::RigRegistry;
-use crate::service::MapServer;
+use crate::service::{MapServer, ReadStreamLimits, ServiceSettings};
 use crate::store::Store;
 use crate::writer::Writer;
 use deog_proto::v1::map_service_server::MapServiceServer;
@@ -68,6 +68,9 @@ pub struct ServerConfig {
     /// Streams (calls) open at once on one connection; a client asking
     /// more waits for one to end (HTTP/2's own limit, announced to it).
     pub max_streams_per_connection: u32,
+    /// Read streams (GetTiles, ReadFrames, ReadPoses) at once, and how
+    /// long one waits for a client that does not read.
+    pub reads: ReadStreamLimits,
 }
 
 impl Default for ServerConfig {
@@ -82,6 +85,7 @@ impl Default for ServerConfig {
             shutdown_grace: Duration::from_secs(5),
             connections: ConnectionLimits::default(),
             max_streams_per_connection: 256,
+            reads: ReadStreamLimits::default(),
         }
     }
 }
@@ -121,8 +125,11 @@ pub async fn serve<S: Store>(
         rigs,
         writer.handle(),
         events,
-        config.limits,
-        config.stream_buffer,
+        ServiceSettings {
+            limits: config.limits,
+            stream_buffer: config.stream_buffer,
+            reads: config.reads,
+        },
         stop_streams.clone(),
     );
     let transport_limit = config.limits.transport_message_bytes();

@@ -15,7 +15,8 @@ use crate::writer::{Batch, EncodedFrame, WriterHandle};
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_server::MapService;
 use std::sync::Arc;
-use tokio::sync::{broadcast, mpsc, oneshot};
+use std::time::Duration;
+use tokio::sync::{Semaphore, broadcast, mpsc, oneshot};
 use tokio_stream::wrappers::ReceiverStream;
 use tokio_util::sync::CancellationToken;
 use tonic::{Request, Response, Status, Streaming};
@@ -36,6 +37,75 @@ pub struct MapServer<S> {
     limits: Limits,
     stream_buffer: usize,
     shutdown: CancellationToken,
+    reads: ReadStreamLimits,
+    /// One per read stream (GetTiles, ReadFrames, ReadPoses) whose
+    /// producer holds a blocking thread.
+    read_permits: Arc<Semaphore>,
+}
+
+/// What the service checks requests against and how it streams replies.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServiceSettings {
+    /// Request limits.
+    pub limits: Limits,
+    /// Messages buffered per response stream.
+    pub stream_buffer: usize,
+    /// Read streams at once, and their stall timeout.
+    pub reads: ReadStreamLimits,
+}
+
+/// How many read streams may run at once and how long one may wait for a
+/// client that does not read. Each runs on a blocking thread while it
+/// reads the store; a client that never reads would hold that thread for
+/// ever, and enough of them would leave none for anyone else.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ReadStreamLimits {
+    /// Read streams at once; one more is refused with RESOURCE_EXHAUSTED.
+    pub max_streams: usize,
+    /// How long a read stream waits for its client to take the next
+    /// message before it ends.
+    pub stalled_timeout: Duration,
+}
+
+impl Default for ReadStreamLimits {
+    fn default() -> Self {
+        Self {
+            max_streams: 64,
+            stalled_timeout: Duration::from_secs(30),
+        }
+    }
+}
+
+/// What a read stream's producer sends through: waits for a slow client
+/// up to the stall timeout, then gives up (false), as for a client gone.
+pub(crate) struct ReadSink<T> {
+    tx: mpsc::Sender<Result<T, Status>>,
+    runtime: tokio::runtime::Handle,
+    stalled_timeout: Duration,
+}
+
+impl<T> ReadSink<T> {
+    /// Sends `item`; false once the client is gone or has not taken a
+    /// message for the stall timeout.
+    fn send(&self, item: Result<T, Status>) -> bool {
+        match self.tx.try_send(item) {
+            Ok(()) => true,
+            Err(mpsc::error::TrySendError::Closed(_)) => false,
+            Err(mpsc::error::TrySendError::Full(item)) => {
+                let sent = self.runtime.block_on(tokio::time::timeout(
+                    self.stalled_timeout,
+                    self.tx.send(item),
+                ));
+                if sent.is_err() {
+                    tracing::debug!(
+                        timeout_s = self.stalled_timeout.as_secs_f64(),
+                        "read stream ended: its client took nothing for the stall timeout"
+                    );
+                }
+                matches!(sent, Ok(Ok(())))
+            }
+        }
+    }
 }
 
 impl<S> std::fmt::Debug for MapServer<S> {
@@ -56,6 +126,8 @@ impl<S> Clone for MapServer<S> {
             limits: self.limits,
             stream_buffer: self.stream_buffer,
             shutdown: self.shutdown.clone(),
+            reads: self.reads,
+            read_permits: self.read_permits.clone(),
         }
     }
 }
@@ -67,8 +139,7 @@ impl<S: Store> MapServer<S> {
         rigs: Arc<RigRegistry>,
         writer: WriterHandle,
         events: Arc<Events>,
-        limits: Limits,
-        stream_buffer: usize,
+        settings: ServiceSettings,
         shutdown: CancellationToken,
     ) -> Self {
         Self {
@@ -76,9 +147,11 @@ impl<S: Store> MapServer<S> {
             rigs,
             writer,
             events,
-            limits,
-            stream_buffer: stream_buffer.max(1),
+            limits: settings.limits,
+            stream_buffer: settings.stream_buffer.max(1),
             shutdown,
+            reads: settings.reads,
+            read_permits: Arc::new(Semaphore::new(settings.reads.max_streams)),
         }
     }
 
@@ -141,20 +214,32 @@ impl<S: Store> MapServer<S> {
         Ok(())
     }
 
-    /// Runs `produce` on a blocking thread, streaming what it sends.
+    /// Runs `produce` on a blocking thread, streaming what it sends; one of
+    /// at most [`ReadStreamLimits::max_streams`] at once.
     fn blocking_stream<T: Send + 'static>(
         &self,
-        produce: impl FnOnce(&mpsc::Sender<Result<T, Status>>) -> Result<(), StoreError>
-        + Send
-        + 'static,
-    ) -> ResponseStream<T> {
+        produce: impl FnOnce(&ReadSink<T>) -> Result<(), StoreError> + Send + 'static,
+    ) -> Result<ResponseStream<T>, Status> {
+        let permit = self.read_permits.clone().try_acquire_owned().map_err(|_| {
+            Status::resource_exhausted(format!(
+                "{} read streams are open, the most the map server allows (--max-read-streams): \
+                 retry when one has ended",
+                self.reads.max_streams
+            ))
+        })?;
         let (tx, rx) = mpsc::channel(self.stream_buffer);
+        let sink = ReadSink {
+            tx,
+            runtime: tokio::runtime::Handle::current(),
+            stalled_timeout: self.reads.stalled_timeout,
+        };
         tokio::task::spawn_blocking(move || {
-            if let Err(error) = produce(&tx) {
-                let _ = tx.blocking_send(Err(error.into()));
+            let _permit = permit;
+            if let Err(error) = produce(&sink) {
+                sink.send(Err(error.into()));
             }
         });
-        ReceiverStream::new(rx)
+        Ok(ReceiverStream::new(rx))
     }
 }
 
@@ -415,9 +500,9 @@ impl<S: Store> MapService for MapServer<S> {
                 let (min, max) = size.tiles_covering(&region);
                 self.blocking_stream(move |tx| {
                     store.tiles_in(&record, TileRange { min, max }, &mut |key, stored| {
-                        tx.blocking_send(Ok(wire(key, &stored))).is_ok()
+                        tx.send(Ok(wire(key, &stored)))
                     })
-                })
+                })?
             }
             Some(pb::tile_query::Selection::Keys(keys)) => {
                 let keys = keys
@@ -431,13 +516,13 @@ impl<S: Store> MapService for MapServer<S> {
                 self.blocking_stream(move |tx| {
                     for key in keys {
                         if let Some(stored) = store.tile(&record, key)?
-                            && tx.blocking_send(Ok(wire(key, &stored))).is_err()
+                            && !tx.send(Ok(wire(key, &stored)))
                         {
                             break;
                         }
                     }
                     Ok(())
-                })
+                })?
             }
             None => return Err(StoreError::invalid("selection", "give a region or keys").into()),
         };
@@ -591,7 +676,7 @@ impl<S: Store> MapService for MapServer<S> {
                 &mut |_, bytes| match decode::<pb::SonarFrame>(bytes, "frame") {
                     Ok(frame) => {
                         sent += 1;
-                        tx.blocking_send(Ok(frame)).is_ok() && sent < limit
+                        tx.send(Ok(frame)) && sent < limit
                     }
                     Err(e) => {
                         failure = Some(e);
@@ -600,7 +685,7 @@ impl<S: Store> MapService for MapServer<S> {
                 },
             )?;
             failure.map_or(Ok(()), Err)
-        })))
+        })?))
     }
 
     type SubscribeFramesStream = ResponseStream<pb::SonarFrame>;
@@ -723,7 +808,7 @@ impl<S: Store> MapService for MapServer<S> {
                 from,
                 to,
                 &mut |_, bytes| match decode::<pb::PoseEstimate>(bytes, "pose") {
-                    Ok(pose) => tx.blocking_send(Ok(pose)).is_ok(),
+                    Ok(pose) => tx.send(Ok(pose)),
                     Err(e) => {
                         failure = Some(e);
                         false
@@ -731,7 +816,7 @@ impl<S: Store> MapService for MapServer<S> {
                 },
             )?;
             failure.map_or(Ok(()), Err)
-        })))
+        })?))
     }
 
     type WatchPosesStream = ResponseStream<pb::PoseEstimate>;
