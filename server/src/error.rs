@@ -68,10 +68,18 @@ pub enum StoreError {
     /// The embedded database failed.
     #[error("storage failure: {0}")]
     Backend(String),
-    /// A group of writes was not committed; the message is the error that
+    /// The device under the store is full: writes fail until it has room.
+    #[error("the store cannot write: {0}")]
+    OutOfSpace(String),
+    /// A group of writes was not committed; `reason` is the error that
     /// stopped it, already worded (every write of the group gets it).
-    #[error("{0}")]
-    NotCommitted(String),
+    #[error("{reason}")]
+    NotCommitted {
+        /// Why.
+        reason: String,
+        /// The device was full: the write may succeed once it has room.
+        out_of_space: bool,
+    },
     /// Stored bytes could not be decoded: the data directory is damaged or
     /// was written by an incompatible version.
     #[error("stored record {what} is corrupt: {reason}")]
@@ -106,7 +114,12 @@ impl StoreError {
 
 impl From<sled::Error> for StoreError {
     fn from(error: sled::Error) -> Self {
-        Self::Backend(error.to_string())
+        match &error {
+            sled::Error::Io(io) if io.kind() == std::io::ErrorKind::StorageFull => {
+                Self::OutOfSpace(io.to_string())
+            }
+            _ => Self::Backend(error.to_string()),
+        }
     }
 }
 
@@ -121,10 +134,15 @@ impl From<StoreError> for Status {
             StoreError::UnknownRig { .. } | StoreError::SequenceOutOfOrder { .. } => {
                 Code::FailedPrecondition
             }
-            StoreError::ShuttingDown => Code::Unavailable,
-            StoreError::Backend(_) | StoreError::NotCommitted(_) | StoreError::Corrupt { .. } => {
-                Code::Internal
+            StoreError::ShuttingDown | StoreError::OutOfSpace(_) => Code::Unavailable,
+            StoreError::NotCommitted { out_of_space, .. } => {
+                if *out_of_space {
+                    Code::Unavailable
+                } else {
+                    Code::Internal
+                }
             }
+            StoreError::Backend(_) | StoreError::Corrupt { .. } => Code::Internal,
         };
         Status::new(code, error.to_string())
     }

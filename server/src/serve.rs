@@ -102,6 +102,9 @@ pub enum ServeError {
     /// The writer thread could not be started.
     #[error("could not start the writer thread: {0}")]
     Writer(#[from] std::io::Error),
+    /// The store's last flush at shutdown failed.
+    #[error("the store's last flush failed: {0}")]
+    FinalFlush(crate::error::StoreError),
     /// The stored rigs could not be read.
     #[error("reading the stored rigs: {0}")]
     Rigs(#[from] crate::error::StoreError),
@@ -209,7 +212,14 @@ pub async fn serve<S: Store>(
             }
         }
     };
-    writer.stop().await;
-    tracing::info!("store flushed; map server stopped");
-    result.map_err(ServeError::from)
+    let flushed = writer.stop().await;
+    match &flushed {
+        Ok(()) => tracing::info!("store flushed; map server stopped"),
+        Err(error) => tracing::error!(
+            %error,
+            "the store's last flush failed: writes not yet on disk are lost (none was acknowledged); map server stopped"
+        ),
+    }
+    result.map_err(ServeError::from)?;
+    flushed.map_err(ServeError::FinalFlush)
 }

@@ -83,7 +83,7 @@ impl std::fmt::Debug for WriterHandle {
 /// The writer thread.
 pub struct Writer {
     handle: WriterHandle,
-    thread: Option<JoinHandle<()>>,
+    thread: Option<JoinHandle<Result<(), StoreError>>>,
 }
 
 impl std::fmt::Debug for Writer {
@@ -115,12 +115,17 @@ impl Writer {
     }
 
     /// Finishes every queued write, flushes, and stops the thread. Writes
-    /// sent later fail with [`StoreError::ShuttingDown`].
-    pub async fn stop(mut self) {
+    /// sent later fail with [`StoreError::ShuttingDown`]. The error is the
+    /// final flush's: what was written but not yet flushed is not on disk.
+    pub async fn stop(mut self) -> Result<(), StoreError> {
         let _ = self.handle.sender.send(WriteOp::Stop).await;
-        if let Some(thread) = self.thread.take() {
-            // The thread only ends after its final flush.
-            let _ = tokio::task::spawn_blocking(move || thread.join()).await;
+        let Some(thread) = self.thread.take() else {
+            return Ok(());
+        };
+        // The thread only ends after its final flush.
+        match tokio::task::spawn_blocking(move || thread.join()).await {
+            Ok(Ok(flushed)) => flushed,
+            _ => Err(StoreError::Backend("the writer thread panicked".into())),
         }
     }
 }
@@ -180,7 +185,13 @@ impl WriterHandle {
     }
 }
 
-fn run<S: Store>(store: &S, events: &Events, mut receiver: mpsc::Receiver<WriteOp>) {
+/// Applies the writes as they come, a group at a time, until stopped;
+/// returns the final flush's outcome.
+fn run<S: Store>(
+    store: &S,
+    events: &Events,
+    mut receiver: mpsc::Receiver<WriteOp>,
+) -> Result<(), StoreError> {
     let mut stopping = false;
     while !stopping {
         let Some(first) = receiver.blocking_recv() else {
@@ -204,10 +215,9 @@ fn run<S: Store>(store: &S, events: &Events, mut receiver: mpsc::Receiver<WriteO
     while let Ok(op) = receiver.try_recv() {
         refuse(op);
     }
-    if let Err(error) = store.flush() {
-        tracing::error!(%error, "final flush failed");
-    }
+    let flushed = store.flush();
     tracing::debug!("writer stopped");
+    flushed
 }
 
 fn refuse(op: WriteOp) {
@@ -228,14 +238,34 @@ fn refuse(op: WriteOp) {
     }
 }
 
-/// A reply held back until the group is durable; given the commit's error
-/// message, if any.
-type Deferred = Box<dyn FnOnce(Option<&str>) + Send>;
+/// Why a group was not committed: the first error, worded, and whether
+/// the device was full.
+#[derive(Debug, Clone)]
+struct GroupFailure {
+    reason: String,
+    out_of_space: bool,
+}
+
+impl GroupFailure {
+    fn of(error: &StoreError) -> Self {
+        Self {
+            reason: error.to_string(),
+            out_of_space: matches!(error, StoreError::OutOfSpace(_)),
+        }
+    }
+}
+
+/// A reply held back until the group is durable; given the commit's
+/// failure, if any.
+type Deferred = Box<dyn FnOnce(Option<&GroupFailure>) + Send>;
 
 fn defer<T: Send + 'static>(reply: Reply<T>, value: Result<T, StoreError>) -> Deferred {
     Box::new(move |failure| {
         let result = match failure {
-            Some(message) => Err(StoreError::NotCommitted(message.to_string())),
+            Some(failure) => Err(StoreError::NotCommitted {
+                reason: failure.reason.clone(),
+                out_of_space: failure.out_of_space,
+            }),
             None => value,
         };
         let _ = reply.send(result);
@@ -266,7 +296,7 @@ struct Group<'s, S> {
     map_events: Vec<(String, MapEvent)>,
     frame_events: Vec<FrameNote>,
     pose_events: Vec<Arc<PoseEstimate>>,
-    failure: Option<String>,
+    failure: Option<GroupFailure>,
 }
 
 impl<'s, S: Store> Group<'s, S> {
@@ -293,12 +323,12 @@ impl<'s, S: Store> Group<'s, S> {
         if self.failure.is_none()
             && let Err(error) = self.store.flush()
         {
-            self.failure = Some(error.to_string());
+            self.failure = Some(GroupFailure::of(&error));
         }
         if let Some(failure) = &self.failure {
-            tracing::error!(%failure, "group commit failed");
+            tracing::error!(failure = %failure.reason, "group commit failed");
         }
-        let failure = self.failure.as_deref();
+        let failure = self.failure.as_ref();
         for reply in self.replies {
             reply(failure);
         }
@@ -535,7 +565,7 @@ impl<'s, S: Store> Group<'s, S> {
                 cursors,
             };
             if let Err(error) = self.store.write_map(&name, write) {
-                self.failure.get_or_insert(error.to_string());
+                self.failure.get_or_insert(GroupFailure::of(&error));
                 continue;
             }
             for (key, version) in map.dirty {
@@ -586,13 +616,13 @@ impl<'s, S: Store> Group<'s, S> {
         if !writes.is_empty()
             && let Err(error) = self.store.write_frames(writes)
         {
-            self.failure.get_or_insert(error.to_string());
+            self.failure.get_or_insert(GroupFailure::of(&error));
         }
         let poses = std::mem::take(&mut self.poses);
         if !poses.is_empty()
             && let Err(error) = self.store.write_poses(poses)
         {
-            self.failure.get_or_insert(error.to_string());
+            self.failure.get_or_insert(GroupFailure::of(&error));
         }
     }
 }
@@ -628,7 +658,7 @@ mod tests {
     #[test]
     fn a_failed_commit_reaches_each_write_worded_once() {
         let (reply, answer) = oneshot::channel::<Result<u64, StoreError>>();
-        let failure = StoreError::Backend("disk full".into()).to_string();
+        let failure = GroupFailure::of(&StoreError::Backend("disk full".into()));
         defer(reply, Ok(7))(Some(&failure));
         let error = answer.blocking_recv().unwrap().unwrap_err();
         assert_eq!(error.to_string(), "storage failure: disk full");
