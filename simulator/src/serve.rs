@@ -1,5 +1,7 @@
 //! Running the simulator's `RobotService` on a listener until a shutdown
-//! future resolves.
+//! future resolves: optionally behind the map server's bearer-token check
+//! and with TLS (both from `deog-proto`), with caps on robots and watch
+//! streams.
 
 use std::future::Future;
 use std::time::Duration;
