@@ -38,18 +38,19 @@ struct Shared {
     sim: Mutex<Simulation>,
     /// One channel per watched robot; none for robots nobody watches.
     channels: Mutex<HashMap<String, broadcast::Sender<Arc<pb::RobotState>>>>,
-    /// Watch streams open now.
-    watchers: AtomicUsize,
+    /// Watch streams open now; shared with their slots, which need nothing
+    /// else of the server.
+    watchers: Arc<AtomicUsize>,
     config: SimServeConfig,
     shutdown: CancellationToken,
 }
 
 /// Holds one of the [`SimServeConfig::max_watchers`] places while a watch
 /// stream is open.
-struct WatcherSlot(Arc<Shared>);
+struct WatcherSlot(Arc<AtomicUsize>);
 
 impl WatcherSlot {
-    fn take(shared: &Arc<Shared>) -> Result<Self, Status> {
+    fn take(shared: &Shared) -> Result<Self, Status> {
         let max = shared.config.max_watchers;
         shared
             .watchers
@@ -62,13 +63,13 @@ impl WatcherSlot {
                      close one first"
                 )))
             })?;
-        Ok(Self(Arc::clone(shared)))
+        Ok(Self(Arc::clone(&shared.watchers)))
     }
 }
 
 impl Drop for WatcherSlot {
     fn drop(&mut self) {
-        self.0.watchers.fetch_sub(1, Ordering::AcqRel);
+        self.0.fetch_sub(1, Ordering::AcqRel);
     }
 }
 
@@ -99,7 +100,7 @@ impl SimServer {
             shared: Arc::new(Shared {
                 sim: Mutex::new(sim),
                 channels: Mutex::new(HashMap::new()),
-                watchers: AtomicUsize::new(0),
+                watchers: Arc::new(AtomicUsize::new(0)),
                 config,
                 shutdown,
             }),
