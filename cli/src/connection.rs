@@ -1,9 +1,12 @@
-//! How robot-side processes reach the map server: address, token, TLS.
+//! How processes reach the map server and the simulator (address, token,
+//! TLS), and how both servers read their own token and TLS files: one set
+//! of rules for the two.
 
 use anyhow::{Context, Result};
 use clap::Args;
+use deog_proto::tls::TlsIdentity;
 use deog_robot_client::ClientConfig;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Options naming the map server and how to authenticate to it.
 #[derive(Debug, Clone, Args)]
@@ -27,25 +30,80 @@ pub struct ConnectionArgs {
 impl ConnectionArgs {
     /// The robot client's configuration.
     pub fn client_config(&self) -> Result<ClientConfig> {
-        let token = self
-            .token_file
-            .as_ref()
-            .map(|path| {
-                std::fs::read_to_string(path)
-                    .with_context(|| format!("reading token file {}", path.display()))
-                    .map(|t| t.trim().to_string())
-            })
-            .transpose()?;
-        let tls_ca_pem = self
-            .tls_ca
-            .as_ref()
-            .map(|path| std::fs::read(path).with_context(|| format!("reading {}", path.display())))
-            .transpose()?;
-        Ok(ClientConfig {
-            token,
-            tls_ca_pem,
-            tls_domain: self.tls_domain.clone(),
-            ..ClientConfig::new(self.server.clone())
-        })
+        client_config(
+            &self.server,
+            self.token_file.as_deref(),
+            self.tls_ca.as_deref(),
+            self.tls_domain.as_deref(),
+        )
+    }
+}
+
+/// Options naming the simulator and how to authenticate to it.
+#[derive(Debug, Clone, Args)]
+pub struct SimConnectionArgs {
+    /// The simulator's address (host:port or a URL).
+    #[arg(long, env = "DEOG_SIM", default_value = "127.0.0.1:50052")]
+    pub sim: String,
+    /// File holding the bearer token the simulator expects.
+    #[arg(long, env = "DEOG_SIM_TOKEN_FILE")]
+    pub sim_token_file: Option<PathBuf>,
+    /// CA certificate (PEM) to trust the simulator's TLS certificate with;
+    /// turns TLS on.
+    #[arg(long, env = "DEOG_SIM_TLS_CA")]
+    pub sim_tls_ca: Option<PathBuf>,
+    /// Name the simulator's certificate is for, when it differs from the
+    /// host in --sim.
+    #[arg(long, env = "DEOG_SIM_TLS_DOMAIN")]
+    pub sim_tls_domain: Option<String>,
+}
+
+impl SimConnectionArgs {
+    /// The simulator client's configuration.
+    pub fn client_config(&self) -> Result<ClientConfig> {
+        client_config(
+            &self.sim,
+            self.sim_token_file.as_deref(),
+            self.sim_tls_ca.as_deref(),
+            self.sim_tls_domain.as_deref(),
+        )
+    }
+}
+
+fn client_config(
+    endpoint: &str,
+    token_file: Option<&Path>,
+    tls_ca: Option<&Path>,
+    tls_domain: Option<&str>,
+) -> Result<ClientConfig> {
+    let token = token_file.map(read_token_file).transpose()?;
+    let tls_ca_pem = tls_ca
+        .map(|path| std::fs::read(path).with_context(|| format!("reading {}", path.display())))
+        .transpose()?;
+    Ok(ClientConfig {
+        token,
+        tls_ca_pem,
+        tls_domain: tls_domain.map(str::to_string),
+        ..ClientConfig::new(endpoint.to_string())
+    })
+}
+
+/// The token in `path`, trimmed; an empty one is refused, since it would
+/// let through anyone who sends an empty bearer token.
+pub fn read_token_file(path: &Path) -> Result<String> {
+    let token = std::fs::read_to_string(path)
+        .with_context(|| format!("reading token file {}", path.display()))?;
+    let token = token.trim().to_string();
+    anyhow::ensure!(!token.is_empty(), "token file {} is empty", path.display());
+    Ok(token)
+}
+
+/// A server's TLS identity from `--tls-cert` and `--tls-key`, both or
+/// neither (clap's `requires` sees to that); a file that cannot be read or
+/// does not hold what it should is named with the reason.
+pub fn read_tls_identity(cert: Option<&Path>, key: Option<&Path>) -> Result<Option<TlsIdentity>> {
+    match (cert, key) {
+        (Some(cert), Some(key)) => Ok(Some(TlsIdentity::from_files(cert, key)?)),
+        _ => Ok(None),
     }
 }

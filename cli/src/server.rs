@@ -3,7 +3,7 @@
 use anyhow::{Context, Result};
 use clap::Args;
 use deog_server::{
-    ConnectionLimits, Limits, ReadStreamLimits, ServerConfig, SledConfig, SledStore, TlsIdentity,
+    ConnectionLimits, Limits, ReadStreamLimits, ServerConfig, SledConfig, SledStore,
 };
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -85,22 +85,11 @@ pub fn run(args: ServerArgs) -> Result<()> {
     );
     let token = args
         .token_file
-        .as_ref()
-        .map(|path| {
-            let token = std::fs::read_to_string(path)
-                .with_context(|| format!("reading token file {}", path.display()))?;
-            let token = token.trim().to_string();
-            anyhow::ensure!(!token.is_empty(), "token file {} is empty", path.display());
-            Ok(token)
-        })
+        .as_deref()
+        .map(crate::connection::read_token_file)
         .transpose()?;
-    let tls = match (&args.tls_cert, &args.tls_key) {
-        (Some(cert), Some(key)) => Some(TlsIdentity {
-            cert_pem: std::fs::read(cert).with_context(|| format!("reading {}", cert.display()))?,
-            key_pem: std::fs::read(key).with_context(|| format!("reading {}", key.display()))?,
-        }),
-        _ => None,
-    };
+    let tls =
+        crate::connection::read_tls_identity(args.tls_cert.as_deref(), args.tls_key.as_deref())?;
     let config = ServerConfig {
         limits: Limits {
             max_message_bytes: args.max_message_bytes,

@@ -9,6 +9,9 @@ use deog_simulator::sonar::{SonarParams, Specular};
 use deog_simulator::{SonarFiring, SonarPreset};
 use deog_world::load_world_spec;
 use std::net::SocketAddr;
+use std::path::PathBuf;
+
+use crate::connection::{read_tls_identity, read_token_file};
 
 /// What a wall struck past the specular angle does.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -96,6 +99,24 @@ pub struct SimArgs {
     /// Largest request message accepted, bytes (at least 1024).
     #[arg(long, env = "DEOG_SIM_MAX_MESSAGE_BYTES", default_value_t = SimServeConfig::default().max_message_bytes)]
     pub max_message_bytes: usize,
+    /// Most robots the world holds (1 to 4096), --robots included; a spawn
+    /// past it is refused with RESOURCE_EXHAUSTED.
+    #[arg(long, env = "DEOG_SIM_MAX_ROBOTS", default_value_t = SimServeConfig::default().max_robots)]
+    pub max_robots: usize,
+    /// Most WatchState streams open at once (1 to 65536); a watch past it
+    /// is refused with RESOURCE_EXHAUSTED.
+    #[arg(long, env = "DEOG_SIM_MAX_WATCHERS", default_value_t = SimServeConfig::default().max_watchers)]
+    pub max_watchers: usize,
+    /// File holding the bearer token every RobotService call must carry
+    /// (health and reflection stay open).
+    #[arg(long, env = "DEOG_SIM_TOKEN_FILE")]
+    pub token_file: Option<PathBuf>,
+    /// TLS certificate chain (PEM); needs --tls-key.
+    #[arg(long, env = "DEOG_SIM_TLS_CERT", requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// TLS private key (PEM); needs --tls-cert.
+    #[arg(long, env = "DEOG_SIM_TLS_KEY", requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
 }
 
 /// The rig `--rig` names, or a one-line error naming it and listing the
@@ -187,6 +208,27 @@ pub fn sonar_params(args: &SimArgs) -> Result<SonarParams> {
 
 /// Runs the simulator until ctrl-c or SIGTERM.
 pub fn run(args: SimArgs) -> Result<()> {
+    let serve_config = SimServeConfig {
+        speed: args.speed,
+        max_message_bytes: args.max_message_bytes,
+        max_robots: args.max_robots,
+        max_watchers: args.max_watchers,
+        token: args
+            .token_file
+            .as_deref()
+            .map(read_token_file)
+            .transpose()?,
+        tls: read_tls_identity(args.tls_cert.as_deref(), args.tls_key.as_deref())?,
+        ..SimServeConfig::default()
+    };
+    serve_config.validate()?;
+    if args.robots > args.max_robots {
+        bail!(
+            "--robots {} is more than --max-robots {}",
+            args.robots,
+            args.max_robots
+        );
+    }
     let world = load_world_spec(&args.world)?;
     let config = sim_config(&args)?;
     let mut sim = Simulation::new(world, config, args.seed).context("setting up the simulation")?;
@@ -197,11 +239,6 @@ pub fn run(args: SimArgs) -> Result<()> {
             .with_context(|| format!("placing {name}"))?;
         tracing::info!(robot = %name, x = state.true_pose.x, y = state.true_pose.y, "robot placed");
     }
-    let serve_config = SimServeConfig {
-        speed: args.speed,
-        max_message_bytes: args.max_message_bytes,
-        ..SimServeConfig::default()
-    };
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     runtime.block_on(async move {
         let listener = tokio::net::TcpListener::bind(args.listen)
@@ -215,7 +252,16 @@ pub fn run(args: SimArgs) -> Result<()> {
             body_radius_m = rig.body_radius(),
             "every robot carries this rig"
         );
-        tracing::info!(%addr, world = %sim.world().name(), rig = %rig.name(), speed = args.speed, robots = sim.robot_count(), "simulator listening");
+        tracing::info!(
+            %addr,
+            world = %sim.world().name(),
+            rig = %rig.name(),
+            speed = args.speed,
+            robots = sim.robot_count(),
+            tls = serve_config.tls.is_some(),
+            auth = serve_config.token.is_some(),
+            "simulator listening"
+        );
         serve_sim(sim, listener, serve_config, deog_harness::shutdown_signal()).await?;
         Ok(())
     })

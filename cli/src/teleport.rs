@@ -4,8 +4,9 @@
 use anyhow::{Context, Result};
 use clap::Args;
 use deog_grid::Pose2;
-use deog_robot_client::{ClientConfig, SimClient};
+use deog_robot_client::SimClient;
 
+use crate::connection::SimConnectionArgs;
 use crate::pose_args::parse_pose;
 
 /// Options of `deog teleport`.
@@ -17,18 +18,18 @@ pub struct TeleportArgs {
     /// Where to put it: x,y,theta (metres, radians).
     #[arg(long, value_parser = parse_pose, allow_hyphen_values = true)]
     pub pose: Pose2,
-    /// The simulator's address.
-    #[arg(long, env = "DEOG_SIM", default_value = "127.0.0.1:50052")]
-    pub sim: String,
+    #[command(flatten)]
+    pub sim: SimConnectionArgs,
 }
 
 /// Runs `deog teleport`.
 pub fn run(args: TeleportArgs) -> Result<()> {
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    let config = args.sim.client_config()?;
     runtime.block_on(async {
-        let sim = SimClient::connect(ClientConfig::new(args.sim.clone()))
+        let sim = SimClient::connect(config)
             .await
-            .with_context(|| format!("connecting to the simulator at {}", args.sim))?;
+            .with_context(|| format!("connecting to the simulator at {}", args.sim.sim))?;
         let state = sim
             .teleport(&args.robot, args.pose)
             .await

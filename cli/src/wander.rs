@@ -12,13 +12,13 @@ use deog_grid::Pose2;
 use deog_proto::names::check_robot_name;
 use deog_proto::v1 as pb;
 use deog_robot_client::convert::pose_or_origin;
-use deog_robot_client::{ClientConfig, MapClient, SimClient};
+use deog_robot_client::{MapClient, SimClient};
 use deog_simulator::data_file::{DataUnits, format_line};
 use deog_simulator::deog_rig::{self, Rig};
 use deog_simulator::{WanderParams, Wanderer};
 use tokio::sync::mpsc;
 
-use crate::connection::ConnectionArgs;
+use crate::connection::{ConnectionArgs, SimConnectionArgs};
 use crate::pose_args::{PoseSource, parse_pose};
 
 /// Options of `deog wander`.
@@ -27,9 +27,8 @@ pub struct WanderArgs {
     /// The robot to drive.
     #[arg(long, env = "DEOG_ROBOT")]
     pub robot: String,
-    /// The simulator's address.
-    #[arg(long, env = "DEOG_SIM", default_value = "127.0.0.1:50052")]
-    pub sim: String,
+    #[command(flatten)]
+    pub sim: SimConnectionArgs,
     /// Place the robot first (at --start, or at a random free pose); without
     /// it the robot must exist.
     #[arg(long)]
@@ -95,11 +94,12 @@ pub fn run(args: WanderArgs) -> Result<()> {
         )),
         None => None,
     };
+    let sim_config = args.sim.client_config()?;
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     let summary = runtime.block_on(async {
-        let sim = SimClient::connect(ClientConfig::new(args.sim.clone()))
+        let sim = SimClient::connect(sim_config)
             .await
-            .with_context(|| format!("connecting to the simulator at {}", args.sim))?;
+            .with_context(|| format!("connecting to the simulator at {}", args.sim.sim))?;
         let rig = sim_rig(&sim).await?;
         if let Some(spec) = &args.rig {
             let expected = crate::rig_args::load_rig(spec)?;

@@ -7,6 +7,10 @@
 //!   the one rule every service and client checks.
 //! - [`rig`]: sensor rigs to and from the wire, and what a frame that names
 //!   no rig means.
+//! - [`auth`]: [`auth::BearerAuth`], the optional bearer-token check both
+//!   servers put in front of their service.
+//! - [`tls`]: [`tls::TlsIdentity`], a server's certificate and key, read and
+//!   checked so that a bad file is named with the reason.
 //! - [`FILE_DESCRIPTOR_SET`]: the encoded descriptors, for the gRPC reflection
 //!   service.
 
@@ -16,8 +20,10 @@ pub mod v1 {
     tonic::include_proto!("deog.v1");
 }
 
+pub mod auth;
 pub mod names;
 pub mod rig;
+pub mod tls;
 
 /// The encoded `FileDescriptorSet` of every deog proto file.
 pub const FILE_DESCRIPTOR_SET: &[u8] =

@@ -1,4 +1,5 @@
-//! Reaching the map server: address, TLS, token, and retry with backoff.
+//! Reaching the map server or the simulator: address, TLS, token, and
+//! retry with backoff.
 
 use crate::error::{ClientError, is_transient};
 use deog_proto::v1::map_service_client::MapServiceClient;
@@ -45,7 +46,8 @@ impl RetryPolicy {
     }
 }
 
-/// Where and how to reach the map server.
+/// Where and how to reach the map server, or the simulator
+/// ([`SimClient`](crate::SimClient) takes the same).
 #[derive(Clone, Default)]
 pub struct ClientConfig {
     /// `http://host:port`, `https://host:port`, or `host:port` (plain).

@@ -12,14 +12,14 @@
 //! - [`rigs`]: [`RigRegistry`], the rigs frames may name (built in or
 //!   stored), against which every published frame is checked.
 //! - [`service`]: the thin `MapService` handlers.
-//! - [`auth`]: the optional bearer-token check.
+//! - [`auth`]: the optional bearer-token check (shared with the simulator,
+//!   from `deog-proto`).
 //! - [`connection`]: accepted connections the server can cut when a
 //!   shutdown's grace period runs out.
 //! - [`serve`](mod@serve): [`serve()`] with health, reflection and TLS, until a
 //!   shutdown future resolves.
 //! - [`error`]: [`StoreError`] and its one mapping to a gRPC status.
 
-pub mod auth;
 pub mod connection;
 pub mod convert;
 pub mod error;
@@ -32,8 +32,10 @@ pub mod writer;
 
 pub use connection::ConnectionLimits;
 pub use convert::Limits;
+pub use deog_proto::auth;
+pub use deog_proto::tls::{TlsError, TlsIdentity};
 pub use error::StoreError;
 pub use rigs::RigRegistry;
-pub use serve::{MAP_SERVICE_NAME, ServeError, ServerConfig, TlsIdentity, serve};
+pub use serve::{MAP_SERVICE_NAME, ServeError, ServerConfig, serve};
 pub use service::ReadStreamLimits;
 pub use store::{SledConfig, SledStore, Store};

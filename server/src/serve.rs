@@ -1,6 +1,5 @@
 //! Running the map server on a listener until a shutdown future resolves.
 
-use crate::auth::BearerAuth;
 use crate::connection::{self, ConnectionLimits};
 use crate::convert::Limits;
 use crate::events::Events;
@@ -8,6 +7,8 @@ use crate::rigs::RigRegistry;
 use crate::service::{MapServer, ReadStreamLimits, ServiceSettings};
 use crate::store::Store;
 use crate::writer::Writer;
+use deog_proto::auth::BearerAuth;
+use deog_proto::tls::{TlsError, TlsIdentity, error_chain};
 use deog_proto::v1::map_service_server::MapServiceServer;
 use std::future::Future;
 use std::sync::Arc;
@@ -15,7 +16,7 @@ use std::time::Duration;
 use thiserror::Error;
 use tokio::net::TcpListener;
 use tokio_util::sync::CancellationToken;
-use tonic::transport::{Identity, Server, ServerTlsConfig};
+use tonic::transport::Server;
 
 /// The gRPC name of the map service, as the health service reports it.
 pub const MAP_SERVICE_NAME: &str = "deog.v1.MapService";
@@ -28,21 +29,6 @@ const REFLECTION_V1ALPHA_SERVICE_NAME: &str = "grpc.reflection.v1alpha.ServerRef
 /// unanswered before the connection is dropped.
 const KEEPALIVE_INTERVAL: Duration = Duration::from_secs(30);
 const KEEPALIVE_TIMEOUT: Duration = Duration::from_secs(20);
-
-/// A certificate chain and private key, PEM.
-#[derive(Clone)]
-pub struct TlsIdentity {
-    /// Certificate chain, PEM.
-    pub cert_pem: Vec<u8>,
-    /// Private key, PEM.
-    pub key_pem: Vec<u8>,
-}
-
-impl std::fmt::Debug for TlsIdentity {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("TlsIdentity").finish_non_exhaustive()
-    }
-}
 
 /// How the server runs.
 #[derive(Debug, Clone)]
@@ -93,9 +79,10 @@ impl Default for ServerConfig {
 /// Why the server could not run.
 #[derive(Debug, Error)]
 pub enum ServeError {
-    /// TLS could not be set up from the identity.
-    #[error("TLS setup failed: {0}")]
-    Tls(tonic::transport::Error),
+    /// TLS could not be set up from the identity: what is wrong with the
+    /// certificate or the key.
+    #[error(transparent)]
+    Tls(#[from] TlsError),
     /// The transport failed while serving.
     #[error("serving failed: {0}")]
     Transport(#[from] tonic::transport::Error),
@@ -119,6 +106,18 @@ pub async fn serve<S: Store>(
     config: ServerConfig,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), ServeError> {
+    // TLS first: a bad certificate or key leaves no writer thread behind.
+    // Keepalive pings find peers that vanished without closing (a robot
+    // that lost power holds its connection otherwise).
+    let mut builder = Server::builder()
+        .max_concurrent_streams(Some(config.max_streams_per_connection))
+        .http2_keepalive_interval(Some(KEEPALIVE_INTERVAL))
+        .http2_keepalive_timeout(Some(KEEPALIVE_TIMEOUT));
+    if let Some(identity) = &config.tls {
+        builder = builder
+            .tls_config(identity.server_config()?)
+            .map_err(|e| TlsError::Setup(error_chain(&e)))?;
+    }
     let rigs = Arc::new(RigRegistry::load(store.as_ref())?);
     let events = Arc::new(Events::new(config.event_buffer));
     let writer = Writer::start(store.clone(), events.clone(), config.write_queue)?;
@@ -167,19 +166,6 @@ pub async fn serve<S: Store>(
         .build_v1alpha()
         .map_err(|e| std::io::Error::other(e.to_string()))?;
 
-    // Keepalive pings find peers that vanished without closing (a robot
-    // that lost power holds its connection otherwise).
-    let mut builder = Server::builder()
-        .max_concurrent_streams(Some(config.max_streams_per_connection))
-        .http2_keepalive_interval(Some(KEEPALIVE_INTERVAL))
-        .http2_keepalive_timeout(Some(KEEPALIVE_TIMEOUT));
-    if let Some(tls) = &config.tls {
-        builder = builder
-            .tls_config(
-                ServerTlsConfig::new().identity(Identity::from_pem(&tls.cert_pem, &tls.key_pem)),
-            )
-            .map_err(ServeError::Tls)?;
-    }
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
     let router = builder
         .add_service(health_service)

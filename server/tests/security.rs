@@ -633,3 +633,64 @@ async fn a_stop_past_the_grace_period_closes_what_is_left() {
     restarted.unwrap().stop().await;
     drop(dir);
 }
+
+#[tokio::test]
+async fn a_bad_tls_key_is_refused_with_the_reason() {
+    // It used to be reported as "TLS setup failed: transport error".
+    let (mut identity, _) = localhost_identity();
+    identity.key_pem = b"-----BEGIN CERTIFICATE-----\nAAAA\n-----END CERTIFICATE-----\n".to_vec();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let store = deog_server::SledStore::open(&deog_server::SledConfig::new(dir.path().join("s")))
+        .expect("store");
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+        .await
+        .expect("bind");
+    let config = ServerConfig {
+        tls: Some(identity),
+        ..ServerConfig::default()
+    };
+    let error = bounded(
+        "refusal",
+        deog_server::serve(
+            std::sync::Arc::new(store),
+            listener,
+            config,
+            std::future::pending(),
+        ),
+    )
+    .await
+    .expect_err("refused");
+    let text = error.to_string();
+    assert!(text.contains("TLS key"), "{text}");
+    assert!(text.contains("no private key"), "{text}");
+    assert!(!text.contains("transport error"), "{text}");
+
+    // A key that parses but is not the certificate's is refused with the
+    // transport's reason, not its bare "transport error".
+    let (mut mismatched, _) = localhost_identity();
+    mismatched.key_pem = localhost_identity().0.key_pem;
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+        .await
+        .expect("bind");
+    let store = deog_server::SledStore::open(&deog_server::SledConfig::new(dir.path().join("t")))
+        .expect("store");
+    let result = tokio::time::timeout(
+        Duration::from_secs(2),
+        deog_server::serve(
+            std::sync::Arc::new(store),
+            listener,
+            ServerConfig {
+                tls: Some(mismatched),
+                ..ServerConfig::default()
+            },
+            std::future::pending(),
+        ),
+    )
+    .await;
+    let text = match result {
+        Ok(Err(error)) => error.to_string(),
+        other => panic!("a mismatched key was not refused: {other:?}"),
+    };
+    assert!(text.contains("TLS setup failed"), "{text}");
+    assert!(text.contains("KeyMismatch"), "{text}");
+}

@@ -16,7 +16,7 @@ impl From<SimError> for Status {
     fn from(error: SimError) -> Self {
         let code = match &error {
             SimError::Invalid { .. } => Code::InvalidArgument,
-            SimError::TooLarge { .. } => Code::ResourceExhausted,
+            SimError::TooLarge { .. } | SimError::Limit(_) => Code::ResourceExhausted,
             SimError::UnknownRobot(_) => Code::NotFound,
             SimError::RobotExists(_) => Code::AlreadyExists,
             SimError::Blocked(_) => Code::FailedPrecondition,
@@ -74,12 +74,14 @@ pub fn pose(field: &str, value: Option<&pb::Pose2>) -> Result<Pose2, SimError> {
     ))
 }
 
-/// A required velocity command: (linear m/s, angular rad/s).
+/// A required velocity command: (linear m/s, angular rad/s). Any finite
+/// speed passes: the API promises to clamp it to the robot's limits, which
+/// the robot does; NaN and infinities are refused.
 pub fn twist(field: &str, value: Option<&pb::Twist2>) -> Result<(f64, f64), SimError> {
     let t = value.ok_or_else(|| SimError::invalid(field, "is required"))?;
     Ok((
-        finite(&format!("{field}.linear"), t.linear, 1e3)?,
-        finite(&format!("{field}.angular"), t.angular, 1e3)?,
+        finite(&format!("{field}.linear"), t.linear, f64::MAX)?,
+        finite(&format!("{field}.angular"), t.angular, f64::MAX)?,
     ))
 }
 

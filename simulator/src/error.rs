@@ -38,6 +38,13 @@ pub enum SimError {
         /// Its size and the limit.
         reason: String,
     },
+    /// The simulator already holds as many robots or watch streams as it
+    /// was started to allow.
+    #[error("{0}")]
+    Limit(String),
+    /// The TLS certificate or key cannot be served.
+    #[error(transparent)]
+    Tls(#[from] deog_proto::tls::TlsError),
     /// A value given to the simulator is out of range or malformed.
     #[error("{field}: {reason}")]
     Invalid {

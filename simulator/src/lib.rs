@@ -24,7 +24,8 @@
 //!   physics steps, every robot carrying the rig of its [`SimConfig`] and
 //!   firing it on a fixed period.
 //! - [`convert`], [`service`], [`serve`](mod@serve): the gRPC edge:
-//!   `RobotService` over a shared simulation with a real-time clock.
+//!   `RobotService` over a shared simulation with a real-time clock, capped
+//!   robots and watch streams, an optional bearer token and TLS.
 //! - [`wander`]: [`Wanderer`], the wandering policy: any rig's ranges in
 //!   (judged by each beam's mount and direction), a velocity command out.
 //! - [`data_file`]: the thesis's wanderer data file, `x y theta s1 ... s16`.

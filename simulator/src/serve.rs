@@ -1,13 +1,18 @@
 //! Running the simulator's `RobotService` on a listener until a shutdown
-//! future resolves.
+//! future resolves: optionally behind the map server's bearer-token check
+//! and with TLS (both from `deog-proto`), with caps on robots and watch
+//! streams.
 
 use std::future::Future;
 use std::time::Duration;
 
+use deog_proto::auth::BearerAuth;
+use deog_proto::tls::{TlsError, TlsIdentity, error_chain};
 use deog_proto::v1::robot_service_server::RobotServiceServer;
 use tokio::net::TcpListener;
 use tokio_stream::wrappers::TcpListenerStream;
 use tokio_util::sync::CancellationToken;
+use tonic::service::interceptor::InterceptedService;
 use tonic::transport::Server;
 
 use crate::error::SimError;
@@ -20,6 +25,14 @@ pub const ROBOT_SERVICE_NAME: &str = "deog.v1.RobotService";
 /// The smallest request limit [`serve_sim`] takes: room for any sane
 /// request.
 pub const MIN_MESSAGE_BYTES: usize = 1024;
+
+/// The most robots [`SimServeConfig::max_robots`] allows: each robot costs
+/// every physics step, and past a few thousand the world falls behind real
+/// time.
+pub const MAX_ROBOTS_LIMIT: usize = 4096;
+
+/// The most watch streams [`SimServeConfig::max_watchers`] allows.
+pub const MAX_WATCHERS_LIMIT: usize = 65_536;
 
 /// How the simulator serves.
 #[derive(Debug, Clone)]
@@ -35,6 +48,17 @@ pub struct SimServeConfig {
     pub max_message_bytes: usize,
     /// How long open calls may take to finish after shutdown begins.
     pub shutdown_grace: Duration,
+    /// Robots the world may hold, 1 to [`MAX_ROBOTS_LIMIT`]; a spawn past
+    /// it is `RESOURCE_EXHAUSTED`.
+    pub max_robots: usize,
+    /// Watch streams open at once, 1 to [`MAX_WATCHERS_LIMIT`]; a watch
+    /// past it is `RESOURCE_EXHAUSTED`.
+    pub max_watchers: usize,
+    /// Bearer token every `RobotService` call must carry; `None` turns
+    /// authentication off. Health and reflection stay open.
+    pub token: Option<String>,
+    /// Serve TLS with this identity; `None` serves plain HTTP/2.
+    pub tls: Option<TlsIdentity>,
 }
 
 impl Default for SimServeConfig {
@@ -45,7 +69,51 @@ impl Default for SimServeConfig {
             stream_buffer: 64,
             max_message_bytes: 64 << 10,
             shutdown_grace: Duration::from_secs(3),
+            max_robots: 64,
+            max_watchers: 256,
+            token: None,
+            tls: None,
         }
+    }
+}
+
+impl SimServeConfig {
+    /// Checks every figure; the error names the field.
+    pub fn validate(&self) -> Result<(), SimError> {
+        if !(self.speed.is_finite() && self.speed > 0.0 && self.speed <= 1000.0) {
+            return Err(SimError::invalid(
+                "speed",
+                format!("must be in (0, 1000], got {}", self.speed),
+            ));
+        }
+        if self.max_message_bytes < MIN_MESSAGE_BYTES {
+            return Err(SimError::invalid(
+                "max_message_bytes",
+                format!(
+                    "must be at least {MIN_MESSAGE_BYTES} bytes, got {}",
+                    self.max_message_bytes
+                ),
+            ));
+        }
+        if !(1..=MAX_ROBOTS_LIMIT).contains(&self.max_robots) {
+            return Err(SimError::invalid(
+                "max_robots",
+                format!("must be 1 to {MAX_ROBOTS_LIMIT}, got {}", self.max_robots),
+            ));
+        }
+        if !(1..=MAX_WATCHERS_LIMIT).contains(&self.max_watchers) {
+            return Err(SimError::invalid(
+                "max_watchers",
+                format!(
+                    "must be 1 to {MAX_WATCHERS_LIMIT}, got {}",
+                    self.max_watchers
+                ),
+            ));
+        }
+        if self.token.as_deref().is_some_and(|t| t.trim().is_empty()) {
+            return Err(SimError::invalid("token", "must not be empty"));
+        }
+        Ok(())
     }
 }
 
@@ -57,29 +125,28 @@ pub async fn serve_sim(
     config: SimServeConfig,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), SimError> {
-    if !(config.speed.is_finite() && config.speed > 0.0 && config.speed <= 1000.0) {
-        return Err(SimError::invalid(
-            "speed",
-            format!("must be in (0, 1000], got {}", config.speed),
-        ));
-    }
-    if config.max_message_bytes < MIN_MESSAGE_BYTES {
-        return Err(SimError::invalid(
-            "max_message_bytes",
-            format!(
-                "must be at least {MIN_MESSAGE_BYTES} bytes, got {}",
-                config.max_message_bytes
-            ),
-        ));
-    }
     let stop = CancellationToken::new();
-    let server = SimServer::new(
-        sim,
-        config.speed,
-        config.stream_buffer,
-        config.max_message_bytes,
-        stop.clone(),
-    );
+    let server = SimServer::new(sim, config, stop.clone())?;
+    serve_sim_server(server, stop, listener, shutdown).await
+}
+
+/// Serves `server` (made with `stop` as its shutdown token) on `listener`
+/// until `shutdown` resolves; for callers that keep a handle on the server,
+/// as the tests do to count its watch channels.
+pub async fn serve_sim_server(
+    server: SimServer,
+    stop: CancellationToken,
+    listener: TcpListener,
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), SimError> {
+    let config = server.config().clone();
+    // TLS first: a bad certificate or key starts nothing.
+    let mut builder = Server::builder();
+    if let Some(identity) = &config.tls {
+        builder = builder
+            .tls_config(identity.server_config().map_err(SimError::Tls)?)
+            .map_err(|e| SimError::Tls(TlsError::Setup(error_chain(&e))))?;
+    }
     // At most two sonar periods per tick: a stalled process slows the world
     // instead of skipping frames.
     let max_step = Duration::from_millis(200);
@@ -112,10 +179,13 @@ pub async fn serve_sim(
         .max_message_bytes
         .saturating_mul(2)
         .saturating_add(1 << 20);
-    let service = RobotServiceServer::new(server).max_decoding_message_size(transport_limit);
+    let service = InterceptedService::new(
+        RobotServiceServer::new(server).max_decoding_message_size(transport_limit),
+        BearerAuth::new(config.token.clone()),
+    );
 
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-    let serving = Server::builder()
+    let serving = builder
         .add_service(health_service)
         .add_service(reflection)
         .add_service(reflection_v1alpha)
@@ -142,5 +212,5 @@ pub async fn serve_sim(
     };
     stop.cancel();
     let _ = clock.await;
-    result.map_err(|e| SimError::Serve(e.to_string()))
+    result.map_err(|e| SimError::Serve(error_chain(&e)))
 }

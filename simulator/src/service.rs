@@ -1,12 +1,19 @@
 //! `RobotService` over a shared [`Simulation`], and the clock that advances
 //! it in real time (times `speed`).
 //!
-//! Watch policy: each robot has a bounded broadcast of its states, one per
-//! firing of its sensors. A watcher that falls behind skips to the newest states
-//! (a warning is logged); `GetState` is always current.
+//! Watch policy: a watched robot has a bounded broadcast of its states, one
+//! per firing of its sensors. A watcher that falls behind skips to the newest
+//! states (a warning is logged); `GetState` is always current. Only robots in
+//! the world can be watched, and a robot's channel goes when its last watcher
+//! does, so watch calls cannot grow the server's memory.
+//!
+//! Limits: at most [`SimServeConfig::max_robots`] robots and
+//! [`SimServeConfig::max_watchers`] open watch streams; past either the call
+//! is `RESOURCE_EXHAUSTED`.
 
 use std::collections::HashMap;
 use std::pin::Pin;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -20,6 +27,8 @@ use tokio_util::sync::CancellationToken;
 use tonic::{Request, Response, Status};
 
 use crate::convert;
+use crate::error::SimError;
+use crate::serve::SimServeConfig;
 use crate::simulation::{RobotSnapshot, Simulation};
 
 /// States buffered per robot before a watcher counts as lagging.
@@ -27,11 +36,41 @@ const WATCH_BUFFER: usize = 256;
 
 struct Shared {
     sim: Mutex<Simulation>,
-    watchers: Mutex<HashMap<String, broadcast::Sender<Arc<pb::RobotState>>>>,
-    speed: f64,
-    stream_buffer: usize,
-    max_message_bytes: usize,
+    /// One channel per watched robot; none for robots nobody watches.
+    channels: Mutex<HashMap<String, broadcast::Sender<Arc<pb::RobotState>>>>,
+    /// Watch streams open now; shared with their slots, which need nothing
+    /// else of the server.
+    watchers: Arc<AtomicUsize>,
+    config: SimServeConfig,
     shutdown: CancellationToken,
+}
+
+/// Holds one of the [`SimServeConfig::max_watchers`] places while a watch
+/// stream is open.
+struct WatcherSlot(Arc<AtomicUsize>);
+
+impl WatcherSlot {
+    fn take(shared: &Shared) -> Result<Self, Status> {
+        let max = shared.config.max_watchers;
+        shared
+            .watchers
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                (n < max).then_some(n + 1)
+            })
+            .map_err(|_| {
+                Status::from(SimError::Limit(format!(
+                    "the simulator already serves {max} watch streams (--max-watchers); \
+                     close one first"
+                )))
+            })?;
+        Ok(Self(Arc::clone(&shared.watchers)))
+    }
+}
+
+impl Drop for WatcherSlot {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::AcqRel);
+    }
 }
 
 /// The `RobotService` implementation; cheap to clone.
@@ -43,32 +82,54 @@ pub struct SimServer {
 impl std::fmt::Debug for SimServer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("SimServer")
-            .field("speed", &self.shared.speed)
+            .field("speed", &self.shared.config.speed)
             .finish_non_exhaustive()
     }
 }
 
 impl SimServer {
-    /// Serves `sim`, run at `speed` simulated seconds per wall-clock second,
-    /// refusing requests over `max_message_bytes`; `shutdown` ends the clock
-    /// and the watch streams.
+    /// Serves `sim` as `config` says (checked here); cancelling `shutdown`
+    /// ends the clock and the watch streams.
     pub fn new(
         sim: Simulation,
-        speed: f64,
-        stream_buffer: usize,
-        max_message_bytes: usize,
+        config: SimServeConfig,
         shutdown: CancellationToken,
-    ) -> Self {
-        Self {
+    ) -> Result<Self, SimError> {
+        config.validate()?;
+        Ok(Self {
             shared: Arc::new(Shared {
                 sim: Mutex::new(sim),
-                watchers: Mutex::new(HashMap::new()),
-                speed,
-                stream_buffer: stream_buffer.max(1),
-                max_message_bytes,
+                channels: Mutex::new(HashMap::new()),
+                watchers: Arc::new(AtomicUsize::new(0)),
+                config,
                 shutdown,
             }),
-        }
+        })
+    }
+
+    /// How it serves.
+    pub fn config(&self) -> &SimServeConfig {
+        &self.shared.config
+    }
+
+    /// Watch streams open now.
+    pub fn watcher_count(&self) -> usize {
+        self.shared.watchers.load(Ordering::Acquire)
+    }
+
+    /// Robots with a state channel now: those somebody watches (a channel
+    /// outlives its last watcher until the next firing of the sensors).
+    pub fn watch_channel_count(&self) -> usize {
+        self.channels().len()
+    }
+
+    fn channels(&self) -> MutexGuard<'_, HashMap<String, broadcast::Sender<Arc<pb::RobotState>>>> {
+        // A panic while holding the lock would be a bug; the map is still
+        // usable, so keep serving it.
+        self.shared
+            .channels
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 
     fn sim(&self) -> MutexGuard<'_, Simulation> {
@@ -84,20 +145,27 @@ impl SimServer {
         Ok(convert::check_size(
             what,
             message,
-            self.shared.max_message_bytes,
+            self.shared.config.max_message_bytes,
         )?)
     }
 
-    fn sender(&self, robot: &str) -> broadcast::Sender<Arc<pb::RobotState>> {
-        let mut watchers = self
-            .shared
-            .watchers
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        watchers
-            .entry(robot.to_string())
+    /// The current state of robot `name` and a subscription to its next
+    /// ones, taken together under the simulation's lock so that no firing
+    /// falls between the two. NOT_FOUND, and no channel made, when there is
+    /// no such robot.
+    fn subscribe(
+        &self,
+        name: &str,
+    ) -> Result<(RobotSnapshot, broadcast::Receiver<Arc<pb::RobotState>>), SimError> {
+        let sim = self.sim();
+        let current = sim.snapshot(name)?;
+        let states = self
+            .channels()
+            .entry(name.to_string())
             .or_insert_with(|| broadcast::channel(WATCH_BUFFER).0)
-            .clone()
+            .subscribe();
+        drop(sim);
+        Ok((current, states))
     }
 
     /// Advances the simulation in real time until shutdown, every `tick` of
@@ -115,7 +183,7 @@ impl SimServer {
                 _ = interval.tick() => {}
             }
             let now = Instant::now();
-            let dt = (now - last).as_secs_f64() * self.shared.speed;
+            let dt = (now - last).as_secs_f64() * self.shared.config.speed;
             last = now;
             let result = self
                 .sim()
@@ -123,10 +191,17 @@ impl SimServer {
             if let Err(error) = result {
                 tracing::error!(%error, "simulation step failed");
             }
+            if fired.is_empty() {
+                continue;
+            }
+            let mut channels = self.channels();
+            // A channel nobody listens to any more goes; a new watcher makes
+            // a new one.
+            channels.retain(|_, sender| sender.receiver_count() > 0);
             for state in fired.drain(..) {
-                let _ = self
-                    .sender(&state.name)
-                    .send(Arc::new(convert::robot_state(&state)));
+                if let Some(sender) = channels.get(&state.name) {
+                    let _ = sender.send(Arc::new(convert::robot_state(&state)));
+                }
             }
         }
     }
@@ -160,7 +235,7 @@ impl SimServer {
             }),
             sonar_ring_radius_m: first.map_or(0.0, |s| s.mount.x.hypot(s.mount.y)),
             robot_radius_m: rig.body_radius(),
-            speed: self.shared.speed,
+            speed: self.shared.config.speed,
             rig: Some(deog_proto::rig::rig_to_wire(rig)),
         }
     }
@@ -185,7 +260,18 @@ impl RobotService for SimServer {
             Some(p) => Some(convert::pose("pose", Some(p))?),
             None => None,
         };
-        let state = self.sim().spawn(&name, pose)?;
+        let state = {
+            let mut sim = self.sim();
+            let max = self.shared.config.max_robots;
+            if sim.robot_count() >= max {
+                return Err(SimError::Limit(format!(
+                    "the world already holds {max} robots, the most this simulator \
+                     takes (--max-robots)"
+                ))
+                .into());
+            }
+            sim.spawn(&name, pose)?
+        };
         tracing::info!(robot = %name, x = state.true_pose.x, y = state.true_pose.y, "robot spawned");
         Ok(reply(state))
     }
@@ -246,13 +332,13 @@ impl RobotService for SimServer {
     ) -> Result<Response<Self::WatchStateStream>, Status> {
         self.check_size("RobotRef", request.get_ref())?;
         let name = convert::robot_name("name", &request.get_ref().name)?;
-        // Subscribe before reading the current state, so no firing falls
-        // between the two.
-        let mut states = self.sender(&name).subscribe();
-        let current = self.sim().snapshot(&name)?;
-        let (tx, rx) = mpsc::channel(self.shared.stream_buffer);
+        let (current, mut states) = self.subscribe(&name)?;
+        let slot = WatcherSlot::take(&self.shared)?;
+        let (tx, rx) = mpsc::channel(self.shared.config.stream_buffer.max(1));
         let shutdown = self.shared.shutdown.clone();
         tokio::spawn(async move {
+            // Held until the stream ends.
+            let _slot = slot;
             let mut last = current.sequence;
             if tx.send(Ok(convert::robot_state(&current))).await.is_err() {
                 return;

@@ -110,6 +110,9 @@ pub struct ServerProcess {
     child: Option<Child>,
     /// The service its health reports on.
     service: &'static str,
+    /// The CA certificate (PEM) its TLS certificate for "localhost" is
+    /// checked against; `None` for a plain process.
+    tls_ca: Option<Vec<u8>>,
 }
 
 impl ServerProcess {
@@ -134,12 +137,23 @@ impl ServerProcess {
     /// arguments and waits until its health service reports the robot
     /// service as serving (bounded: 30 s).
     pub async fn start_sim(world: &str, extra: &[&str]) -> Self {
+        Self::start_sim_with(world, extra, None).await
+    }
+
+    /// As [`ServerProcess::start_sim`] for a simulator serving TLS with a
+    /// certificate for "localhost" that `ca_pem` vouches for (given in
+    /// `extra`), waiting for its health over TLS.
+    pub async fn start_sim_tls(world: &str, extra: &[&str], ca_pem: &[u8]) -> Self {
+        Self::start_sim_with(world, extra, Some(ca_pem.to_vec())).await
+    }
+
+    async fn start_sim_with(world: &str, extra: &[&str], tls_ca: Option<Vec<u8>>) -> Self {
         let addr = free_loopback_addr();
         let mut args: Vec<OsString> = vec!["sim".into(), "--world".into(), world.into()];
         args.push("--listen".into());
         args.push(addr.to_string().into());
         args.extend(extra.iter().map(OsString::from));
-        Self::spawn(args, addr, "deog.v1.RobotService").await
+        Self::spawn_with(args, addr, "deog.v1.RobotService", tls_ca).await
     }
 
     /// As [`ServerProcess::start`], with the process allowed at most
@@ -157,11 +171,20 @@ impl ServerProcess {
             data.into(),
         ];
         args.extend(extra.iter().map(OsString::from));
-        Self::spawn_program("sh".as_ref(), args, addr, "deog.v1.MapService").await
+        Self::spawn_program("sh".as_ref(), args, addr, "deog.v1.MapService", None).await
     }
 
     async fn spawn(args: Vec<OsString>, addr: SocketAddr, service: &'static str) -> Self {
-        Self::spawn_program(&deog_binary(), args, addr, service).await
+        Self::spawn_program(&deog_binary(), args, addr, service, None).await
+    }
+
+    async fn spawn_with(
+        args: Vec<OsString>,
+        addr: SocketAddr,
+        service: &'static str,
+        tls_ca: Option<Vec<u8>>,
+    ) -> Self {
+        Self::spawn_program(&deog_binary(), args, addr, service, tls_ca).await
     }
 
     async fn spawn_program(
@@ -169,6 +192,7 @@ impl ServerProcess {
         args: Vec<OsString>,
         addr: SocketAddr,
         service: &'static str,
+        tls_ca: Option<Vec<u8>>,
     ) -> Self {
         let child = Command::new(program)
             .args(&args)
@@ -186,14 +210,34 @@ impl ServerProcess {
             addr,
             child: Some(child),
             service,
+            tls_ca,
         };
         server.wait_ready().await;
         server
     }
 
-    /// `http://<addr>`.
+    /// `http://<addr>`, or `https://<addr>` when it serves TLS.
     pub fn url(&self) -> String {
-        format!("http://{}", self.addr)
+        let scheme = if self.tls_ca.is_some() {
+            "https"
+        } else {
+            "http"
+        };
+        format!("{scheme}://{}", self.addr)
+    }
+
+    fn endpoint(&self) -> Option<tonic::transport::Endpoint> {
+        let endpoint = tonic::transport::Channel::from_shared(self.url()).ok()?;
+        match &self.tls_ca {
+            None => Some(endpoint),
+            Some(ca) => endpoint
+                .tls_config(
+                    tonic::transport::ClientTlsConfig::new()
+                        .ca_certificate(tonic::transport::Certificate::from_pem(ca))
+                        .domain_name("localhost"),
+                )
+                .ok(),
+        }
     }
 
     /// The process id.
@@ -203,7 +247,7 @@ impl ServerProcess {
 
     async fn wait_ready(&self) {
         for _ in 0..300 {
-            if let Ok(endpoint) = tonic::transport::Channel::from_shared(self.url())
+            if let Some(endpoint) = self.endpoint()
                 && let Ok(channel) = endpoint.connect().await
             {
                 let mut health = tonic_health::pb::health_client::HealthClient::new(channel);

@@ -1,4 +1,5 @@
-//! Optional bearer-token authentication of the map service.
+//! Optional bearer-token authentication, the one check both servers (the
+//! map server and the simulator) put in front of their service.
 
 use tonic::service::Interceptor;
 use tonic::{Request, Status};
@@ -26,6 +27,11 @@ impl BearerAuth {
             expected: token.map(|t| t.trim().as_bytes().to_vec()),
         }
     }
+
+    /// Whether calls must carry a token.
+    pub fn enabled(&self) -> bool {
+        self.expected.is_some()
+    }
 }
 
 /// The token of a `Bearer <token>` header value.
@@ -35,9 +41,26 @@ fn bearer_token(value: &[u8]) -> Option<&[u8]> {
     scheme.eq_ignore_ascii_case(b"bearer").then_some(token)
 }
 
-/// Compares in time independent of where the inputs differ.
-fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+/// Whether `given` equals `expected`, in time that depends on the length of
+/// `given` only: every byte of it is compared (against `expected` repeated)
+/// whatever the lengths, so neither where the tokens differ nor the length
+/// of the expected one shows in the time taken.
+pub fn constant_time_eq(given: &[u8], expected: &[u8]) -> bool {
+    // An empty expected token would leave nothing to cycle over; compare
+    // against a zero byte instead (the length check still refuses).
+    let pad = [0u8];
+    let against = if expected.is_empty() {
+        &pad[..]
+    } else {
+        expected
+    };
+    let differ = given
+        .iter()
+        .zip(against.iter().cycle())
+        .fold(0u8, |acc, (x, y)| acc | (x ^ y));
+    // Both folded in without a branch on either.
+    let length_differs = u8::from(given.len() != expected.len());
+    (differ | length_differs) == 0
 }
 
 impl Interceptor for BearerAuth {
@@ -63,17 +86,57 @@ impl Interceptor for BearerAuth {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::time::{Duration, Instant};
 
     #[test]
     fn compares_tokens_exactly() {
         assert!(constant_time_eq(b"Bearer abc", b"Bearer abc"));
         assert!(!constant_time_eq(b"Bearer abc", b"Bearer abd"));
         assert!(!constant_time_eq(b"Bearer abc", b"Bearer abcd"));
+        assert!(!constant_time_eq(b"Bearer abcd", b"Bearer abc"));
+        // A token repeated is not the token, though it matches the cycle.
+        assert!(!constant_time_eq(b"abcabc", b"abc"));
+        assert!(!constant_time_eq(b"", b"abc"));
+        assert!(!constant_time_eq(b"abc", b""));
+        assert!(constant_time_eq(b"", b""));
+    }
+
+    /// The fastest of `runs` comparisons of `given` with `expected`.
+    fn fastest(given: &[u8], expected: &[u8], runs: usize) -> Duration {
+        (0..runs)
+            .map(|_| {
+                let start = Instant::now();
+                std::hint::black_box(constant_time_eq(
+                    std::hint::black_box(given),
+                    std::hint::black_box(expected),
+                ));
+                start.elapsed()
+            })
+            .min()
+            .unwrap_or_default()
+    }
+
+    #[test]
+    fn a_token_of_another_length_is_compared_in_full() {
+        // It used to return at once on a length mismatch, which told an
+        // attacker the token's length. A long guess of the wrong length
+        // must take about as long as one of the right length.
+        let expected = vec![b'k'; 32];
+        let mut right_length = vec![b'k'; 1 << 20];
+        *right_length.last_mut().expect("not empty") = b'x';
+        let long_guess = vec![b'k'; (1 << 20) + 1];
+        let same = fastest(&right_length, &right_length.clone(), 15);
+        let other = fastest(&long_guess, &expected, 15);
+        assert!(
+            other * 10 >= same,
+            "a wrong-length token took {other:?}, a right-length one {same:?}"
+        );
     }
 
     #[test]
     fn refuses_missing_and_wrong_tokens() {
         let mut auth = BearerAuth::new(Some("s3cret\n".into()));
+        assert!(auth.enabled());
         assert!(auth.call(Request::new(())).is_err());
         let mut wrong = Request::new(());
         wrong
@@ -95,6 +158,8 @@ mod tests {
             ("Basic s3cret", false),
             ("s3cret", false),
             ("Bearer", false),
+            ("Bearer s3cre", false),
+            ("Bearer s3crets3cret", false),
         ] {
             let mut request = Request::new(());
             request
@@ -102,6 +167,7 @@ mod tests {
                 .insert("authorization", value.parse().unwrap());
             assert_eq!(auth.call(request).is_ok(), ok, "{value:?}");
         }
+        assert!(!BearerAuth::new(None).enabled());
         assert!(BearerAuth::new(None).call(Request::new(())).is_ok());
     }
 }
