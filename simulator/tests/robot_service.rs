@@ -120,7 +120,14 @@ async fn eight_robots_are_driven_at_once_and_each_moves_its_own_way() {
                 })
                 .await
                 .expect("drive");
-            // Bounded wait for one simulated second of driving.
+            // Bounded wait for one simulated second of driving, counted from
+            // the drive (on a busy machine the robot may stand a while
+            // between its spawn and its drive at 20x).
+            let start = client
+                .get_state(pb::RobotRef { name: name.clone() })
+                .await
+                .expect("state")
+                .into_inner();
             let mut state = start.clone();
             for _ in 0..200 {
                 tokio::time::sleep(Duration::from_millis(10)).await;
