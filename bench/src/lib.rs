@@ -44,9 +44,14 @@
 //!   reads and the cell file it writes.
 //! - `python_script`: a peer's side as a child Python process (OctoMap's,
 //!   amcl's): the built-in script written out, probed, run.
+//! - [`fuzz`]: `deog bench fuzz`, every decoder of outside input (tile
+//!   cells, the servers' wire requests, rig, map, world, data and log
+//!   files) fed seeded mutated bytes for a fixed time: execs, crashes and
+//!   hangs, crashing inputs saved.
 //! - [`option_error`]: [`OptionError`], an option out of its range or
 //!   options that do not go together.
 
+pub mod fuzz;
 pub mod laser_mapping;
 pub mod localize;
 pub mod localize_memory;

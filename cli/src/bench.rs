@@ -3,6 +3,7 @@
 
 use anyhow::Result;
 use clap::{Args, Subcommand};
+use deog_bench::fuzz::FuzzOptions;
 use deog_bench::laser_mapping::LaserMappingOptions;
 use deog_bench::localize::LocalizeOptions;
 use deog_bench::localize_memory::LocalizeMemoryOptions;
@@ -48,6 +49,11 @@ enum BenchTarget {
     /// readings: frames/s, cell updates/s, each map judged against the
     /// world.
     SonarMapping(SonarMappingOptions),
+    /// Every decoder of outside input (tile cells, the servers' wire
+    /// requests, rig, map, world, data and log files) fed seeded mutated
+    /// bytes for a fixed time per target: execs, crashes, hangs. Fails if
+    /// any input panicked; those inputs are saved.
+    Fuzz(FuzzOptions),
 }
 
 /// Runs `deog bench`.
@@ -60,5 +66,6 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchTarget::LaserMapping(options) => deog_bench::laser_mapping::run(options),
         BenchTarget::Real(options) => deog_bench::real::run(options),
         BenchTarget::SonarMapping(options) => deog_bench::sonar_mapping::run(options),
+        BenchTarget::Fuzz(options) => deog_bench::fuzz::run(options),
     }
 }
