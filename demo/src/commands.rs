@@ -137,10 +137,13 @@ pub(crate) fn localize(
     robot: &PlannedRobot,
     addresses: &Addresses,
 ) -> Vec<OsString> {
-    let specular: Vec<OsString> = match plan.sonar.specular_angle_deg() {
+    let mut extra: Vec<OsString> = match plan.sonar.specular_angle_deg() {
         Some(angle) => os(&["--specular-angle", &angle.to_string()]),
         None => Vec::new(),
     };
+    if plan.every_frame {
+        extra.push("--every-frame".into());
+    }
     os(&[
         "localize",
         "--robot",
@@ -155,7 +158,7 @@ pub(crate) fn localize(
         &addresses.server_url(),
     ])
     .into_iter()
-    .chain(specular)
+    .chain(extra)
     .collect()
 }
 
@@ -211,6 +214,20 @@ mod tests {
             "localize --robot scout-2 --map demo --idle-exit 3 --seed 2002 \
              --server http://127.0.0.1:5001"
         );
+    }
+
+    #[test]
+    fn every_frame_goes_to_the_localizers() {
+        let addresses = Addresses {
+            server: "127.0.0.1:5001".parse().expect("address"),
+            sim: "127.0.0.1:5002".parse().expect("address"),
+        };
+        let every = plan(&["--every-frame"]).expect("valid");
+        let command = line(&localize(&every, &every.robots[0], &addresses));
+        assert!(command.ends_with(" --every-frame"), "{command}");
+        let keeping_up = plan(&[]).expect("valid");
+        let command = line(&localize(&keeping_up, &keeping_up.robots[0], &addresses));
+        assert!(!command.contains("--every-frame"), "{command}");
     }
 
     #[test]

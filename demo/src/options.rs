@@ -57,6 +57,12 @@ pub struct DemoOptions {
     /// are printed).
     #[arg(long)]
     pub keep: bool,
+    /// The localizers correct with every frame, however far behind their
+    /// robots they fall (by default one that falls behind skips to the
+    /// newest frame within a second): for a machine too slow for the
+    /// demo's pace, where reaching a pose matters more than keeping time.
+    #[arg(long)]
+    pub every_frame: bool,
     /// Folder for the map, the plots, report.md, report.json, the
     /// processes' logs and the server's data; its earlier demo files are
     /// replaced.

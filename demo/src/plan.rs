@@ -45,6 +45,8 @@ pub(crate) struct DemoPlan {
     pub out: PathBuf,
     /// Whether the map server is left running at the end.
     pub keep: bool,
+    /// Whether the localizers correct with every frame.
+    pub every_frame: bool,
 }
 
 impl DemoPlan {
@@ -75,6 +77,7 @@ impl DemoPlan {
             schedule,
             out: options.out.clone(),
             keep: options.keep,
+            every_frame: options.every_frame,
         })
     }
 
