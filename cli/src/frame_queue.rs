@@ -2,6 +2,7 @@
 //! follower (`deog map`, `deog localize`) can take whatever has arrived at
 //! once, and stop when the stream ends or goes quiet.
 
+use std::collections::VecDeque;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
@@ -83,10 +84,114 @@ impl FrameQueue {
     }
 }
 
+/// Frames kept waiting at most while catching up (at 10 a second, 100 s of
+/// them); older ones are skipped.
+const MOST_PENDING: usize = 1024;
+
+/// A follower's rule for frames that waited while it worked: correct with
+/// the newest within `max_skip_s` of the one in hand (the odometry carries
+/// the particles over those skipped); keep the rest for the next turn.
+pub(crate) struct CatchUp {
+    pending: VecDeque<pb::SonarFrame>,
+    max_skip_s: f64,
+    skipped: u64,
+}
+
+impl CatchUp {
+    pub(crate) fn new(max_skip_s: f64) -> Self {
+        Self {
+            pending: VecDeque::new(),
+            max_skip_s,
+            skipped: 0,
+        }
+    }
+
+    /// The oldest frame kept from an earlier turn.
+    pub(crate) fn next_waiting(&mut self) -> Option<pb::SonarFrame> {
+        self.pending.pop_front()
+    }
+
+    /// Takes `waiting` behind the kept frames and returns the frame to use
+    /// in place of `frame`: the newest within reach, or with `first` (a
+    /// filter that has seen no frame has no odometry to carry) the newest
+    /// of all. A follower far slower than its robot keeps only the newest
+    /// [`MOST_PENDING`].
+    pub(crate) fn newest_within_reach(
+        &mut self,
+        mut frame: pb::SonarFrame,
+        waiting: Vec<pb::SonarFrame>,
+        first: bool,
+    ) -> pb::SonarFrame {
+        self.pending.extend(waiting);
+        let reach = if first {
+            f64::INFINITY
+        } else {
+            frame.time_s + self.max_skip_s
+        };
+        while self
+            .pending
+            .front()
+            .is_some_and(|next| next.time_s <= reach)
+        {
+            if let Some(next) = self.pending.pop_front() {
+                frame = next;
+                self.skipped += 1;
+            }
+        }
+        while self.pending.len() > MOST_PENDING {
+            self.pending.pop_front();
+            self.skipped += 1;
+        }
+        frame
+    }
+
+    /// Frames passed over so far.
+    pub(crate) fn skipped(&self) -> u64 {
+        self.skipped
+    }
+}
+
 impl Drop for FrameQueue {
     fn drop(&mut self) {
         if let Some(reader) = &self.reader {
             reader.abort();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(sequence: u64) -> pb::SonarFrame {
+        pb::SonarFrame {
+            sequence,
+            time_s: sequence as f64 * 0.1,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn catching_up_skips_at_most_the_reach_and_keeps_the_rest() {
+        let mut catch_up = CatchUp::new(1.0);
+        // The first frame goes straight to the newest.
+        let waiting: Vec<_> = (2..=40).map(frame).collect();
+        assert_eq!(
+            catch_up
+                .newest_within_reach(frame(1), waiting, true)
+                .sequence,
+            40
+        );
+        assert_eq!(catch_up.skipped(), 39);
+        // Later, at most a second (10 frames) beyond the one in hand.
+        let waiting: Vec<_> = (42..=70).map(frame).collect();
+        assert_eq!(
+            catch_up
+                .newest_within_reach(frame(41), waiting, false)
+                .sequence,
+            51
+        );
+        assert_eq!(catch_up.next_waiting().map(|f| f.sequence), Some(52));
+        assert_eq!(catch_up.skipped(), 49);
     }
 }

@@ -7,7 +7,6 @@ mod server;
 
 use server::{ServerTiles, estimate_message, log_estimate};
 
-use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail, ensure};
@@ -22,20 +21,15 @@ use deog_robot_client::convert::{cell_box_from_wire, pose_from_wire};
 use deog_robot_client::{MapClient, TileChange, TileWatch};
 
 use crate::connection::ConnectionArgs;
-use crate::frame_queue::FrameQueue;
+use crate::frame_queue::{CatchUp, FrameQueue};
 use crate::pose_args::InitialPose;
 use crate::rig_args::{load_rig, publish_rig};
 use deog_localizer::sensors::{LikelihoodFieldParams, SensorChoice};
 use deog_proto::rig::frame_rig_name;
-use deog_proto::v1 as pb;
 
 /// A sensor update that takes this long is logged with what it did: the
 /// robot's frames come ten a second.
 const SLOW_STEP: Duration = Duration::from_millis(100);
-
-/// Frames kept waiting at most while keeping up (at 10 a second, 100 s of
-/// them); older ones are skipped.
-const MOST_PENDING: usize = 1024;
 
 /// Options of `deog localize`.
 #[derive(Debug, Args)]
@@ -437,11 +431,10 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     );
     let keep_up = !args.every_frame && args.from == 0 && args.to == 0;
     let (mut processed, mut corrections, mut last_sequence) = (0u64, 0u64, 0u64);
-    let mut skipped = 0u64;
     let mut first = Some(first);
-    let mut pending: VecDeque<pb::SonarFrame> = VecDeque::new();
+    let mut catch_up = CatchUp::new(args.max_skip_s);
     loop {
-        let next = match first.take().or_else(|| pending.pop_front()) {
+        let next = match first.take().or_else(|| catch_up.next_waiting()) {
             Some(frame) => Ok(Some(frame)),
             None => runtime.block_on(async {
                 tokio::select! {
@@ -452,30 +445,8 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         };
         let Some(mut frame) = next? else { break };
         if keep_up {
-            // Frames that waited while the filter worked: the newest within
-            // reach is corrected with, the odometry carries the particles
-            // over the others. The first goes straight to the newest: a
-            // filter that has seen no frame has no odometry to carry.
-            pending.extend(runtime.block_on(queue.ready()));
-            let reach = if processed > 0 {
-                frame.time_s + args.max_skip_s
-            } else {
-                f64::INFINITY
-            };
-            while let Some(next) = pending.front() {
-                if next.time_s > reach {
-                    break;
-                }
-                if let Some(next) = pending.pop_front() {
-                    frame = next;
-                    skipped += 1;
-                }
-            }
-            // A localizer far slower than its robot keeps the newest.
-            while pending.len() > MOST_PENDING {
-                pending.pop_front();
-                skipped += 1;
-            }
+            let waiting = runtime.block_on(queue.ready());
+            frame = catch_up.newest_within_reach(frame, waiting, processed == 0);
         }
         if frame.rig != first_rig_field {
             bail!(
@@ -540,9 +511,10 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     drop(changes);
     let map = localizer.map();
     println!(
-        "{} on {}: {processed} frames, {corrections} sensor updates, {skipped} frames skipped to keep up, {} range tables built, cache {:.1} MiB",
+        "{} on {}: {processed} frames, {corrections} sensor updates, {} frames skipped to keep up, {} range tables built, cache {:.1} MiB",
         args.robot,
         args.map,
+        catch_up.skipped(),
         map.stats().tables_built,
         map.bytes() as f64 / f64::from(1 << 20)
     );
