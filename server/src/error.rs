@@ -71,6 +71,10 @@ pub enum StoreError {
     /// The device under the store is full: writes fail until it has room.
     #[error("the store cannot write: {0}")]
     OutOfSpace(String),
+    /// The store cannot serve the call now (it is recovering from a failed
+    /// write); the call may succeed later.
+    #[error("the store is unavailable: {0}")]
+    Unavailable(String),
     /// A group of writes was not committed; `reason` is the error that
     /// stopped it, already worded (every write of the group gets it).
     #[error("{reason}")]
@@ -134,7 +138,9 @@ impl From<StoreError> for Status {
             StoreError::UnknownRig { .. } | StoreError::SequenceOutOfOrder { .. } => {
                 Code::FailedPrecondition
             }
-            StoreError::ShuttingDown | StoreError::OutOfSpace(_) => Code::Unavailable,
+            StoreError::ShuttingDown | StoreError::OutOfSpace(_) | StoreError::Unavailable(_) => {
+                Code::Unavailable
+            }
             StoreError::NotCommitted { out_of_space, .. } => {
                 if *out_of_space {
                     Code::Unavailable

@@ -6,7 +6,7 @@ use crate::events::Events;
 use crate::rigs::RigRegistry;
 use crate::service::{MapServer, ReadStreamLimits, ServiceSettings};
 use crate::store::Store;
-use crate::writer::Writer;
+use crate::writer::{StoreHealth, Writer};
 use deog_proto::auth::BearerAuth;
 use deog_proto::tls::{TlsError, TlsIdentity, error_chain};
 use deog_proto::v1::map_service_server::MapServiceServer;
@@ -15,6 +15,7 @@ use std::sync::Arc;
 use std::time::Duration;
 use thiserror::Error;
 use tokio::net::TcpListener;
+use tokio::sync::watch;
 use tokio_util::sync::CancellationToken;
 use tonic::transport::Server;
 
@@ -97,6 +98,33 @@ pub enum ServeError {
     Rigs(#[from] crate::error::StoreError),
 }
 
+/// Turns the writer's view of the store into the health service's status:
+/// NOT_SERVING while the store cannot write, SERVING once it recovered.
+/// Stops at shutdown, which sets NOT_SERVING for good.
+async fn report_store_health(
+    mut store: watch::Receiver<StoreHealth>,
+    health: tonic_health::server::HealthReporter,
+    shutdown: CancellationToken,
+) {
+    loop {
+        tokio::select! {
+            () = shutdown.cancelled() => return,
+            changed = store.changed() => {
+                if changed.is_err() {
+                    return;
+                }
+            }
+        }
+        let status = match &*store.borrow_and_update() {
+            StoreHealth::Writable => tonic_health::ServingStatus::Serving,
+            StoreHealth::Failing { .. } => tonic_health::ServingStatus::NotServing,
+        };
+        if !shutdown.is_cancelled() {
+            health.set_service_status(MAP_SERVICE_NAME, status).await;
+        }
+    }
+}
+
 /// Serves the map service, health and reflection on `listener` until
 /// `shutdown` resolves; then stops long-lived streams, lets in-flight calls
 /// finish (up to the grace period), and flushes the store.
@@ -146,6 +174,11 @@ pub async fn serve<S: Store>(
     health
         .set_service_status(MAP_SERVICE_NAME, tonic_health::ServingStatus::Serving)
         .await;
+    tokio::spawn(report_store_health(
+        writer.health(),
+        health.clone(),
+        stop_streams.clone(),
+    ));
     // Advertise exactly what this process serves: the deog descriptor set
     // also describes the simulator's service, which lives elsewhere.
     // Both versions of reflection: grpcurl asks v1, many tools (Python's

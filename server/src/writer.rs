@@ -18,10 +18,15 @@ use std::collections::hash_map::Entry;
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::Arc;
 use std::thread::JoinHandle;
-use tokio::sync::{mpsc, oneshot};
+use std::time::{Duration, Instant};
+use tokio::sync::{mpsc, oneshot, watch};
 
 /// Most requests taken into one group commit.
 const MAX_GROUP: usize = 512;
+/// How often a writer whose store failed tries to recover it, and how
+/// often it looks for writes to refuse meanwhile.
+const RECOVERY_INTERVAL: Duration = Duration::from_secs(1);
+const REFUSAL_POLL: Duration = Duration::from_millis(20);
 
 /// A batch of tile deltas from one client, decoded and checked.
 #[derive(Debug)]
@@ -80,10 +85,24 @@ impl std::fmt::Debug for WriterHandle {
     }
 }
 
+/// Whether the store takes writes, as the writer last found it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum StoreHealth {
+    /// The last commit (or recovery) landed.
+    Writable,
+    /// A commit failed and the store has not recovered yet: writes are
+    /// refused with this reason.
+    Failing {
+        /// The error that made the commit fail.
+        reason: String,
+    },
+}
+
 /// The writer thread.
 pub struct Writer {
     handle: WriterHandle,
     thread: Option<JoinHandle<Result<(), StoreError>>>,
+    health: watch::Receiver<StoreHealth>,
 }
 
 impl std::fmt::Debug for Writer {
@@ -100,18 +119,25 @@ impl Writer {
         queue: usize,
     ) -> std::io::Result<Self> {
         let (sender, receiver) = mpsc::channel(queue.max(1));
+        let (health_sender, health) = watch::channel(StoreHealth::Writable);
         let thread = std::thread::Builder::new()
             .name("deog-writer".into())
-            .spawn(move || run(store.as_ref(), &events, receiver))?;
+            .spawn(move || run(store.as_ref(), &events, receiver, &health_sender))?;
         Ok(Self {
             handle: WriterHandle { sender },
             thread: Some(thread),
+            health,
         })
     }
 
     /// A handle for sending writes.
     pub fn handle(&self) -> WriterHandle {
         self.handle.clone()
+    }
+
+    /// Follows whether the store takes writes; ends when the writer stops.
+    pub fn health(&self) -> watch::Receiver<StoreHealth> {
+        self.health.clone()
     }
 
     /// Finishes every queued write, flushes, and stops the thread. Writes
@@ -186,11 +212,13 @@ impl WriterHandle {
 }
 
 /// Applies the writes as they come, a group at a time, until stopped;
-/// returns the final flush's outcome.
+/// returns the final flush's outcome. After a failed commit it refuses
+/// writes and tries to recover the store until it can write again.
 fn run<S: Store>(
     store: &S,
     events: &Events,
     mut receiver: mpsc::Receiver<WriteOp>,
+    health: &watch::Sender<StoreHealth>,
 ) -> Result<(), StoreError> {
     let mut stopping = false;
     while !stopping {
@@ -208,33 +236,149 @@ fn run<S: Store>(
             stopping = true;
             group.truncate(at);
         }
-        Group::new(store).run(group, events);
+        if let Some((failure, unconfirmed)) = Group::new(store).run(group, events) {
+            if !stopping {
+                stopping = recover(store, events, &mut receiver, health, failure, unconfirmed);
+            }
+        }
     }
     receiver.close();
     // Anything still queued was never accepted.
     while let Ok(op) = receiver.try_recv() {
-        refuse(op);
+        refuse(op, || StoreError::ShuttingDown);
     }
     let flushed = store.flush();
     tracing::debug!("writer stopped");
     flushed
 }
 
-fn refuse(op: WriteOp) {
+/// After a failed commit: says so through `health`, then until the store
+/// recovers refuses every write with the reason and tries to recover it
+/// every [`RECOVERY_INTERVAL`]. Once recovered, tells watchers of the
+/// failed group's changes that reached the disk after all. Returns true if
+/// the server stopped meanwhile.
+fn recover<S: Store>(
+    store: &S,
+    events: &Events,
+    receiver: &mut mpsc::Receiver<WriteOp>,
+    health: &watch::Sender<StoreHealth>,
+    failure: GroupFailure,
+    unconfirmed: Unconfirmed,
+) -> bool {
+    let failed_at = Instant::now();
+    let reason = failure.reason;
+    health.send_replace(StoreHealth::Failing {
+        reason: reason.clone(),
+    });
+    tracing::error!(%reason, "the store cannot write: writes are refused until it recovers");
+    let mut attempts = 0u64;
+    let mut next_attempt = failed_at;
+    loop {
+        let now = Instant::now();
+        if now >= next_attempt {
+            attempts += 1;
+            match store.recover(&reason) {
+                Ok(()) => break,
+                Err(error) => {
+                    // A line per attempt would flood the log: one a minute.
+                    if attempts % 60 == 1 {
+                        tracing::warn!(%error, attempts, "the store has not recovered yet");
+                    }
+                    next_attempt = now + RECOVERY_INTERVAL;
+                }
+            }
+        }
+        loop {
+            match receiver.try_recv() {
+                Ok(WriteOp::Stop) | Err(mpsc::error::TryRecvError::Disconnected) => return true,
+                Ok(op) => refuse(op, || {
+                    StoreError::Unavailable(format!(
+                        "the store cannot write ({reason}); the server retries every second"
+                    ))
+                }),
+                Err(mpsc::error::TryRecvError::Empty) => break,
+            }
+        }
+        std::thread::sleep(REFUSAL_POLL);
+    }
+    unconfirmed.announce_survivors(store, events);
+    health.send_replace(StoreHealth::Writable);
+    tracing::info!(
+        after_s = failed_at.elapsed().as_secs_f64(),
+        "the store recovered: writes are taken again"
+    );
+    false
+}
+
+fn refuse(op: WriteOp, error: impl Fn() -> StoreError) {
     match op {
         WriteOp::CreateMap(_, r) | WriteOp::ClearMap(_, r) => {
-            let _ = r.send(Err(StoreError::ShuttingDown));
+            let _ = r.send(Err(error()));
         }
         WriteOp::DeleteMap(_, r) | WriteOp::Pose(_, _, r) => {
-            let _ = r.send(Err(StoreError::ShuttingDown));
+            let _ = r.send(Err(error()));
         }
         WriteOp::Apply(_, r) => {
-            let _ = r.send(Err(StoreError::ShuttingDown));
+            let _ = r.send(Err(error()));
         }
         WriteOp::Frames(_, r) => {
-            let _ = r.send(Err(StoreError::ShuttingDown));
+            let _ = r.send(Err(error()));
         }
         WriteOp::Stop => {}
+    }
+}
+
+/// The changes of a group whose commit failed. Some may have reached the
+/// disk all the same (the store writes in pieces); watchers hear of those
+/// once the store has recovered.
+struct Unconfirmed {
+    map_events: Vec<(String, MapEvent)>,
+    frame_events: Vec<FrameNote>,
+    pose_events: Vec<Arc<PoseEstimate>>,
+}
+
+impl Unconfirmed {
+    fn announce_survivors<S: Store>(self, store: &S, events: &Events) {
+        let mut by_map: BTreeMap<String, Vec<MapEvent>> = BTreeMap::new();
+        for (map, event) in self.map_events {
+            let record = store.map(&map).ok().flatten();
+            let landed = match (&event, &record) {
+                (MapEvent::Deleted, record) => record.is_none(),
+                (MapEvent::Cleared { version }, Some(record)) => record.version >= *version,
+                (MapEvent::TileChanged { key, version }, Some(record)) => store
+                    .tile(record, *key)
+                    .ok()
+                    .flatten()
+                    .is_some_and(|tile| tile.version == *version),
+                (_, None) => false,
+            };
+            if landed {
+                by_map.entry(map).or_default().push(event);
+            }
+        }
+        for (map, list) in by_map {
+            events.map_changed(&map, list);
+        }
+        for note in self.frame_events {
+            if store.has_frame(&note.robot, note.sequence).unwrap_or(false) {
+                events.frame_stored(note);
+            }
+        }
+        for pose in self.pose_events {
+            let mut found = false;
+            let _ = store.read_poses(
+                &pose.robot,
+                pose.frame_sequence,
+                pose.frame_sequence,
+                &mut |_, _| {
+                    found = true;
+                    false
+                },
+            );
+            if found {
+                events.pose_stored(pose);
+            }
+        }
     }
 }
 
@@ -314,7 +458,9 @@ impl<'s, S: Store> Group<'s, S> {
         }
     }
 
-    fn run(mut self, ops: Vec<WriteOp>, events: &Events) {
+    /// Applies and commits `ops`, answers them and tells the watchers;
+    /// if the commit failed, returns why with the changes it held.
+    fn run(mut self, ops: Vec<WriteOp>, events: &Events) -> Option<(GroupFailure, Unconfirmed)> {
         for op in ops {
             self.apply(op);
         }
@@ -332,8 +478,13 @@ impl<'s, S: Store> Group<'s, S> {
         for reply in self.replies {
             reply(failure);
         }
-        if failure.is_some() {
-            return;
+        if let Some(failure) = self.failure {
+            let unconfirmed = Unconfirmed {
+                map_events: self.map_events,
+                frame_events: self.frame_events,
+                pose_events: self.pose_events,
+            };
+            return Some((failure, unconfirmed));
         }
         let mut by_map: BTreeMap<String, Vec<MapEvent>> = BTreeMap::new();
         for (map, event) in self.map_events {
@@ -348,6 +499,7 @@ impl<'s, S: Store> Group<'s, S> {
         for pose in self.pose_events {
             events.pose_stored(pose);
         }
+        None
     }
 
     fn apply(&mut self, op: WriteOp) {

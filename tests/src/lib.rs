@@ -316,6 +316,91 @@ impl Drop for ServerProcess {
     }
 }
 
+/// A small tmpfs mounted at a fresh temporary directory, to fill and empty
+/// under a running server; unmounted when dropped.
+#[derive(Debug)]
+pub struct SmallDisk {
+    dir: tempfile::TempDir,
+}
+
+impl SmallDisk {
+    /// Mounts a tmpfs of `size` (as `mount -o size=` takes it: `24m`);
+    /// `None` where this process may not mount.
+    pub fn mount(size: &str) -> Option<Self> {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let mounted = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
+            .arg(dir.path())
+            .stderr(Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success());
+        mounted.then_some(Self { dir })
+    }
+
+    /// The mount point.
+    pub fn path(&self) -> &Path {
+        self.dir.path()
+    }
+
+    /// Takes every free byte with a file of its own; returns its size.
+    pub fn fill(&self) -> u64 {
+        use std::io::Write;
+        let mut file = std::fs::File::create(self.filler()).expect("create the filler");
+        let chunk = vec![0xA5u8; 64 << 10];
+        let mut written = 0u64;
+        // A tmpfs refuses the write that no longer fits; bounded by its size.
+        while let Ok(n) = file.write(&chunk) {
+            if n == 0 {
+                break;
+            }
+            written += n as u64;
+        }
+        written
+    }
+
+    /// Gives back what [`SmallDisk::fill`] took.
+    pub fn empty(&self) {
+        let _ = std::fs::remove_file(self.filler());
+    }
+
+    fn filler(&self) -> std::path::PathBuf {
+        self.dir.path().join("filler")
+    }
+}
+
+impl Drop for SmallDisk {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg(self.dir.path()).status();
+    }
+}
+
+/// The health a serving process reports for `service` at `url` (plain
+/// HTTP/2), or `None` when it does not answer within 2 s.
+pub async fn health_status(
+    url: &str,
+    service: &str,
+) -> Option<tonic_health::pb::health_check_response::ServingStatus> {
+    let ask = async {
+        let channel = tonic::transport::Channel::from_shared(url.to_string())
+            .ok()?
+            .connect()
+            .await
+            .ok()?;
+        let reply = tonic_health::pb::health_client::HealthClient::new(channel)
+            .check(tonic_health::pb::HealthCheckRequest {
+                service: service.into(),
+            })
+            .await
+            .ok()?;
+        tonic_health::pb::health_check_response::ServingStatus::try_from(reply.into_inner().status)
+            .ok()
+    };
+    tokio::time::timeout(Duration::from_secs(2), ask)
+        .await
+        .ok()
+        .flatten()
+}
+
 /// `count` frames of robot `robot` wandering in `worlds/map2.toml` from a
 /// random start (seeded), as `deog wander` would publish them: computed
 /// in-process with the simulator's library, so tests need no simulator

@@ -1,52 +1,40 @@
-//! The map server on a disk that fills (a small tmpfs, mounted for the
-//! test; where mounting is not allowed the test says so and passes): writes
-//! fail with UNAVAILABLE naming the full device rather than an
-//! acknowledgement, and a shutdown whose last flush fails says so and exits
-//! with a failure, not "store flushed".
+//! The map server on a disk that fills and empties (a small tmpfs, mounted
+//! for the test; where mounting is not allowed the test says so and
+//! passes): while the store cannot write, health says NOT_SERVING and
+//! writes fail with UNAVAILABLE naming the full device; reads show only
+//! what is durable (or are refused the same way); once the disk has room the server recovers by
+//! itself, and every acknowledged batch is there exactly once.
 
-use std::process::Command;
+use std::collections::HashMap;
 use std::time::Duration;
 
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_client::MapServiceClient;
-use deog_tests::ServerProcess;
+use deog_tests::{ServerProcess, SmallDisk, health_status};
+use tonic::transport::Channel;
+use tonic_health::pb::health_check_response::ServingStatus;
 
-/// A tmpfs of `size` mounted at a fresh temporary directory, unmounted when
-/// dropped; `None` where the test may not mount.
-struct SmallDisk {
-    dir: tempfile::TempDir,
-}
+const SIDE: usize = 64;
+const TILES_PER_BATCH: i32 = 4;
 
-impl SmallDisk {
-    fn mount(size: &str) -> Option<Self> {
-        let dir = tempfile::tempdir().expect("temp dir");
-        let mounted = Command::new("mount")
-            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
-            .arg(dir.path())
-            .status()
-            .is_ok_and(|s| s.success());
-        mounted.then_some(Self { dir })
-    }
-}
-
-impl Drop for SmallDisk {
-    fn drop(&mut self) {
-        let _ = Command::new("umount").arg(self.dir.path()).status();
-    }
-}
-
-/// A batch of 16 dense 64 × 64 tiles (128 KiB) in row `row`.
-fn batch(sequence: u64, row: i32) -> pb::UpdateBatch {
-    let cells: Vec<u8> = (0..64 * 64)
-        .flat_map(|i: i32| ((i % 1999) as i16 - 999).to_le_bytes())
+/// Batch `sequence` adds `sequence % 100 + 1` to every cell of tiles
+/// (0..4, sequence): each batch's tiles are its own, so a tile holding
+/// twice its value was applied twice.
+fn batch(sequence: u64) -> pb::UpdateBatch {
+    let value = (sequence % 100 + 1) as i16;
+    let cells: Vec<u8> = std::iter::repeat_n(value.to_le_bytes(), SIDE * SIDE)
+        .flatten()
         .collect();
     pb::UpdateBatch {
         map: "m".into(),
         client_id: "filler".into(),
         sequence,
-        tiles: (0..16)
+        tiles: (0..TILES_PER_BATCH)
             .map(|x| pb::TileDelta {
-                key: Some(pb::TileKey { x, y: row }),
+                key: Some(pb::TileKey {
+                    x,
+                    y: sequence as i32,
+                }),
                 encoding: pb::CellEncoding::DenseI16Le as i32,
                 cells: cells.clone(),
             })
@@ -54,56 +42,206 @@ fn batch(sequence: u64, row: i32) -> pb::UpdateBatch {
     }
 }
 
+/// Sends one batch on its own stream: its acknowledgement (whether it was
+/// applied) or the status that refused it. Bounded: 20 s.
+async fn send(
+    client: &mut MapServiceClient<Channel>,
+    sequence: u64,
+) -> Result<bool, tonic::Status> {
+    let answer = async {
+        let mut stream = client
+            .apply_updates(tokio_stream::iter([batch(sequence)]))
+            .await?
+            .into_inner();
+        match stream.message().await? {
+            Some(ack) => {
+                assert_eq!(ack.sequence, sequence);
+                Ok(ack.applied)
+            }
+            None => panic!("batch {sequence}: the stream ended with no acknowledgement"),
+        }
+    };
+    tokio::time::timeout(Duration::from_secs(20), answer)
+        .await
+        .unwrap_or_else(|_| panic!("batch {sequence}: no answer within 20 s"))
+}
+
+/// Every stored tile's first cell by row (the batch's sequence) and column.
+async fn stored(
+    client: &mut MapServiceClient<Channel>,
+) -> Result<HashMap<(i32, i32), i16>, tonic::Status> {
+    let read = async {
+        let mut stream = client
+            .get_tiles(pb::TileQuery {
+                map: "m".into(),
+                selection: Some(pb::tile_query::Selection::Region(pb::CellBox {
+                    min_x: i32::MIN,
+                    min_y: i32::MIN,
+                    max_x: i32::MAX,
+                    max_y: i32::MAX,
+                })),
+                newer_than_version: 0,
+            })
+            .await?
+            .into_inner();
+        let mut out = HashMap::new();
+        while let Some(tile) = stream.message().await? {
+            let key = tile.key.expect("key");
+            let first = i16::from_le_bytes([tile.cells[0], tile.cells[1]]);
+            out.insert((key.x, key.y), first);
+        }
+        Ok(out)
+    };
+    tokio::time::timeout(Duration::from_secs(20), read)
+        .await
+        .expect("tiles within 20 s")
+}
+
+/// Waits (bounded: 30 s) until the map service's health is `wanted`.
+async fn wait_for_health(server: &ServerProcess, wanted: ServingStatus) {
+    for _ in 0..300 {
+        if health_status(&server.url(), "deog.v1.MapService").await == Some(wanted) {
+            return;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    panic!("the map service's health never became {wanted:?}");
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-#[ignore = "an acknowledgement on a full disk can wait for ever: the server's full-disk state is not healed yet; run with --ignored"]
-async fn a_full_disk_fails_writes_and_a_failed_last_flush_fails_the_shutdown() {
-    let Some(disk) = SmallDisk::mount("6m") else {
+async fn a_full_disk_is_reported_refused_and_healed_with_nothing_acknowledged_lost() {
+    let Some(disk) = SmallDisk::mount("24m") else {
         eprintln!("skipped: this machine does not let the test mount a tmpfs");
         return;
     };
-    let server = ServerProcess::start(&disk.dir.path().join("data"), &[]).await;
+    let server = ServerProcess::start(&disk.path().join("data"), &[]).await;
     let mut client = MapServiceClient::connect(server.url())
         .await
         .expect("connect");
     client
         .create_map(pb::CreateMapRequest {
             name: "m".into(),
-            tile_size: 64,
+            tile_size: SIDE as u32,
+            // Wide enough that no sum here is clamped.
+            clamp_min_probability: 1e-9,
+            clamp_max_probability: 1.0 - 1e-9,
             ..Default::default()
         })
         .await
         .expect("create map");
+    let mut acknowledged = Vec::new();
+    for sequence in 1..=10u64 {
+        assert!(
+            send(&mut client, sequence)
+                .await
+                .expect("a batch before the disk fills")
+        );
+        acknowledged.push(sequence);
+    }
+
+    assert!(disk.fill() > 0, "the filler took no space");
     let mut refused = None;
-    for sequence in 1..=200u64 {
-        let reply = tokio::time::timeout(
-            Duration::from_secs(20),
-            client.apply_updates(tokio_stream::iter([batch(sequence, sequence as i32)])),
-        )
-        .await
-        .expect("an answer in time");
-        let outcome = match reply {
-            Ok(stream) => stream.into_inner().message().await,
-            Err(status) => Err(status),
-        };
-        match outcome {
-            Ok(Some(ack)) => assert_eq!(ack.sequence, sequence),
-            Ok(None) => panic!("batch {sequence}: the stream ended with no acknowledgement"),
+    for sequence in 11..=400u64 {
+        match send(&mut client, sequence).await {
+            Ok(applied) => {
+                assert!(applied);
+                acknowledged.push(sequence);
+            }
             Err(status) => {
                 refused = Some((sequence, status));
                 break;
             }
         }
     }
-    let (sequence, status) = refused.expect("a 6 MiB disk held 200 batches of 128 KiB");
-    assert!(sequence > 1, "the first batch already failed: {status:?}");
+    let (first_refused, status) = refused.expect("a full disk refused a write");
     assert_eq!(status.code(), tonic::Code::Unavailable, "{status:?}");
     assert!(
         status.message().contains("cannot write") && status.message().contains("space"),
         "{}",
         status.message()
     );
+    wait_for_health(&server, ServingStatus::NotServing).await;
+    // While it cannot write, a write is refused at once.
+    let status = send(&mut client, first_refused)
+        .await
+        .expect_err("a write while the store is failing");
+    assert_eq!(status.code(), tonic::Code::Unavailable, "{status:?}");
+    // A read shows what was acknowledged, or is refused while the store
+    // is being opened again; it never shows the refused batch's tiles
+    // unless they landed after all (then a resend is not applied again).
+    match stored(&mut client).await {
+        Ok(tiles) => {
+            for &sequence in &acknowledged {
+                assert_eq!(
+                    tiles.get(&(0, sequence as i32)),
+                    Some(&((sequence % 100 + 1) as i16)),
+                    "acknowledged batch {sequence} while the disk is full"
+                );
+            }
+        }
+        Err(status) => {
+            assert_eq!(status.code(), tonic::Code::Unavailable, "{status:?}");
+            assert!(status.message().contains("space"), "{}", status.message());
+        }
+    }
+
+    disk.empty();
+    wait_for_health(&server, ServingStatus::Serving).await;
+    // The refused batch again, and more: a refused batch may have reached
+    // the disk all the same, and is then acknowledged as already applied.
+    for sequence in first_refused..first_refused + 10 {
+        send(&mut client, sequence)
+            .await
+            .expect("a write once the disk has room");
+        acknowledged.push(sequence);
+    }
+    let tiles = stored(&mut client).await.expect("tiles after recovery");
+    for &sequence in &acknowledged {
+        for x in 0..TILES_PER_BATCH {
+            assert_eq!(
+                tiles.get(&(x, sequence as i32)),
+                Some(&((sequence % 100 + 1) as i16)),
+                "tile ({x}, {sequence}): acknowledged batch {sequence} must be there exactly once"
+            );
+        }
+    }
+    let last = *acknowledged.last().expect("batches") as i32;
+    assert!(
+        tiles.keys().all(|&(_, row)| row <= last),
+        "a tile of a batch never sent"
+    );
+    assert!(server.terminate(), "the shutdown after recovery failed");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_failed_last_flush_fails_the_shutdown() {
+    let Some(disk) = SmallDisk::mount("24m") else {
+        eprintln!("skipped: this machine does not let the test mount a tmpfs");
+        return;
+    };
+    let server = ServerProcess::start(&disk.path().join("data"), &[]).await;
+    let mut client = MapServiceClient::connect(server.url())
+        .await
+        .expect("connect");
+    client
+        .create_map(pb::CreateMapRequest {
+            name: "m".into(),
+            tile_size: SIDE as u32,
+            ..Default::default()
+        })
+        .await
+        .expect("create map");
+    disk.fill();
+    let mut failed = false;
+    for sequence in 1..=400u64 {
+        if send(&mut client, sequence).await.is_err() {
+            failed = true;
+            break;
+        }
+    }
+    assert!(failed, "a full disk refused a write");
     assert!(
         !server.terminate(),
-        "the shutdown after a failed write exited with success"
+        "the shutdown on a full disk exited with success"
     );
 }

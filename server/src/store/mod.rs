@@ -123,4 +123,13 @@ pub trait Store: Send + Sync + 'static {
 
     /// Makes every earlier write durable.
     fn flush(&self) -> Result<(), StoreError>;
+
+    /// After a failed write: lets go of whatever the store holds in memory
+    /// (it may include writes that never became durable), opens it again
+    /// from what is durable, and checks that a write lands. Until it
+    /// succeeds, calls may fail with [`StoreError::Unavailable`]. Called by
+    /// the writer, which tries again while it fails; what was acknowledged
+    /// was flushed, so nothing acknowledged is lost. `failure` says why the
+    /// commit failed, for the errors calls get meanwhile.
+    fn recover(&self, failure: &str) -> Result<(), StoreError>;
 }

@@ -17,12 +17,14 @@ use crate::error::StoreError;
 use deog_grid::TileKey;
 use std::collections::HashMap;
 use std::path::PathBuf;
-use std::sync::RwLock;
+use std::sync::{Arc, Mutex, RwLock, Weak};
 
 const MAP_TREE_PREFIX: &str = "map/";
 const RECORD_KEY: &[u8] = b"m";
 const CURSOR_PREFIX: u8 = b'c';
 const TILE_PREFIX: u8 = b't';
+/// Written in the default tree by a recovery, to see that writes land.
+const PROBE_KEY: &[u8] = b"deog/recovery-probe";
 
 /// How to open the sled store.
 #[derive(Debug, Clone)]
@@ -45,7 +47,24 @@ impl SledConfig {
 }
 
 /// The sled-backed [`Store`].
+///
+/// The open database sits behind a lock so that [`Store::recover`] can let
+/// go of it and open it again from disk: after a failed write sled refuses
+/// every later one, and what it holds in memory may include writes that
+/// never reached the disk.
 pub struct SledStore {
+    config: SledConfig,
+    open: RwLock<Option<Arc<OpenStore>>>,
+    /// The database let go of by the last recovery, while calls still read
+    /// it: it cannot be opened again until they finish.
+    released: Mutex<Option<Weak<OpenStore>>>,
+    /// Why it is closed: the failed write, then the last attempt to open
+    /// it again.
+    closed_because: Mutex<String>,
+}
+
+/// One opening of the database.
+struct OpenStore {
     db: sled::Db,
     frames: sled::Tree,
     poses: sled::Tree,
@@ -55,14 +74,50 @@ pub struct SledStore {
 
 impl std::fmt::Debug for SledStore {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("SledStore").finish_non_exhaustive()
+        f.debug_struct("SledStore")
+            .field("path", &self.config.path)
+            .finish_non_exhaustive()
     }
 }
 
 impl SledStore {
-    /// Opens (or creates) the store. This is the one place the database is
-    /// opened.
+    /// Opens (or creates) the store.
     pub fn open(config: &SledConfig) -> Result<Self, StoreError> {
+        Ok(Self {
+            config: config.clone(),
+            open: RwLock::new(Some(Arc::new(OpenStore::open(config)?))),
+            released: Mutex::new(None),
+            closed_because: Mutex::new(String::new()),
+        })
+    }
+
+    /// The open database, or why there is none (a recovery is under way).
+    fn current(&self) -> Result<Arc<OpenStore>, StoreError> {
+        self.open
+            .read()
+            .map_err(|_| StoreError::Backend("store lock poisoned".into()))?
+            .clone()
+            .ok_or_else(|| {
+                let why = self
+                    .closed_because
+                    .lock()
+                    .map(|why| why.clone())
+                    .unwrap_or_default();
+                StoreError::Unavailable(format!(
+                    "the store is being opened again after a failed write ({why})"
+                ))
+            })
+    }
+
+    #[cfg(test)]
+    fn tree(&self, name: &str) -> Result<sled::Tree, StoreError> {
+        self.current()?.tree(name)
+    }
+}
+
+impl OpenStore {
+    /// The one place the database is opened.
+    fn open(config: &SledConfig) -> Result<Self, StoreError> {
         let db = sled::Config::new()
             .path(&config.path)
             .cache_capacity(config.cache_bytes)
@@ -167,7 +222,8 @@ fn visit_range(
 
 impl Store for SledStore {
     fn maps(&self) -> Result<Vec<MapRecord>, StoreError> {
-        let trees: Vec<(String, sled::Tree)> = self
+        let open = self.current()?;
+        let trees: Vec<(String, sled::Tree)> = open
             .maps
             .read()
             .map_err(|_| StoreError::Backend("map catalog lock poisoned".into()))?
@@ -185,7 +241,7 @@ impl Store for SledStore {
     }
 
     fn map(&self, name: &str) -> Result<Option<MapRecord>, StoreError> {
-        let tree = match self.tree(name) {
+        let tree = match self.current()?.tree(name) {
             Ok(tree) => tree,
             Err(StoreError::MapNotFound(_)) => return Ok(None),
             Err(e) => return Err(e),
@@ -196,14 +252,15 @@ impl Store for SledStore {
     }
 
     fn create_map(&self, record: &MapRecord) -> Result<(), StoreError> {
-        let mut maps = self
+        let open = self.current()?;
+        let mut maps = open
             .maps
             .write()
             .map_err(|_| StoreError::Backend("map catalog lock poisoned".into()))?;
         if maps.contains_key(&record.name) {
             return Err(StoreError::MapExists(record.name.clone()));
         }
-        let tree = self
+        let tree = open
             .db
             .open_tree(format!("{MAP_TREE_PREFIX}{}", record.name))?;
         tree.insert(RECORD_KEY, record.encode())?;
@@ -212,19 +269,20 @@ impl Store for SledStore {
     }
 
     fn delete_map(&self, name: &str) -> Result<(), StoreError> {
-        let mut maps = self
+        let open = self.current()?;
+        let mut maps = open
             .maps
             .write()
             .map_err(|_| StoreError::Backend("map catalog lock poisoned".into()))?;
         if maps.remove(name).is_none() {
             return Err(StoreError::MapNotFound(name.to_string()));
         }
-        self.db.drop_tree(format!("{MAP_TREE_PREFIX}{name}"))?;
+        open.db.drop_tree(format!("{MAP_TREE_PREFIX}{name}"))?;
         Ok(())
     }
 
     fn write_map(&self, name: &str, write: MapWrite) -> Result<(), StoreError> {
-        let tree = self.tree(name)?;
+        let tree = self.current()?.tree(name)?;
         let mut batch = sled::Batch::default();
         if write.clear_tiles {
             for key in tree.scan_prefix([TILE_PREFIX]).keys() {
@@ -245,7 +303,7 @@ impl Store for SledStore {
     }
 
     fn tile(&self, map: &MapRecord, key: TileKey) -> Result<Option<StoredTile>, StoreError> {
-        let tree = self.tree(&map.name)?;
+        let tree = self.current()?.tree(&map.name)?;
         tree.get(tile_key_bytes(key))?
             .map(|bytes| StoredTile::decode(map.settings.tile_size, &bytes))
             .transpose()
@@ -257,7 +315,7 @@ impl Store for SledStore {
         range: TileRange,
         visit: &mut dyn FnMut(TileKey, StoredTile) -> bool,
     ) -> Result<(), StoreError> {
-        let tree = self.tree(&map.name)?;
+        let tree = self.current()?.tree(&map.name)?;
         let from = tile_key_bytes(range.min);
         let to = tile_key_bytes(range.max);
         for entry in tree.range(from..=to) {
@@ -280,7 +338,7 @@ impl Store for SledStore {
     }
 
     fn cursor(&self, name: &str, client: &str) -> Result<ClientCursor, StoreError> {
-        let tree = self.tree(name)?;
+        let tree = self.current()?.tree(name)?;
         match tree.get(cursor_key(client))? {
             Some(bytes) => ClientCursor::decode(client, &bytes),
             None => Ok(ClientCursor::new()),
@@ -288,23 +346,28 @@ impl Store for SledStore {
     }
 
     fn write_frames(&self, writes: Vec<FrameWrite>) -> Result<(), StoreError> {
+        let open = self.current()?;
         for write in writes {
             let mut batch = sled::Batch::default();
             for (sequence, bytes) in write.frames {
                 batch.insert(frame_key(&write.robot, sequence), bytes);
             }
             batch.insert(summary_key(&write.robot), &write.summary.encode()[..]);
-            self.frames.apply_batch(batch)?;
+            open.frames.apply_batch(batch)?;
         }
         Ok(())
     }
 
     fn has_frame(&self, robot: &str, sequence: u64) -> Result<bool, StoreError> {
-        Ok(self.frames.contains_key(frame_key(robot, sequence))?)
+        Ok(self
+            .current()?
+            .frames
+            .contains_key(frame_key(robot, sequence))?)
     }
 
     fn robot(&self, robot: &str) -> Result<Option<RobotSummary>, StoreError> {
-        self.frames
+        self.current()?
+            .frames
             .get(summary_key(robot))?
             .map(|b| RobotSummary::decode(&b))
             .transpose()
@@ -312,7 +375,7 @@ impl Store for SledStore {
 
     fn robots(&self) -> Result<Vec<(String, RobotSummary)>, StoreError> {
         let mut out = Vec::new();
-        for entry in self.frames.scan_prefix(b"r") {
+        for entry in self.current()?.frames.scan_prefix(b"r") {
             let (key, value) = entry?;
             let name = String::from_utf8_lossy(&key[1..]).into_owned();
             out.push((name, RobotSummary::decode(&value)?));
@@ -328,7 +391,7 @@ impl Store for SledStore {
         visit: &mut dyn FnMut(u64, &[u8]) -> bool,
     ) -> Result<(), StoreError> {
         visit_range(
-            &self.frames,
+            &self.current()?.frames,
             frame_key(robot, from),
             frame_key(robot, to),
             visit,
@@ -340,7 +403,7 @@ impl Store for SledStore {
         for (robot, sequence, bytes) in poses {
             batch.insert(pose_key(&robot, sequence), bytes);
         }
-        self.poses.apply_batch(batch)?;
+        self.current()?.poses.apply_batch(batch)?;
         Ok(())
     }
 
@@ -352,7 +415,7 @@ impl Store for SledStore {
         visit: &mut dyn FnMut(u64, &[u8]) -> bool,
     ) -> Result<(), StoreError> {
         visit_range(
-            &self.poses,
+            &self.current()?.poses,
             pose_key(robot, from),
             pose_key(robot, to),
             visit,
@@ -361,7 +424,7 @@ impl Store for SledStore {
 
     fn rigs(&self) -> Result<Vec<(String, Vec<u8>)>, StoreError> {
         let mut out = Vec::new();
-        for entry in self.rigs.iter() {
+        for entry in self.current()?.rigs.iter() {
             let (key, value) = entry?;
             out.push((String::from_utf8_lossy(&key).into_owned(), value.to_vec()));
         }
@@ -369,12 +432,55 @@ impl Store for SledStore {
     }
 
     fn put_rig(&self, name: &str, bytes: Vec<u8>) -> Result<(), StoreError> {
-        self.rigs.insert(name.as_bytes(), bytes)?;
+        self.current()?.rigs.insert(name.as_bytes(), bytes)?;
         Ok(())
     }
 
     fn flush(&self) -> Result<(), StoreError> {
-        self.db.flush()?;
+        self.current()?.db.flush()?;
+        Ok(())
+    }
+
+    fn recover(&self, failure: &str) -> Result<(), StoreError> {
+        let old = self
+            .open
+            .write()
+            .map_err(|_| StoreError::Backend("store lock poisoned".into()))?
+            .take();
+        let mut released = self
+            .released
+            .lock()
+            .map_err(|_| StoreError::Backend("store lock poisoned".into()))?;
+        if let Some(old) = old {
+            *released = Some(Arc::downgrade(&old));
+            if let Ok(mut why) = self.closed_because.lock() {
+                failure.clone_into(&mut why);
+            }
+        }
+        // sled locks its directory: the old opening must be gone first.
+        let readers = released.as_ref().map_or(0, Weak::strong_count);
+        if readers > 0 {
+            return Err(StoreError::Unavailable(format!(
+                "{readers} calls still read the store as it was before the failed write"
+            )));
+        }
+        *released = None;
+        let opened = OpenStore::open(&self.config);
+        if let (Err(error), Ok(mut why)) = (&opened, self.closed_because.lock()) {
+            *why = error.to_string();
+        }
+        let fresh = Arc::new(opened?);
+        *self
+            .open
+            .write()
+            .map_err(|_| StoreError::Backend("store lock poisoned".into()))? = Some(fresh.clone());
+        // Open is not enough: a small durable write shows the device takes
+        // writes again.
+        let stamp = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as u64);
+        fresh.db.insert(PROBE_KEY, &stamp.to_le_bytes()[..])?;
+        fresh.db.flush()?;
         Ok(())
     }
 }
@@ -404,5 +510,26 @@ mod tests {
         assert_eq!((cursor.last, cursor.recent.len()), (41, 0));
         assert_eq!(cursor.check(40), SequenceCheck::Unknown);
         assert_eq!(store.cursor("m", "new").unwrap(), ClientCursor::new());
+    }
+
+    #[test]
+    fn a_recovery_opens_the_store_again_once_no_call_holds_the_old_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = SledStore::open(&SledConfig::new(dir.path())).unwrap();
+        let settings =
+            MapSettings::new(Resolution::DEFAULT, TileSize::DEFAULT, (0.1, 0.9)).unwrap();
+        store
+            .create_map(&MapRecord::new("m".into(), settings))
+            .unwrap();
+        store.flush().unwrap();
+        let reader = store.current().unwrap();
+        let error = store.recover("disk full").unwrap_err();
+        assert!(matches!(error, StoreError::Unavailable(_)), "{error}");
+        // Meanwhile calls are refused, saying why.
+        let refused = store.maps().unwrap_err().to_string();
+        assert!(refused.contains("disk full"), "{refused}");
+        drop(reader);
+        store.recover("disk full").unwrap();
+        assert_eq!(store.maps().unwrap().len(), 1);
     }
 }

@@ -244,6 +244,9 @@ impl<S: Store> Store for CountingStore<S> {
         self.flushes.fetch_add(1, Ordering::Relaxed);
         Ok(())
     }
+    fn recover(&self, failure: &str) -> Result<(), StoreError> {
+        self.inner.recover(failure)
+    }
 }
 
 pub async fn create_map(
