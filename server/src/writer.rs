@@ -273,6 +273,7 @@ fn recover<S: Store>(
     tracing::error!(%reason, "the store cannot write: writes are refused until it recovers");
     let mut attempts = 0u64;
     let mut next_attempt = failed_at;
+    let mut last_error = String::new();
     loop {
         let now = Instant::now();
         if now >= next_attempt {
@@ -280,10 +281,13 @@ fn recover<S: Store>(
             match store.recover(&reason) {
                 Ok(()) => break,
                 Err(error) => {
-                    // A line per attempt would flood the log: one a minute.
-                    if attempts % 60 == 1 {
+                    // A line per attempt would flood the log: a line when
+                    // the reason changes, and one a minute.
+                    let error = error.to_string();
+                    if error != last_error || attempts % 60 == 0 {
                         tracing::warn!(%error, attempts, "the store has not recovered yet");
                     }
+                    last_error = error;
                     next_attempt = now + RECOVERY_INTERVAL;
                 }
             }

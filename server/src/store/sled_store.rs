@@ -118,6 +118,7 @@ impl SledStore {
 impl OpenStore {
     /// The one place the database is opened.
     fn open(config: &SledConfig) -> Result<Self, StoreError> {
+        remove_unfinished_snapshots(&config.path)?;
         let db = sled::Config::new()
             .path(&config.path)
             .cache_capacity(config.cache_bytes)
@@ -162,6 +163,38 @@ impl OpenStore {
             .cloned()
             .ok_or_else(|| StoreError::MapNotFound(name.to_string()))
     }
+}
+
+/// Removes the snapshot files sled left half written. sled writes a
+/// snapshot as `snap.<lsn>.generating` and renames it when complete; one
+/// cut short (a full disk, a kill) keeps that name, and sled 0.34 then
+/// takes it for the newest snapshot and refuses to open ("corrupted
+/// data"). The log it summarises is intact, so the snapshot is rebuilt.
+fn remove_unfinished_snapshots(path: &std::path::Path) -> Result<(), StoreError> {
+    let entries = match std::fs::read_dir(path) {
+        Ok(entries) => entries,
+        Err(error) if error.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(error) => {
+            return Err(StoreError::Backend(format!(
+                "reading the data directory {}: {error}",
+                path.display()
+            )));
+        }
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if name.starts_with("snap.") && name.ends_with(".generating") {
+            tracing::warn!(file = %entry.path().display(), "removing a snapshot left half written");
+            std::fs::remove_file(entry.path()).map_err(|error| {
+                StoreError::Backend(format!(
+                    "removing the half-written snapshot {}: {error}",
+                    entry.path().display()
+                ))
+            })?;
+        }
+    }
+    Ok(())
 }
 
 fn tile_key_bytes(key: TileKey) -> [u8; 9] {
@@ -530,6 +563,25 @@ mod tests {
         assert!(refused.contains("disk full"), "{refused}");
         drop(reader);
         store.recover("disk full").unwrap();
+        assert_eq!(store.maps().unwrap().len(), 1);
+    }
+
+    #[test]
+    fn a_snapshot_left_half_written_does_not_stop_the_store_opening() {
+        let dir = tempfile::tempdir().unwrap();
+        let settings =
+            MapSettings::new(Resolution::DEFAULT, TileSize::DEFAULT, (0.1, 0.9)).unwrap();
+        {
+            let store = SledStore::open(&SledConfig::new(dir.path())).unwrap();
+            store
+                .create_map(&MapRecord::new("m".into(), settings))
+                .unwrap();
+            store.flush().unwrap();
+        }
+        // What a snapshot cut short by a full disk leaves, sorting after
+        // every complete one.
+        std::fs::write(dir.path().join("snap.FFFFFFFFFFFFFFFF.generating"), b"").unwrap();
+        let store = SledStore::open(&SledConfig::new(dir.path())).unwrap();
         assert_eq!(store.maps().unwrap().len(), 1);
     }
 }
