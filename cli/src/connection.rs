@@ -4,6 +4,7 @@
 
 use anyhow::{Context, Result};
 use clap::Args;
+use deog_proto::connection::ConnectionLimits;
 use deog_proto::tls::TlsIdentity;
 use deog_robot_client::ClientConfig;
 use std::path::{Path, PathBuf};
@@ -106,4 +107,25 @@ pub fn read_tls_identity(cert: Option<&Path>, key: Option<&Path>) -> Result<Opti
         (Some(cert), Some(key)) => Ok(Some(TlsIdentity::from_files(cert, key)?)),
         _ => Ok(None),
     }
+}
+
+/// The connection limits a serving process was given, checked:
+/// `--max-connections` and `--handshake-timeout-s` as both servers take
+/// them.
+pub fn connection_limits(
+    max_connections: usize,
+    handshake_timeout_s: f64,
+) -> Result<ConnectionLimits> {
+    anyhow::ensure!(
+        max_connections >= 1,
+        "--max-connections must be at least 1, got {max_connections}"
+    );
+    anyhow::ensure!(
+        handshake_timeout_s.is_finite() && (0.1..=3600.0).contains(&handshake_timeout_s),
+        "--handshake-timeout-s must be within 0.1 and 3600 seconds, got {handshake_timeout_s}"
+    );
+    Ok(ConnectionLimits {
+        max_connections,
+        handshake_timeout: std::time::Duration::from_secs_f64(handshake_timeout_s),
+    })
 }

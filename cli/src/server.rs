@@ -57,16 +57,8 @@ pub struct ServerArgs {
 
 /// Runs the server until ctrl-c or SIGTERM.
 pub fn run(args: ServerArgs) -> Result<()> {
-    anyhow::ensure!(
-        args.max_connections >= 1,
-        "--max-connections must be at least 1, got {}",
-        args.max_connections
-    );
-    anyhow::ensure!(
-        args.handshake_timeout_s.is_finite() && (0.1..=3600.0).contains(&args.handshake_timeout_s),
-        "--handshake-timeout-s must be within 0.1 and 3600 seconds, got {}",
-        args.handshake_timeout_s
-    );
+    let connections =
+        crate::connection::connection_limits(args.max_connections, args.handshake_timeout_s)?;
     anyhow::ensure!(
         args.max_read_streams >= 1,
         "--max-read-streams must be at least 1, got {}",
@@ -97,10 +89,7 @@ pub fn run(args: ServerArgs) -> Result<()> {
         },
         token,
         tls,
-        connections: ConnectionLimits {
-            max_connections: args.max_connections,
-            handshake_timeout: Duration::from_secs_f64(args.handshake_timeout_s),
-        },
+        connections,
         max_streams_per_connection: args.max_streams_per_connection,
         reads: ReadStreamLimits {
             max_streams: args.max_read_streams,

@@ -11,7 +11,8 @@ use deog_world::load_world_spec;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
-use crate::connection::{read_tls_identity, read_token_file};
+use crate::connection::{connection_limits, read_tls_identity, read_token_file};
+use deog_proto::connection::ConnectionLimits;
 
 /// What a wall struck past the specular angle does.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -107,6 +108,17 @@ pub struct SimArgs {
     /// is refused with RESOURCE_EXHAUSTED.
     #[arg(long, env = "DEOG_SIM_MAX_WATCHERS", default_value_t = SimServeConfig::default().max_watchers)]
     pub max_watchers: usize,
+    /// Connections held at once; one more is closed as soon as it is
+    /// accepted.
+    #[arg(long, env = "DEOG_SIM_MAX_CONNECTIONS", default_value_t = ConnectionLimits::default().max_connections)]
+    pub max_connections: usize,
+    /// Seconds a new connection has to start speaking (HTTP/2 or TLS)
+    /// before it is closed.
+    #[arg(long, env = "DEOG_SIM_HANDSHAKE_TIMEOUT_S", default_value_t = ConnectionLimits::default().handshake_timeout.as_secs_f64())]
+    pub handshake_timeout_s: f64,
+    /// Calls open at once on one connection; a client asking more waits.
+    #[arg(long, env = "DEOG_SIM_MAX_STREAMS_PER_CONNECTION", default_value_t = SimServeConfig::default().max_streams_per_connection)]
+    pub max_streams_per_connection: u32,
     /// File holding the bearer token every RobotService call must carry
     /// (health and reflection stay open).
     #[arg(long, env = "DEOG_SIM_TOKEN_FILE")]
@@ -219,6 +231,8 @@ pub fn run(args: SimArgs) -> Result<()> {
             .map(read_token_file)
             .transpose()?,
         tls: read_tls_identity(args.tls_cert.as_deref(), args.tls_key.as_deref())?,
+        connections: connection_limits(args.max_connections, args.handshake_timeout_s)?,
+        max_streams_per_connection: args.max_streams_per_connection,
         ..SimServeConfig::default()
     };
     serve_config.validate()?;

@@ -21,6 +21,7 @@ pub mod v1 {
 }
 
 pub mod auth;
+pub mod connection;
 pub mod names;
 pub mod rig;
 pub mod tls;

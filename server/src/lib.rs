@@ -20,7 +20,6 @@
 //!   shutdown future resolves.
 //! - [`error`]: [`StoreError`] and its one mapping to a gRPC status.
 
-pub mod connection;
 pub mod convert;
 pub mod error;
 pub mod events;
@@ -30,9 +29,9 @@ pub mod service;
 pub mod store;
 pub mod writer;
 
-pub use connection::ConnectionLimits;
 pub use convert::Limits;
 pub use deog_proto::auth;
+pub use deog_proto::connection::{self, ConnectionLimits};
 pub use deog_proto::tls::{TlsError, TlsIdentity};
 pub use error::StoreError;
 pub use rigs::RigRegistry;

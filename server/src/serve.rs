@@ -1,6 +1,5 @@
 //! Running the map server on a listener until a shutdown future resolves.
 
-use crate::connection::{self, ConnectionLimits};
 use crate::convert::Limits;
 use crate::events::Events;
 use crate::rigs::RigRegistry;
@@ -8,6 +7,7 @@ use crate::service::{MapServer, ReadStreamLimits, ServiceSettings};
 use crate::store::Store;
 use crate::writer::{StoreHealth, Writer};
 use deog_proto::auth::BearerAuth;
+use deog_proto::connection::{self, ConnectionLimits, KEEPALIVE_INTERVAL, KEEPALIVE_TIMEOUT};
 use deog_proto::tls::{TlsError, TlsIdentity, error_chain};
 use deog_proto::v1::map_service_server::MapServiceServer;
 use std::future::Future;
@@ -25,11 +25,6 @@ const HEALTH_SERVICE_NAME: &str = "grpc.health.v1.Health";
 const REFLECTION_SERVICE_NAME: &str = "grpc.reflection.v1.ServerReflection";
 /// The reflection service's older name, which many tools still ask first.
 const REFLECTION_V1ALPHA_SERVICE_NAME: &str = "grpc.reflection.v1alpha.ServerReflection";
-
-/// Time between keepalive pings on a connection, and how long one may go
-/// unanswered before the connection is dropped.
-const KEEPALIVE_INTERVAL: Duration = Duration::from_secs(30);
-const KEEPALIVE_TIMEOUT: Duration = Duration::from_secs(20);
 
 /// How the server runs.
 #[derive(Debug, Clone)]

@@ -1,16 +1,17 @@
 //! Running the simulator's `RobotService` on a listener until a shutdown
 //! future resolves: optionally behind the map server's bearer-token check
 //! and with TLS (both from `deog-proto`), with caps on robots and watch
-//! streams.
+//! streams, and the map server's bounds on connections (`deog-proto`'s
+//! `connection`).
 
 use std::future::Future;
 use std::time::Duration;
 
 use deog_proto::auth::BearerAuth;
+use deog_proto::connection::{self, ConnectionLimits, KEEPALIVE_INTERVAL, KEEPALIVE_TIMEOUT};
 use deog_proto::tls::{TlsError, TlsIdentity, error_chain};
 use deog_proto::v1::robot_service_server::RobotServiceServer;
 use tokio::net::TcpListener;
-use tokio_stream::wrappers::TcpListenerStream;
 use tokio_util::sync::CancellationToken;
 use tonic::service::interceptor::InterceptedService;
 use tonic::transport::Server;
@@ -59,6 +60,12 @@ pub struct SimServeConfig {
     pub token: Option<String>,
     /// Serve TLS with this identity; `None` serves plain HTTP/2.
     pub tls: Option<TlsIdentity>,
+    /// How many connections are held, and how long a new one may stay
+    /// silent (as the map server's).
+    pub connections: ConnectionLimits,
+    /// Calls open at once on one connection; a client asking more waits
+    /// (HTTP/2's own limit, announced to it).
+    pub max_streams_per_connection: u32,
 }
 
 impl Default for SimServeConfig {
@@ -73,6 +80,8 @@ impl Default for SimServeConfig {
             max_watchers: 256,
             token: None,
             tls: None,
+            connections: ConnectionLimits::default(),
+            max_streams_per_connection: 256,
         }
     }
 }
@@ -110,6 +119,15 @@ impl SimServeConfig {
                 ),
             ));
         }
+        if self.connections.max_connections == 0 {
+            return Err(SimError::invalid("max_connections", "must be at least 1"));
+        }
+        if self.max_streams_per_connection == 0 {
+            return Err(SimError::invalid(
+                "max_streams_per_connection",
+                "must be at least 1",
+            ));
+        }
         if self.token.as_deref().is_some_and(|t| t.trim().is_empty()) {
             return Err(SimError::invalid("token", "must not be empty"));
         }
@@ -141,7 +159,10 @@ pub async fn serve_sim_server(
 ) -> Result<(), SimError> {
     let config = server.config().clone();
     // TLS first: a bad certificate or key starts nothing.
-    let mut builder = Server::builder();
+    let mut builder = Server::builder()
+        .max_concurrent_streams(Some(config.max_streams_per_connection))
+        .http2_keepalive_interval(Some(KEEPALIVE_INTERVAL))
+        .http2_keepalive_timeout(Some(KEEPALIVE_TIMEOUT));
     if let Some(identity) = &config.tls {
         builder = builder
             .tls_config(identity.server_config().map_err(SimError::Tls)?)
@@ -185,12 +206,14 @@ pub async fn serve_sim_server(
     );
 
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let cut_connections = CancellationToken::new();
+    let incoming = connection::incoming(listener, cut_connections.clone(), config.connections);
     let serving = builder
         .add_service(health_service)
         .add_service(reflection)
         .add_service(reflection_v1alpha)
         .add_service(service)
-        .serve_with_incoming_shutdown(TcpListenerStream::new(listener), async {
+        .serve_with_incoming_shutdown(incoming, async {
             let _ = stop_rx.await;
         });
     tokio::pin!(serving);
@@ -204,7 +227,9 @@ pub async fn serve_sim_server(
             match tokio::time::timeout(config.shutdown_grace, &mut serving).await {
                 Ok(result) => result,
                 Err(_) => {
-                    tracing::warn!("calls still open after the grace period");
+                    tracing::warn!("calls still open after the grace period; closing them");
+                    cut_connections.cancel();
+                    let _ = tokio::time::timeout(Duration::from_secs(1), &mut serving).await;
                     Ok(())
                 }
             }

@@ -3,14 +3,15 @@
 //! 127.0.0.1: silent connections are closed after the handshake timeout,
 //! connections over `--max-connections` are closed at once, and a process
 //! out of file descriptors waits between accepts rather than spinning,
-//! serving again once descriptors are free.
+//! serving again once descriptors are free. The simulator (`deog sim`)
+//! holds its connections the same way.
 
 use std::io::Read as _;
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
 use deog_robot_client::{ClientConfig, MapClient};
-use deog_tests::ServerProcess;
+use deog_tests::{ServerProcess, health_status};
 
 /// Whether the server closed `stream` (end of file or a reset) within
 /// `within`, reading past what it sends first (its HTTP/2 settings); false
@@ -149,4 +150,45 @@ async fn out_of_file_descriptors_the_server_waits_instead_of_spinning() {
         serves_again(&server).await,
         "the server did not serve again once descriptors were free"
     );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_simulator_closes_silent_connections_and_those_over_its_limit() {
+    let sim = ServerProcess::start_sim(
+        "map2",
+        &["--max-connections", "2", "--handshake-timeout-s", "0.5"],
+    )
+    .await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let mut silent = TcpStream::connect(sim.addr).expect("connect");
+    let _held = TcpStream::connect(sim.addr).expect("connect");
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let mut over = TcpStream::connect(sim.addr).expect("the kernel accepts");
+    let started = Instant::now();
+    let over_closed =
+        tokio::task::block_in_place(|| closed_within(&mut over, Duration::from_millis(400)));
+    assert!(
+        over_closed,
+        "a third connection was held beyond --max-connections 2"
+    );
+    let silent_closed =
+        tokio::task::block_in_place(|| closed_within(&mut silent, Duration::from_secs(10)));
+    assert!(
+        silent_closed && started.elapsed() >= Duration::from_millis(300),
+        "the silent connection: closed {silent_closed} after {:?}",
+        started.elapsed()
+    );
+    // Both silent ones are gone after their timeout: a client is served.
+    let mut served = false;
+    for _ in 0..30 {
+        if health_status(&sim.url(), "deog.v1.RobotService")
+            .await
+            .is_some()
+        {
+            served = true;
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    assert!(served, "the simulator did not serve again");
 }

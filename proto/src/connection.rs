@@ -1,6 +1,7 @@
-//! The connections the server accepts: bounded in number, given a time to
-//! start speaking, paced when the process runs out of file descriptors,
-//! and cut when a shutdown's grace period runs out.
+//! The connections a deog server (the map server, the simulator) accepts:
+//! bounded in number, given a time to start speaking, paced when the
+//! process runs out of file descriptors, and cut when a shutdown's grace
+//! period runs out.
 //!
 //! tonic stops accepting at shutdown but lets open connections run until
 //! their clients leave; a client holding a stream open would keep the
@@ -24,6 +25,14 @@ use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
 use tokio_util::sync::{CancellationToken, WaitForCancellationFutureOwned};
 use tonic::transport::server::{Connected, TcpConnectInfo};
+
+/// Time between keepalive pings on a connection, and how long one may go
+/// unanswered before the connection is dropped: a peer that vanished
+/// without closing (a robot that lost power) holds its connection
+/// otherwise.
+pub const KEEPALIVE_INTERVAL: Duration = Duration::from_secs(30);
+/// See [`KEEPALIVE_INTERVAL`].
+pub const KEEPALIVE_TIMEOUT: Duration = Duration::from_secs(20);
 
 /// First and longest wait after an accept failed for want of resources.
 const ACCEPT_BACKOFF: (Duration, Duration) = (Duration::from_millis(50), Duration::from_secs(1));
