@@ -1,6 +1,7 @@
 //! `deog`: every process of the system as a subcommand.
 
 mod bench;
+mod completions;
 mod connection;
 mod demo;
 mod eval;
@@ -14,13 +15,14 @@ mod pose_args;
 mod rig_args;
 mod server;
 mod sim;
+mod status;
 mod teleport;
 mod wander;
 
 use std::io::IsTerminal;
 
 use anyhow::Result;
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
 
 /// deog: a shared, dynamically expanding occupancy-grid map for robots with
@@ -74,6 +76,15 @@ enum Command {
     /// Runs the release benchmarks: the map server, localization accuracy,
     /// the localizer's memory.
     Bench(bench::BenchArgs),
+    /// What a running system is doing: the map server's health, its maps,
+    /// the robots' frames and the localizers' estimates, with rates over
+    /// an interval (--watch: redrawn until ctrl-c).
+    Status(status::StatusArgs),
+    /// Prints the shell completion script for bash, zsh or fish (and
+    /// elvish, powershell).
+    Completions(completions::CompletionsArgs),
+    /// Writes man pages for deog and every subcommand into a folder.
+    Man(completions::ManArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -110,5 +121,8 @@ fn run(command: Command) -> Result<()> {
         Command::Frames(args) => frames::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Bench(args) => bench::run(args),
+        Command::Status(args) => status::run(args),
+        Command::Completions(args) => completions::print_completions(args, Cli::command()),
+        Command::Man(args) => completions::write_man_pages(args, Cli::command()),
     }
 }

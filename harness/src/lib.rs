@@ -15,12 +15,15 @@
 //! - [`run_reads`]: a map, the robots' start poses, and a robot's true
 //!   poses and estimates read from the map server, as the evaluation takes
 //!   them.
+//! - [`status`]: what a running system is doing, from two samples of
+//!   the map server: the rows and table `deog status` prints.
 //! - [`shutdown`]: [`shutdown_signal`], ctrl-c or SIGTERM, on which a run
 //!   stops its children and a long-running subcommand ends.
 
 pub mod proc_stats;
 pub mod run_reads;
 pub mod shutdown;
+pub mod status;
 pub mod supervisor;
 
 pub use shutdown::shutdown_signal;
