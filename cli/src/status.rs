@@ -253,6 +253,21 @@ impl Sampler {
             .context("listing the maps")?
             .into_inner()
             .maps;
+        let mut map_samples = Vec::new();
+        for info in &maps {
+            let writers = self
+                .client
+                .update_cursors(&info.name)
+                .await
+                .with_context(|| format!("listing the writers of map {}", info.name))?;
+            map_samples.push(map_sample(
+                info,
+                writers
+                    .into_iter()
+                    .map(|c| (c.client_id, c.last_sequence))
+                    .collect(),
+            ));
+        }
         let robots = self.client.robots().await.context("listing the robots")?;
         for robot in &robots {
             self.follow_frames(&robot.robot)
@@ -292,7 +307,7 @@ impl Sampler {
         }
         Ok(Sample {
             at_s: self.clock_s(at),
-            maps: maps.iter().map(map_sample).collect(),
+            maps: map_samples,
             robots: robot_samples,
             estimates,
         })
@@ -345,7 +360,7 @@ impl Sampler {
     }
 }
 
-fn map_sample(info: &pb::MapInfo) -> MapSample {
+fn map_sample(info: &pb::MapInfo, writers: Vec<(String, u64)>) -> MapSample {
     MapSample {
         name: info.name.clone(),
         cells: info.cell_count,
@@ -357,5 +372,6 @@ fn map_sample(info: &pb::MapInfo) -> MapSample {
             max_y: b.max_y,
         }),
         version: info.version,
+        writers,
     }
 }

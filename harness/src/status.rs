@@ -38,6 +38,9 @@ pub struct MapSample {
     pub bounds: Option<Bounds>,
     /// Incremented by every applied batch and every clear.
     pub version: u64,
+    /// The clients that applied batches to it, with their highest applied
+    /// sequence.
+    pub writers: Vec<(String, u64)>,
 }
 
 /// One robot's frames as a sample saw them.
@@ -119,6 +122,20 @@ pub struct MapRow {
     /// Version increments per second between the samples; `None` for a
     /// map the first sample did not see, or one cleared and rebuilt.
     pub writes_per_s: Option<f64>,
+    /// Who writes to the map, by client id.
+    pub writers: Vec<WriterRow>,
+}
+
+/// A client that writes to a map.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WriterRow {
+    /// The client's id, e.g. `carto/scout-1`.
+    pub client_id: String,
+    /// Its highest applied batch sequence.
+    pub last_sequence: u64,
+    /// Its sequence's advance per second between the samples (batches per
+    /// second when it numbers them one by one).
+    pub batches_per_s: Option<f64>,
 }
 
 /// A robot row.
@@ -189,6 +206,24 @@ pub fn status_rows(server: ServerRow, before: &Sample, after: &Sample) -> Status
         .iter()
         .map(|map| {
             let old = before.maps.iter().find(|m| m.name == map.name);
+            let mut writers: Vec<WriterRow> = map
+                .writers
+                .iter()
+                .map(|(client_id, last_sequence)| {
+                    let old_sequence = old.and_then(|m| {
+                        m.writers
+                            .iter()
+                            .find(|(id, _)| id == client_id)
+                            .map(|&(_, s)| s)
+                    });
+                    WriterRow {
+                        client_id: client_id.clone(),
+                        last_sequence: *last_sequence,
+                        batches_per_s: rate(old_sequence, *last_sequence),
+                    }
+                })
+                .collect();
+            writers.sort_by(|a, b| a.client_id.cmp(&b.client_id));
             MapRow {
                 name: map.name.clone(),
                 cells: map.cells,
@@ -196,6 +231,7 @@ pub fn status_rows(server: ServerRow, before: &Sample, after: &Sample) -> Status
                 bounds: map.bounds,
                 version: map.version,
                 writes_per_s: rate(old.map(|m| m.version), map.version),
+                writers,
             }
         })
         .collect();
@@ -287,11 +323,20 @@ pub fn status_table(status: &Status, watched_s: f64) -> String {
                 bounds,
                 m.version.to_string(),
                 opt(m.writes_per_s, 1),
+                writers(&m.writers),
             ]
         });
         table(
             &mut out,
-            &["map", "cells", "tiles", "bounds (m)", "version", "writes/s"],
+            &[
+                "map",
+                "cells",
+                "tiles",
+                "bounds (m)",
+                "version",
+                "writes/s",
+                "writers (batches/s)",
+            ],
             rows,
         );
     }
@@ -349,6 +394,21 @@ pub fn status_table(status: &Status, watched_s: f64) -> String {
     out
 }
 
+/// A map's writers on one line: each client id with its batch rate.
+fn writers(writers: &[WriterRow]) -> String {
+    if writers.is_empty() {
+        return "-".to_string();
+    }
+    let named: Vec<String> = writers
+        .iter()
+        .map(|w| match w.batches_per_s {
+            Some(rate) => format!("{} ({rate:.1})", w.client_id),
+            None => w.client_id.clone(),
+        })
+        .collect();
+    named.join(", ")
+}
+
 /// Appends `headers` and `rows` with columns aligned: the first left, the
 /// others right, as numbers read best.
 fn table(out: &mut String, headers: &[&str], rows: impl Iterator<Item = Vec<String>>) {
@@ -397,6 +457,7 @@ mod tests {
             tiles: 2,
             bounds: None,
             version,
+            writers: vec![("carto/r1".into(), version)],
         }
     }
 
@@ -429,6 +490,14 @@ mod tests {
         assert_eq!(names, ["a", "b"]);
         assert_eq!(status.maps[0].writes_per_s, Some(15.0));
         assert_eq!(status.maps[1].writes_per_s, None, "new map: no rate yet");
+        assert_eq!(
+            status.maps[0].writers,
+            [WriterRow {
+                client_id: "carto/r1".into(),
+                last_sequence: 130,
+                batches_per_s: Some(15.0)
+            }]
+        );
         assert_eq!(status.robots[0].name, "r0");
         assert_eq!(status.robots[0].frames_per_s, None);
         assert_eq!(status.robots[0].last_frame_age_s, None);
@@ -492,6 +561,7 @@ mod tests {
         };
         let text = status_table(&status_rows(server(), &after, &after), 1.0);
         assert!(text.contains("writes/s"), "{text}");
+        assert!(text.contains("carto/r1"), "{text}");
         assert!(text.contains("no robots with frames"), "{text}");
         let lines: Vec<&str> = text.lines().filter(|l| l.contains("empty")).collect();
         assert_eq!(lines.len(), 2, "{text}");
@@ -518,6 +588,7 @@ mod tests {
                 "name",
                 "tiles",
                 "version",
+                "writers",
                 "writes_per_s"
             ]
         );

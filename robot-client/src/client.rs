@@ -115,6 +115,25 @@ impl MapClient {
         .last_sequence)
     }
 
+    /// Every client that applied batches to map `map`, with its highest
+    /// applied sequence, by client id: who writes to the map. One attempt,
+    /// no retry: callers that poll it ask again anyway.
+    pub async fn update_cursors(
+        &self,
+        map: &str,
+    ) -> Result<Vec<pb::ClientUpdateCursor>, ClientError> {
+        let request = pb::MapRef {
+            name: map.to_string(),
+        };
+        Ok(self
+            .raw
+            .clone()
+            .list_update_cursors(request)
+            .await?
+            .into_inner()
+            .cursors)
+    }
+
     /// Every stored tile that the query selects.
     pub async fn tiles(&self, query: pb::TileQuery) -> Result<Vec<pb::Tile>, ClientError> {
         let mut stream = self.raw.clone().get_tiles(query).await?.into_inner();

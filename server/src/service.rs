@@ -474,6 +474,24 @@ impl<S: Store> MapService for MapServer<S> {
         Ok(Response::new(pb::UpdateCursor { last_sequence }))
     }
 
+    async fn list_update_cursors(
+        &self,
+        request: Request<pb::MapRef>,
+    ) -> Result<Response<pb::ListUpdateCursorsResponse>, Status> {
+        let map = convert::map_name("name", &request.into_inner().name)?;
+        self.record(&map)?;
+        let cursors = self
+            .store
+            .cursors(&map)?
+            .into_iter()
+            .map(|(client_id, cursor)| pb::ClientUpdateCursor {
+                client_id,
+                last_sequence: cursor.last,
+            })
+            .collect();
+        Ok(Response::new(pb::ListUpdateCursorsResponse { cursors }))
+    }
+
     type GetTilesStream = ResponseStream<pb::Tile>;
 
     async fn get_tiles(

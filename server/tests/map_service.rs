@@ -552,3 +552,59 @@ async fn a_slow_watcher_gets_one_resync_instead_of_an_unbounded_queue() {
         }
     }
 }
+
+#[tokio::test]
+async fn update_cursors_name_every_client_writing_to_a_map() {
+    let server = TestServer::start().await;
+    let mut client = server.client().await;
+    for map in ["shared", "other", "unwritten"] {
+        create_map(&mut client, map, 8).await;
+    }
+    let cells = vec![10i16; 64];
+    let writes = [
+        ("shared", "carto/scout-2", 1..=2),
+        ("shared", "carto/scout-1", 1..=5),
+        ("other", "import/map1", 7..=7),
+    ];
+    for (map, client_id, sequences) in writes {
+        let batches = sequences
+            .map(|s| batch(map, client_id, s, vec![dense_delta(0, 0, &cells)]))
+            .collect();
+        let (acks, error) = send_batches(&mut client, batches).await;
+        assert!(error.is_none() && acks.iter().all(|a| a.applied));
+    }
+
+    let cursors = |map: &str| {
+        let mut client = client.clone();
+        let map = map.to_string();
+        async move {
+            client
+                .list_update_cursors(pb::MapRef { name: map })
+                .await
+                .map(|reply| {
+                    reply
+                        .into_inner()
+                        .cursors
+                        .into_iter()
+                        .map(|c| (c.client_id, c.last_sequence))
+                        .collect::<Vec<_>>()
+                })
+        }
+    };
+    assert_eq!(
+        cursors("shared").await.unwrap(),
+        [
+            ("carto/scout-1".to_string(), 5),
+            ("carto/scout-2".to_string(), 2)
+        ]
+    );
+    assert_eq!(
+        cursors("other").await.unwrap(),
+        [("import/map1".to_string(), 7)]
+    );
+    assert!(cursors("unwritten").await.unwrap().is_empty());
+    let missing = cursors("nowhere").await.unwrap_err();
+    assert_eq!(missing.code(), tonic::Code::NotFound, "{missing}");
+    let bad = cursors("").await.unwrap_err();
+    assert_eq!(bad.code(), tonic::Code::InvalidArgument, "{bad}");
+}

@@ -128,6 +128,19 @@ async fn status_shows_the_maps_robots_and_localizers_being_written() {
         maps[0]["writes_per_s"].as_f64().expect("rate") > 1.0,
         "{json}"
     );
+    let writers = maps[0]["writers"].as_array().expect("writers");
+    assert_eq!(writers.len(), 1, "{json}");
+    assert_eq!(writers[0]["client_id"], "carto/scout-1");
+    // Read just after the map's version, while batches keep landing.
+    let last_sequence = writers[0]["last_sequence"].as_u64().expect("sequence");
+    assert!(
+        last_sequence >= version && last_sequence <= sent as u64,
+        "{json}"
+    );
+    assert!(
+        writers[0]["batches_per_s"].as_f64().expect("rate") > 1.0,
+        "{json}"
+    );
 
     let robots = json["robots"].as_array().expect("robots");
     assert_eq!(robots.len(), 1, "{json}");
@@ -177,6 +190,7 @@ async fn status_shows_the_maps_robots_and_localizers_being_written() {
         "SERVING",
         MAP,
         ROBOT,
+        "carto/scout-1",
         "writes/s",
         "frames/s",
         "lag (frames)",

@@ -84,6 +84,9 @@ pub trait Store: Send + Sync + 'static {
     /// The batch sequences applied for `client` on map `name`
     /// ([`ClientCursor::new`] if none).
     fn cursor(&self, name: &str, client: &str) -> Result<ClientCursor, StoreError>;
+    /// Every client with applied batches on map `name`, by client id, with
+    /// its cursor.
+    fn cursors(&self, name: &str) -> Result<Vec<(String, ClientCursor)>, StoreError>;
 
     /// Stores frames (atomically per robot).
     fn write_frames(&self, writes: Vec<FrameWrite>) -> Result<(), StoreError>;

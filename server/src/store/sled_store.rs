@@ -378,6 +378,18 @@ impl Store for SledStore {
         }
     }
 
+    fn cursors(&self, name: &str) -> Result<Vec<(String, ClientCursor)>, StoreError> {
+        let tree = self.current()?.tree(name)?;
+        let mut out = Vec::new();
+        for entry in tree.scan_prefix([CURSOR_PREFIX]) {
+            let (key, bytes) = entry?;
+            let client = String::from_utf8_lossy(&key[1..]).into_owned();
+            let cursor = ClientCursor::decode(&client, &bytes)?;
+            out.push((client, cursor));
+        }
+        Ok(out)
+    }
+
     fn write_frames(&self, writes: Vec<FrameWrite>) -> Result<(), StoreError> {
         let open = self.current()?;
         for write in writes {

@@ -200,6 +200,9 @@ impl<S: Store> Store for CountingStore<S> {
     fn cursor(&self, name: &str, client: &str) -> Result<ClientCursor, StoreError> {
         self.inner.cursor(name, client)
     }
+    fn cursors(&self, name: &str) -> Result<Vec<(String, ClientCursor)>, StoreError> {
+        self.inner.cursors(name)
+    }
     fn write_frames(&self, writes: Vec<FrameWrite>) -> Result<(), StoreError> {
         self.inner.write_frames(writes)
     }
