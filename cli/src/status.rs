@@ -8,6 +8,8 @@ use std::io::{IsTerminal, Write as _};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use tokio::task::JoinHandle;
+
 use anyhow::{Context, Result};
 use clap::Args;
 use deog_harness::status::{
@@ -60,7 +62,11 @@ struct Sampler {
     address: String,
     started: Instant,
     arrivals: Arc<Mutex<Arrivals>>,
-    followed_robots: std::collections::HashSet<String>,
+    /// The task timing estimates; followed again once it ends (the server
+    /// went away and came back).
+    estimate_follower: Option<JoinHandle<()>>,
+    /// The tasks timing each robot's frames, likewise.
+    frame_followers: HashMap<String, JoinHandle<()>>,
 }
 
 /// Runs `deog status`.
@@ -119,7 +125,9 @@ async fn watch(args: &StatusArgs) -> Result<()> {
         let after = match tokio::time::timeout(timeout, sampler.sample()).await {
             Ok(Ok(sample)) => sample,
             Ok(Err(error)) if args.watch => {
-                print_block(&format!("error: {error:#}"), clear)?;
+                // What was asked and the root cause: tonic's own chain
+                // repeats itself over a whole screen line.
+                print_block(&format!("error: {error}: {}", error.root_cause()), clear)?;
                 continue;
             }
             Err(_) if args.watch => {
@@ -169,13 +177,14 @@ impl Sampler {
     async fn connect(config: ClientConfig, address: String) -> Result<Self> {
         let client = MapClient::connect(config.clone()).await?;
         let (channel, _) = deog_robot_client::connect::connect(&config).await?;
-        let sampler = Self {
+        let mut sampler = Self {
             client,
             health: HealthClient::new(channel),
             address,
             started: Instant::now(),
             arrivals: Arc::default(),
-            followed_robots: Default::default(),
+            estimate_follower: None,
+            frame_followers: HashMap::new(),
         };
         sampler.follow_estimates().await?;
         Ok(sampler)
@@ -196,7 +205,14 @@ impl Sampler {
     }
 
     /// Times every estimate that arrives from now on, whatever its robot.
-    async fn follow_estimates(&self) -> Result<()> {
+    async fn follow_estimates(&mut self) -> Result<()> {
+        if self
+            .estimate_follower
+            .as_ref()
+            .is_some_and(|task| !task.is_finished())
+        {
+            return Ok(());
+        }
         let mut stream = self
             .client
             .raw()
@@ -207,7 +223,7 @@ impl Sampler {
             .with_context(|| format!("following the estimates on {}", self.address))?
             .into_inner();
         let arrivals = Arc::clone(&self.arrivals);
-        tokio::spawn(async move {
+        self.estimate_follower = Some(tokio::spawn(async move {
             while let Ok(Some(estimate)) = stream.message().await {
                 if let Ok(mut arrivals) = arrivals.lock() {
                     arrivals
@@ -215,25 +231,30 @@ impl Sampler {
                         .insert((estimate.robot, estimate.map), Instant::now());
                 }
             }
-        });
+        }));
         Ok(())
     }
 
     /// Times the frames of `robot` that arrive from now on.
     async fn follow_frames(&mut self, robot: &str) -> Result<()> {
-        if !self.followed_robots.insert(robot.to_string()) {
+        if self
+            .frame_followers
+            .get(robot)
+            .is_some_and(|task| !task.is_finished())
+        {
             return Ok(());
         }
         let mut stream = self.client.subscribe_frames(robot, 0).await?;
         let arrivals = Arc::clone(&self.arrivals);
-        let robot = robot.to_string();
-        tokio::spawn(async move {
+        let name = robot.to_string();
+        let task = tokio::spawn(async move {
             while let Ok(Some(_)) = stream.message().await {
                 if let Ok(mut arrivals) = arrivals.lock() {
-                    arrivals.frames.insert(robot.clone(), Instant::now());
+                    arrivals.frames.insert(name.clone(), Instant::now());
                 }
             }
         });
+        self.frame_followers.insert(robot.to_string(), task);
         Ok(())
     }
 
@@ -269,6 +290,7 @@ impl Sampler {
             ));
         }
         let robots = self.client.robots().await.context("listing the robots")?;
+        self.follow_estimates().await?;
         for robot in &robots {
             self.follow_frames(&robot.robot)
                 .await

@@ -221,3 +221,99 @@ fn status_refuses_a_bad_interval() {
     assert!(stderr.contains("--interval-s"), "{stderr}");
     assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
 }
+
+/// Reads the lines a child prints, one at a time, each within `timeout`.
+fn lines_of(stdout: std::process::ChildStdout) -> std::sync::mpsc::Receiver<String> {
+    use std::io::BufRead as _;
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stdout)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    rx
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn status_watch_outlives_a_server_restart_and_times_frames_after_it() {
+    let data = tempfile::tempdir().expect("temp dir");
+    let server = ServerProcess::start(data.path(), &[]).await;
+    let addr = server.addr;
+    // Frames stored before status starts: it follows the robot from its
+    // first sample but times no arrival.
+    let frames = wander_frames(ROBOT, 3, 200);
+    let (before, after) = frames.split_at(5);
+    MapClient::connect(ClientConfig::new(addr.to_string()))
+        .await
+        .expect("connect")
+        .publish_frames(before.to_vec())
+        .await
+        .expect("frames");
+    let mut watch = Command::new(deog_binary())
+        .args(["status", "--watch", "--json", "--interval-s", "0.3"])
+        .args(["--server", &addr.to_string()])
+        .env("RUST_LOG", "warn")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("deog status starts");
+    let lines = lines_of(watch.stdout.take().expect("stdout"));
+    let next = || {
+        lines
+            .recv_timeout(Duration::from_secs(20))
+            .expect("a line within 20 s")
+    };
+    let first: serde_json::Value = serde_json::from_str(&next()).expect("JSON");
+    assert_eq!(first["server"]["health"], "SERVING");
+    assert_eq!(first["robots"][0]["name"], ROBOT);
+    assert!(first["robots"][0]["last_frame_age_s"].is_null(), "{first}");
+
+    server.kill();
+    let down = (0..50)
+        .map(|_| next())
+        .find(|line| line.starts_with("error: "))
+        .expect("an error line while the server is down");
+    assert!(!down.contains('\n'), "{down}");
+
+    let server = ServerProcess::start_on(addr, data.path(), &[]).await;
+    let client = MapClient::connect(ClientConfig::new(addr.to_string()))
+        .await
+        .expect("connect");
+    // Frames keep arriving until status has seen one arrive: it followed
+    // the robot's frames anew on the restarted server.
+    let mut seen = None;
+    for frame in after {
+        client
+            .publish_frames(vec![frame.clone()])
+            .await
+            .expect("frame");
+        while let Ok(line) = lines.try_recv() {
+            if let Ok(json) = serde_json::from_str::<serde_json::Value>(&line)
+                && json["robots"][0]["last_frame_age_s"].is_f64()
+            {
+                seen = Some(json);
+            }
+        }
+        if seen.is_some() {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let json = seen.expect("status timed a frame after the restart");
+    assert_eq!(json["server"]["health"], "SERVING");
+    assert_eq!(json["robots"][0]["name"], ROBOT);
+
+    let stopped = Command::new("kill")
+        .args(["-INT", &watch.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(stopped.success());
+    let status = watch.wait().expect("deog status ends");
+    assert!(status.success(), "ctrl-c ends --watch cleanly: {status:?}");
+    drop(server);
+}
