@@ -222,6 +222,17 @@ fn status_refuses_a_bad_interval() {
     assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
 }
 
+/// A child process killed when dropped, so that a failing test leaves no
+/// `deog status --watch` running.
+struct KillOnDrop(std::process::Child);
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 /// Reads the lines a child prints, one at a time, each within `timeout`.
 fn lines_of(stdout: std::process::ChildStdout) -> std::sync::mpsc::Receiver<String> {
     use std::io::BufRead as _;
@@ -254,7 +265,7 @@ async fn status_watch_outlives_a_server_restart_and_times_frames_after_it() {
         .publish_frames(before.to_vec())
         .await
         .expect("frames");
-    let mut watch = Command::new(deog_binary())
+    let watch = Command::new(deog_binary())
         .args(["status", "--watch", "--json", "--interval-s", "0.3"])
         .args(["--server", &addr.to_string()])
         .env("RUST_LOG", "warn")
@@ -262,7 +273,8 @@ async fn status_watch_outlives_a_server_restart_and_times_frames_after_it() {
         .stderr(std::process::Stdio::null())
         .spawn()
         .expect("deog status starts");
-    let lines = lines_of(watch.stdout.take().expect("stdout"));
+    let mut watch = KillOnDrop(watch);
+    let lines = lines_of(watch.0.stdout.take().expect("stdout"));
     let next = || {
         lines
             .recv_timeout(Duration::from_secs(20))
@@ -309,11 +321,11 @@ async fn status_watch_outlives_a_server_restart_and_times_frames_after_it() {
     assert_eq!(json["robots"][0]["name"], ROBOT);
 
     let stopped = Command::new("kill")
-        .args(["-INT", &watch.id().to_string()])
+        .args(["-INT", &watch.0.id().to_string()])
         .status()
         .expect("kill runs");
     assert!(stopped.success());
-    let status = watch.wait().expect("deog status ends");
+    let status = watch.0.wait().expect("deog status ends");
     assert!(status.success(), "ctrl-c ends --watch cleanly: {status:?}");
     drop(server);
 }
