@@ -106,6 +106,15 @@ impl ClientConfig {
     /// and ends).
     pub fn one_shot(mut self, timeout: Duration) -> Self {
         self.connect_timeout = Some(timeout);
+        // A call that keeps failing for want of the server gives up as
+        // soon: as many attempts as the backoff fits in the timeout.
+        let mut attempts = 1;
+        let mut waited = Duration::ZERO;
+        while waited < timeout && attempts < 1000 {
+            attempts += 1;
+            waited += self.retry.delay(attempts);
+        }
+        self.retry.max_attempts = Some(attempts);
         self
     }
 
@@ -325,6 +334,17 @@ mod tests {
         assert_eq!(delays, [0, 100, 200, 400, 500, 500]);
         assert!(policy.allows(5));
         assert!(!policy.allows(6));
+    }
+
+    #[test]
+    fn a_one_shot_client_retries_calls_for_about_its_timeout() {
+        let config = ClientConfig::new("h:1").one_shot(Duration::from_secs(5));
+        let attempts = config.retry.max_attempts.expect("bounded");
+        let waited: Duration = (1..=attempts).map(|a| config.retry.delay(a)).sum();
+        assert!(
+            waited >= Duration::from_secs(5) && waited < Duration::from_secs(8),
+            "{attempts} attempts wait {waited:?}"
+        );
     }
 
     #[test]
