@@ -6,7 +6,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use deog_proto::connection::ConnectionLimits;
 use deog_proto::tls::TlsIdentity;
-use deog_robot_client::ClientConfig;
+use deog_robot_client::{ClientConfig, Peer};
 use std::path::{Path, PathBuf};
 
 /// Options naming the map server and how to authenticate to it.
@@ -32,6 +32,7 @@ impl ConnectionArgs {
     /// The robot client's configuration.
     pub fn client_config(&self) -> Result<ClientConfig> {
         client_config(
+            Peer::MapServer,
             &self.server,
             self.token_file.as_deref(),
             self.tls_ca.as_deref(),
@@ -63,6 +64,7 @@ impl SimConnectionArgs {
     /// The simulator client's configuration.
     pub fn client_config(&self) -> Result<ClientConfig> {
         client_config(
+            Peer::Simulator,
             &self.sim,
             self.sim_token_file.as_deref(),
             self.sim_tls_ca.as_deref(),
@@ -72,6 +74,7 @@ impl SimConnectionArgs {
 }
 
 fn client_config(
+    peer: Peer,
     endpoint: &str,
     token_file: Option<&Path>,
     tls_ca: Option<&Path>,
@@ -85,8 +88,29 @@ fn client_config(
         token,
         tls_ca_pem,
         tls_domain: tls_domain.map(str::to_string),
+        peer,
         ..ClientConfig::new(endpoint.to_string())
     })
+}
+
+/// How long a command that does one thing and ends waits for its server.
+#[derive(Debug, Clone, Args)]
+pub struct ConnectTimeoutArgs {
+    /// Seconds to keep trying to reach the server before giving up.
+    #[arg(long, env = "DEOG_CONNECT_TIMEOUT", default_value_t = 5.0)]
+    pub connect_timeout: f64,
+}
+
+impl ConnectTimeoutArgs {
+    /// `config`, giving up after the timeout.
+    pub fn apply(&self, config: ClientConfig) -> Result<ClientConfig> {
+        anyhow::ensure!(
+            self.connect_timeout.is_finite() && (0.1..=3600.0).contains(&self.connect_timeout),
+            "--connect-timeout must be within 0.1 and 3600 seconds, got {}",
+            self.connect_timeout
+        );
+        Ok(config.one_shot(std::time::Duration::from_secs_f64(self.connect_timeout)))
+    }
 }
 
 /// The token in `path`, trimmed; an empty one is refused, since it would

@@ -20,7 +20,7 @@ use deog_harness::run_reads::{read_map, read_robot, robot_starts};
 use deog_robot_client::MapClient;
 use deog_world::load_world_spec;
 
-use crate::connection::ConnectionArgs;
+use crate::connection::{ConnectTimeoutArgs, ConnectionArgs};
 
 /// Options of `deog eval`.
 #[derive(Debug, Args)]
@@ -75,6 +75,8 @@ pub struct EvalMapArgs {
     pub rig: Option<String>,
     #[command(flatten)]
     pub connection: ConnectionArgs,
+    #[command(flatten)]
+    pub timeout: ConnectTimeoutArgs,
 }
 
 /// Options of `deog eval localize`.
@@ -115,6 +117,8 @@ pub struct EvalLocalizeArgs {
     pub kidnap_jump_m: f64,
     #[command(flatten)]
     pub connection: ConnectionArgs,
+    #[command(flatten)]
+    pub timeout: ConnectTimeoutArgs,
 }
 
 /// Runs the evaluation asked for.
@@ -137,11 +141,8 @@ fn run_map(args: EvalMapArgs) -> Result<()> {
     };
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     let (map, seeds) = runtime.block_on(async {
-        let client = MapClient::connect(args.connection.client_config()?)
-            .await
-            .with_context(|| {
-                format!("connecting to the map server at {}", args.connection.server)
-            })?;
+        let client =
+            MapClient::connect(args.timeout.apply(args.connection.client_config()?)?).await?;
         let map = read_map(&client, &args.map).await?;
         let seeds = robot_starts(&client).await?;
         anyhow::Ok((map, seeds))
@@ -186,11 +187,8 @@ fn run_localize(args: EvalLocalizeArgs) -> Result<()> {
     let (from, to) = (args.from.unwrap_or(0), args.to.unwrap_or(0));
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     let (robots, map) = runtime.block_on(async {
-        let client = MapClient::connect(args.connection.client_config()?)
-            .await
-            .with_context(|| {
-                format!("connecting to the map server at {}", args.connection.server)
-            })?;
+        let client =
+            MapClient::connect(args.timeout.apply(args.connection.client_config()?)?).await?;
         let mut robots = Vec::with_capacity(args.robots.len());
         for name in &args.robots {
             robots.push(read_robot(&client, name, args.map.as_deref(), from, to).await?);

@@ -12,7 +12,7 @@ use deog_mapfile::{to_png, write_map};
 use deog_mapping::export_map;
 use deog_robot_client::{ClientError, MapClient};
 
-use crate::connection::ConnectionArgs;
+use crate::connection::{ConnectTimeoutArgs, ConnectionArgs};
 
 /// Options of `deog export`.
 #[derive(Debug, Args)]
@@ -29,6 +29,8 @@ pub struct ExportArgs {
     pub name: Option<String>,
     #[command(flatten)]
     pub connection: ConnectionArgs,
+    #[command(flatten)]
+    pub timeout: ConnectTimeoutArgs,
 }
 
 /// Runs the export.
@@ -68,9 +70,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
 
 /// Every tile of the map, as a [`TileMap`] with the map's settings.
 async fn fetch(args: &ExportArgs) -> Result<TileMap> {
-    let client = MapClient::connect(args.connection.client_config()?)
-        .await
-        .with_context(|| format!("connecting to the map server at {}", args.connection.server))?;
+    let client = MapClient::connect(args.timeout.apply(args.connection.client_config()?)?).await?;
     if let Err(ClientError::Status(status)) = client.map_info(&args.map).await
         && status.code() == tonic::Code::NotFound
     {

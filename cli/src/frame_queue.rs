@@ -7,6 +7,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use deog_proto::v1 as pb;
+use deog_robot_client::MapClient;
 
 /// Frames read ahead at most.
 const QUEUE_CAPACITY: usize = 1024;
@@ -19,12 +20,56 @@ pub(crate) struct FrameQueue {
 }
 
 impl FrameQueue {
-    /// Starts reading `stream`; with `idle_exit_s` > 0, [`Self::next`]
-    /// ends once no frame has come for that long.
-    pub(crate) fn spawn(mut stream: tonic::Streaming<pb::SonarFrame>, idle_exit_s: f64) -> Self {
+    /// Follows `robot`'s frames from sequence `from`, saying whose frames
+    /// it waits for (and what the server holds of them), and again when the
+    /// first one comes; with `idle_exit_s` > 0, [`Self::next`] ends once no
+    /// frame has come for that long.
+    pub(crate) async fn follow(
+        client: &MapClient,
+        robot: &str,
+        from: u64,
+        idle_exit_s: f64,
+    ) -> Result<Self> {
+        let held = client
+            .robots()
+            .await
+            .ok()
+            .and_then(|robots| robots.into_iter().find(|r| r.robot == robot));
+        match held {
+            Some(r) => tracing::info!(
+                "waiting for frames of robot {robot} from sequence {from} (the server holds {} of them, {}..={})",
+                r.frame_count,
+                r.first_sequence,
+                r.last_sequence
+            ),
+            None => tracing::info!(
+                "waiting for frames of robot {robot} from sequence {from}: it has published none yet"
+            ),
+        }
+        let stream = client
+            .subscribe_frames(robot, from)
+            .await
+            .with_context(|| format!("following the frames of robot {robot}"))?;
+        Ok(Self::spawn(stream, robot.to_string(), idle_exit_s))
+    }
+
+    /// Starts reading `stream` of `robot`'s frames.
+    fn spawn(
+        mut stream: tonic::Streaming<pb::SonarFrame>,
+        robot: String,
+        idle_exit_s: f64,
+    ) -> Self {
         let (tx, frames) = tokio::sync::mpsc::channel(QUEUE_CAPACITY);
         let reader = tokio::spawn(async move {
+            let mut first = true;
             while let Some(frame) = stream.message().await.context("the frame stream failed")? {
+                if first {
+                    tracing::info!(
+                        "first frame of robot {robot} arrived: sequence {}",
+                        frame.sequence
+                    );
+                    first = false;
+                }
                 if tx.send(frame).await.is_err() {
                     break;
                 }

@@ -1,12 +1,14 @@
 //! `deog frames`: what the map server holds of the robots' sonar frames:
 //! each robot's count and range, or one robot's frames, followed live.
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
+
+use crate::frame_queue::FrameQueue;
 use clap::Args;
 use deog_proto::v1 as pb;
 use deog_robot_client::MapClient;
 
-use crate::connection::ConnectionArgs;
+use crate::connection::{ConnectTimeoutArgs, ConnectionArgs};
 
 /// Options of `deog frames`.
 #[derive(Debug, Args)]
@@ -22,6 +24,8 @@ pub struct FramesArgs {
     pub follow: bool,
     #[command(flatten)]
     pub connection: ConnectionArgs,
+    #[command(flatten)]
+    pub timeout: ConnectTimeoutArgs,
 }
 
 /// One frame: its rig, its best pose (true, else reference, else
@@ -61,11 +65,13 @@ fn print(text: &str) -> Result<bool> {
 pub fn run(args: FramesArgs) -> Result<()> {
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     runtime.block_on(async {
-        let map = MapClient::connect(args.connection.client_config()?)
-            .await
-            .with_context(|| {
-                format!("connecting to the map server at {}", args.connection.server)
-            })?;
+        let config = args.connection.client_config()?;
+        let config = if args.follow {
+            config.retrying_forever()
+        } else {
+            args.timeout.apply(config)?
+        };
+        let map = MapClient::connect(config).await?;
         let Some(robot) = &args.robot else {
             let robots = map.robots().await?;
             if robots.is_empty() {
@@ -83,20 +89,40 @@ pub fn run(args: FramesArgs) -> Result<()> {
             return Ok(());
         };
         if !args.follow {
-            for frame in map.read_frames(robot, args.from, 0).await? {
+            let frames = map.read_frames(robot, args.from, 0).await?;
+            if frames.is_empty() {
+                let robots = map.robots().await?;
+                let held = robots.iter().find(|r| &r.robot == robot);
+                match held {
+                    Some(r) => bail!(
+                        "robot {robot} has no frame from sequence {}: its frames run {}..={}",
+                        args.from,
+                        r.first_sequence,
+                        r.last_sequence
+                    ),
+                    None if robots.is_empty() => bail!(
+                        "robot {robot} has published no frames: no robot has (--follow waits for them)"
+                    ),
+                    None => bail!(
+                        "robot {robot} has published no frames (--follow waits for them); robots with frames: {}",
+                        robots.iter().map(|r| r.robot.as_str()).collect::<Vec<_>>().join(", ")
+                    ),
+                }
+            }
+            for frame in frames {
                 if !print(&line(&frame))? {
                     break;
                 }
             }
             return Ok(());
         }
-        let mut frames = map.subscribe_frames(robot, args.from).await?;
+        let mut frames = FrameQueue::follow(&map, robot, args.from, 0.0).await?;
         let shutdown = deog_harness::shutdown_signal();
         tokio::pin!(shutdown);
         loop {
             tokio::select! {
                 () = &mut shutdown => return Ok(()),
-                frame = frames.message() => match frame? {
+                frame = frames.next() => match frame? {
                     Some(frame) => if !print(&line(&frame))? {
                         return Ok(());
                     },

@@ -16,11 +16,11 @@ use deog_harness::status::{
     Bounds, EstimateSample, MapSample, RobotSample, Sample, ServerRow, status_rows, status_table,
 };
 use deog_proto::v1 as pb;
-use deog_robot_client::{ClientConfig, MapClient, RetryPolicy};
+use deog_robot_client::{ClientConfig, MapClient};
 use tonic_health::pb::health_check_response::ServingStatus;
 use tonic_health::pb::health_client::HealthClient;
 
-use crate::connection::ConnectionArgs;
+use crate::connection::{ConnectTimeoutArgs, ConnectionArgs};
 
 /// How far behind its robot's newest frame an estimate may be and still be
 /// read: 3,000 frames, five minutes of a robot firing at 10 Hz.
@@ -41,9 +41,8 @@ pub struct StatusArgs {
     /// Print one JSON object per sample instead of tables.
     #[arg(long)]
     pub json: bool,
-    /// Seconds to wait for the map server before giving up.
-    #[arg(long, default_value_t = 5.0)]
-    pub connect_timeout_s: f64,
+    #[command(flatten)]
+    pub timeout: ConnectTimeoutArgs,
 }
 
 /// When estimates and frames last arrived, by the status's own clock,
@@ -76,11 +75,6 @@ pub fn run(args: StatusArgs) -> Result<()> {
         "--interval-s must be within 0.05 and 3600 seconds, got {}",
         args.interval_s
     );
-    anyhow::ensure!(
-        args.connect_timeout_s.is_finite() && (0.1..=600.0).contains(&args.connect_timeout_s),
-        "--connect-timeout-s must be within 0.1 and 600 seconds, got {}",
-        args.connect_timeout_s
-    );
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     runtime.block_on(async {
         tokio::select! {
@@ -92,30 +86,19 @@ pub fn run(args: StatusArgs) -> Result<()> {
 
 async fn watch(args: &StatusArgs) -> Result<()> {
     let address = args.connection.server.clone();
-    let timeout = Duration::from_secs_f64(args.connect_timeout_s);
-    let config = ClientConfig {
-        // One quick try: a person asking for status wants to know now that
-        // the server is not there, not after the robots' patient retries.
-        retry: RetryPolicy {
-            initial: Duration::from_millis(100),
-            max: Duration::from_millis(500),
-            max_attempts: Some(1),
-        },
-        ..args.connection.client_config()?
-    };
-    let (mut sampler, mut before) = tokio::time::timeout(timeout, async {
-        let mut sampler = Sampler::connect(config, address.clone()).await?;
-        let first = sampler.sample().await?;
-        anyhow::Ok((sampler, first))
-    })
-    .await
-    .map_err(|_| {
-        anyhow::anyhow!(
-            "the map server at {address} did not answer within {:.1} s",
-            args.connect_timeout_s
-        )
-    })?
-    .with_context(|| format!("reading the status of {address}"))?;
+    let config = args.timeout.apply(args.connection.client_config()?)?;
+    let timeout = Duration::from_secs_f64(args.timeout.connect_timeout);
+    // Unreachable, it says so itself, with the reason and a hint.
+    let mut sampler = Sampler::connect(config, address.clone()).await?;
+    let mut before = tokio::time::timeout(timeout, sampler.sample())
+        .await
+        .map_err(|_| {
+            anyhow::anyhow!(
+                "the map server at {address} did not answer within {:.1} s",
+                args.timeout.connect_timeout
+            )
+        })?
+        .with_context(|| format!("reading the status of {address}"))?;
 
     let interval = Duration::from_secs_f64(args.interval_s);
     let clear = args.watch && !args.json && std::io::stdout().is_terminal();

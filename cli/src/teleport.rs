@@ -6,7 +6,7 @@ use clap::Args;
 use deog_grid::Pose2;
 use deog_robot_client::SimClient;
 
-use crate::connection::SimConnectionArgs;
+use crate::connection::{ConnectTimeoutArgs, SimConnectionArgs};
 use crate::pose_args::parse_pose;
 
 /// Options of `deog teleport`.
@@ -20,16 +20,16 @@ pub struct TeleportArgs {
     pub pose: Pose2,
     #[command(flatten)]
     pub sim: SimConnectionArgs,
+    #[command(flatten)]
+    pub timeout: ConnectTimeoutArgs,
 }
 
 /// Runs `deog teleport`.
 pub fn run(args: TeleportArgs) -> Result<()> {
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
-    let config = args.sim.client_config()?;
+    let config = args.timeout.apply(args.sim.client_config()?)?;
     runtime.block_on(async {
-        let sim = SimClient::connect(config)
-            .await
-            .with_context(|| format!("connecting to the simulator at {}", args.sim.sim))?;
+        let sim = SimClient::connect(config).await?;
         let state = sim
             .teleport(&args.robot, args.pose)
             .await

@@ -94,12 +94,10 @@ pub fn run(args: WanderArgs) -> Result<()> {
         )),
         None => None,
     };
-    let sim_config = args.sim.client_config()?;
+    let sim_config = args.sim.client_config()?.retrying_forever();
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     let summary = runtime.block_on(async {
-        let sim = SimClient::connect(sim_config)
-            .await
-            .with_context(|| format!("connecting to the simulator at {}", args.sim.sim))?;
+        let sim = SimClient::connect(sim_config).await?;
         let rig = sim_rig(&sim).await?;
         if let Some(spec) = &args.rig {
             let expected = crate::rig_args::load_rig(spec)?;
@@ -127,10 +125,8 @@ pub fn run(args: WanderArgs) -> Result<()> {
         let publisher = if args.no_publish {
             None
         } else {
-            let config = args.connection.client_config()?;
-            let map = MapClient::connect(config).await.with_context(|| {
-                format!("connecting to the map server at {}", args.connection.server)
-            })?;
+            let config = args.connection.client_config()?.retrying_forever();
+            let map = MapClient::connect(config).await?;
             // The map server knows the built-in rigs; any other must be
             // stored before a frame names it.
             if !deog_rig::is_built_in(rig.name()) {

@@ -1,9 +1,9 @@
 //! Reaching the map server or the simulator: address, TLS, token, and
 //! retry with backoff.
 
-use crate::error::{ClientError, is_transient};
+use crate::error::{ClientError, Peer, is_transient};
 use deog_proto::v1::map_service_client::MapServiceClient;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 use tonic::metadata::MetadataValue;
 use tonic::service::Interceptor;
 use tonic::service::interceptor::InterceptedService;
@@ -60,7 +60,17 @@ pub struct ClientConfig {
     pub tls_domain: Option<String>,
     /// Retry policy for connecting and for transient failures.
     pub retry: RetryPolicy,
+    /// What is being reached, for messages and hints.
+    pub peer: Peer,
+    /// Give up connecting after this long, whatever the retry policy
+    /// allows (one-shot commands); `None` follows the policy alone.
+    pub connect_timeout: Option<Duration>,
 }
+
+/// How long an unanswered first attempt goes before the client says it is
+/// still waiting, and how often it repeats that it cannot reach the peer.
+const FIRST_NOTICE: Duration = Duration::from_secs(1);
+const NOTICE_EVERY: Duration = Duration::from_secs(5);
 
 impl std::fmt::Debug for ClientConfig {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -69,6 +79,8 @@ impl std::fmt::Debug for ClientConfig {
             .field("token", &self.token.as_ref().map(|_| "<set>"))
             .field("tls", &self.tls_ca_pem.is_some())
             .field("retry", &self.retry)
+            .field("peer", &self.peer)
+            .field("connect_timeout", &self.connect_timeout)
             .finish()
     }
 }
@@ -80,6 +92,38 @@ impl ClientConfig {
             endpoint: endpoint.into(),
             ..Self::default()
         }
+    }
+
+    /// The same, for the simulator.
+    pub fn simulator(endpoint: impl Into<String>) -> Self {
+        Self {
+            peer: Peer::Simulator,
+            ..Self::new(endpoint)
+        }
+    }
+
+    /// Gives up connecting after `timeout` (a command that does one thing
+    /// and ends).
+    pub fn one_shot(mut self, timeout: Duration) -> Self {
+        self.connect_timeout = Some(timeout);
+        // A call that keeps failing for want of the server gives up as
+        // soon: as many attempts as the backoff fits in the timeout.
+        let mut attempts = 1;
+        let mut waited = Duration::ZERO;
+        while waited < timeout && attempts < 1000 {
+            attempts += 1;
+            waited += self.retry.delay(attempts);
+        }
+        self.retry.max_attempts = Some(attempts);
+        self
+    }
+
+    /// Keeps trying for as long as it takes (a process that follows the
+    /// server for hours rides out its restarts).
+    pub fn retrying_forever(mut self) -> Self {
+        self.retry.max_attempts = None;
+        self.connect_timeout = None;
+        self
     }
 
     fn url(&self) -> String {
@@ -141,7 +185,9 @@ impl Interceptor for TokenInterceptor {
 /// The generated map-service client with the token interceptor.
 pub type RawMapClient = MapServiceClient<InterceptedService<Channel, TokenInterceptor>>;
 
-/// Connects, retrying with backoff while the server is not up yet.
+/// Connects, retrying with backoff while the server is not up yet. Says
+/// what it connects to; while the peer cannot be reached it says so within
+/// a second and again every few seconds, with the reason and a hint.
 pub async fn connect(config: &ClientConfig) -> Result<(Channel, TokenInterceptor), ClientError> {
     let endpoint = config.endpoint()?;
     let header = config
@@ -153,36 +199,101 @@ pub async fn connect(config: &ClientConfig) -> Result<(Channel, TokenInterceptor
             })
         })
         .transpose()?;
+    let peer = config.peer;
+    let address = config.endpoint.as_str();
+    tracing::info!("connecting to the {} at {address}", peer.name());
+    let started = Instant::now();
+    let deadline = config.connect_timeout.map(|t| started + t);
+    let mut last_notice: Option<Instant> = None;
+    let mut last_reason: Option<String> = None;
     let mut attempt = 1;
     loop {
-        tokio::time::sleep(config.retry.delay(attempt)).await;
-        match endpoint.connect().await {
-            Ok(channel) => return Ok((channel, TokenInterceptor { header })),
-            Err(error) => {
-                let last_error = error_chain(&error);
-                tracing::debug!(attempt, %last_error, endpoint = %config.endpoint, "server not reachable yet");
-                if !config.retry.allows(attempt + 1) {
-                    return Err(ClientError::Unreachable {
-                        endpoint: config.endpoint.clone(),
-                        attempts: attempt,
-                        last_error,
-                    });
+        // The last wait ends at the deadline, for one attempt there.
+        let mut wait = config.retry.delay(attempt);
+        if let Some(at) = deadline {
+            wait = wait.min(at.saturating_duration_since(Instant::now()));
+        }
+        tokio::time::sleep(wait).await;
+        let connecting = endpoint.connect();
+        tokio::pin!(connecting);
+        let give_up = async {
+            match deadline {
+                Some(at) => tokio::time::sleep_until(at.into()).await,
+                None => std::future::pending().await,
+            }
+        };
+        tokio::pin!(give_up);
+        // Until the deadline, with a word after a second of silence.
+        let result = loop {
+            let silent_too_long = async {
+                match last_notice {
+                    None => tokio::time::sleep_until((started + FIRST_NOTICE).into()).await,
+                    Some(_) => std::future::pending().await,
+                }
+            };
+            tokio::select! {
+                result = &mut connecting => break Some(result),
+                () = &mut give_up => break None,
+                () = silent_too_long => {
+                    tracing::warn!(
+                        "no answer yet from the {} at {address}; still trying",
+                        peer.name()
+                    );
+                    last_notice = Some(Instant::now());
                 }
             }
+        };
+        let reason = match result {
+            Some(Ok(channel)) => {
+                if last_notice.is_some() {
+                    tracing::info!(
+                        "reached the {} at {address} after {:.1} s",
+                        peer.name(),
+                        started.elapsed().as_secs_f64()
+                    );
+                }
+                return Ok((channel, TokenInterceptor { header }));
+            }
+            Some(Err(error)) => innermost_cause(&error),
+            // Cut short by the deadline: the last real failure says more.
+            None => last_reason
+                .take()
+                .unwrap_or_else(|| "no answer".to_string()),
+        };
+        tracing::debug!(attempt, %reason, endpoint = %address, "not reachable yet");
+        let out_of_time = deadline.is_some_and(|at| Instant::now() >= at);
+        if out_of_time || !config.retry.allows(attempt + 1) {
+            return Err(ClientError::Unreachable {
+                peer,
+                endpoint: address.to_string(),
+                attempts: attempt,
+                waited_s: started.elapsed().as_secs_f64(),
+                last_error: reason,
+            });
         }
+        if last_notice.is_none_or(|at| at.elapsed() >= NOTICE_EVERY) {
+            tracing::warn!(
+                "cannot reach the {} at {address} ({reason}): is `{}` running there? \
+                 start one with `{} --listen {address}`; retrying",
+                peer.name(),
+                peer.command(),
+                peer.command()
+            );
+            last_notice = Some(Instant::now());
+        }
+        last_reason = Some(reason);
         attempt += 1;
     }
 }
 
-fn error_chain(error: &dyn std::error::Error) -> String {
-    let mut text = error.to_string();
-    let mut source = error.source();
-    while let Some(e) = source {
-        text.push_str(": ");
-        text.push_str(&e.to_string());
-        source = e.source();
+/// The most specific cause of an error: what the operating system or the
+/// TLS layer said, without the wrappers that repeat it.
+fn innermost_cause(error: &dyn std::error::Error) -> String {
+    let mut innermost = error;
+    while let Some(source) = innermost.source() {
+        innermost = source;
     }
-    text
+    innermost.to_string()
 }
 
 /// Runs `call` until it succeeds, fails for a reason retrying cannot fix, or
@@ -223,6 +334,17 @@ mod tests {
         assert_eq!(delays, [0, 100, 200, 400, 500, 500]);
         assert!(policy.allows(5));
         assert!(!policy.allows(6));
+    }
+
+    #[test]
+    fn a_one_shot_client_retries_calls_for_about_its_timeout() {
+        let config = ClientConfig::new("h:1").one_shot(Duration::from_secs(5));
+        let attempts = config.retry.max_attempts.expect("bounded");
+        let waited: Duration = (1..=attempts).map(|a| config.retry.delay(a)).sum();
+        assert!(
+            waited >= Duration::from_secs(5) && waited < Duration::from_secs(8),
+            "{attempts} attempts wait {waited:?}"
+        );
     }
 
     #[test]

@@ -29,7 +29,7 @@ pub mod updates;
 pub use client::MapClient;
 pub use connect::{ClientConfig, RawMapClient, RetryPolicy};
 pub use convert::{decode_tile, encode_delta};
-pub use error::ClientError;
+pub use error::{ClientError, Peer, code_words, status_line};
 pub use sim_client::SimClient;
 pub use tile_cache::TileCache;
 pub use tile_watch::{TileChange, TileWatch};

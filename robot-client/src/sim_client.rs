@@ -22,7 +22,9 @@ pub struct SimClient {
 
 impl SimClient {
     /// Connects, retrying with backoff while the simulator is not up yet.
-    pub async fn connect(config: ClientConfig) -> Result<Self, ClientError> {
+    pub async fn connect(mut config: ClientConfig) -> Result<Self, ClientError> {
+        // Whatever the configuration says, this reaches a simulator.
+        config.peer = crate::Peer::Simulator;
         let (channel, interceptor) = connect(&config).await?;
         Ok(Self {
             raw: RobotServiceClient::with_interceptor(channel, interceptor),

@@ -127,5 +127,8 @@ async fn connecting_to_nothing_gives_up_with_a_clear_error() {
         .await
         .expect_err("nothing listens");
     let text = error.to_string();
-    assert!(text.contains("after 3 attempts"), "{text}");
+    assert!(
+        text.contains("3 attempts") && text.contains("start one with `deog server"),
+        "{text}"
+    );
 }

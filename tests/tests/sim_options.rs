@@ -200,8 +200,22 @@ async fn with_tls_the_simulator_serves_clients_that_trust_its_certificate() {
         "1",
         "--no-publish",
     ];
-    // A plain client gets nothing from the TLS port.
-    failure(&against(&sim, &wander, &[]));
+    // A plain client gets nothing from the TLS port (a one-shot command:
+    // a follower such as wander would keep trying).
+    let plain = failure(&against(
+        &sim,
+        &[
+            "teleport",
+            "--robot",
+            "t",
+            "--pose",
+            "1,1,0",
+            "--connect-timeout",
+            "2",
+        ],
+        &[],
+    ));
+    assert!(plain.contains("error: teleporting t:"), "{plain}");
     let trusting = [
         ("DEOG_SIM_TLS_CA", cert_file.clone()),
         ("DEOG_SIM_TLS_DOMAIN", "localhost".to_string()),

@@ -109,7 +109,9 @@ pub fn fuzz(target: &Target, budget: &Budget, seed: u64, crashes_dir: &Path) -> 
                     run.first_crash_file = Some(file);
                 }
             }
-        } else if took > budget.hang_after {
+        } else if took > budget.hang_after
+            && confirmed_slow(target.decode, &input, budget.hang_after)
+        {
             run.hangs += 1;
             if saved_hangs < MAX_SAVED {
                 saved_hangs += 1;
@@ -119,6 +121,17 @@ pub fn fuzz(target: &Target, budget: &Budget, seed: u64, crashes_dir: &Path) -> 
     }
     run.elapsed = start.elapsed();
     Ok(run)
+}
+
+/// Whether an input that took longer than `limit` does so again, twice:
+/// a busy machine can hold any input up for a while, a real hang is slow
+/// every time.
+fn confirmed_slow(decode: fn(&[u8]), input: &[u8], limit: Duration) -> bool {
+    (0..2).all(|_| {
+        let began = Instant::now();
+        let _ = run_one(decode, input);
+        began.elapsed() > limit
+    })
 }
 
 thread_local! {

@@ -15,7 +15,7 @@ use deog_proto::v1 as pb;
 use deog_robot_client::MapClient;
 use deog_simulator::data_file::DataUnits;
 
-use crate::connection::ConnectionArgs;
+use crate::connection::{ConnectTimeoutArgs, ConnectionArgs};
 use crate::pose_args::PoseSource;
 
 /// Frames sent per request.
@@ -75,6 +75,8 @@ pub struct ImportArgs {
     pub force: bool,
     #[command(flatten)]
     pub connection: ConnectionArgs,
+    #[command(flatten)]
+    pub timeout: ConnectTimeoutArgs,
 }
 
 /// A CARMEN log's lasers.
@@ -117,7 +119,5 @@ async fn publish_all(client: &MapClient, frames: &[pb::SonarFrame]) -> Result<(u
 
 /// Connects to the map server the options name.
 async fn connect(args: &ImportArgs) -> Result<MapClient> {
-    MapClient::connect(args.connection.client_config()?)
-        .await
-        .with_context(|| format!("connecting to the map server at {}", args.connection.server))
+    Ok(MapClient::connect(args.timeout.apply(args.connection.client_config()?)?).await?)
 }

@@ -282,9 +282,9 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         .build()
         .context("starting the async runtime")?;
     let _context = runtime.enter();
-    let client = runtime
-        .block_on(MapClient::connect(args.connection.client_config()?))
-        .with_context(|| format!("connecting to the map server at {}", args.connection.server))?;
+    let client = runtime.block_on(MapClient::connect(
+        args.connection.client_config()?.retrying_forever(),
+    ))?;
     let info = runtime
         .block_on(client.map_info(&args.map))
         .with_context(|| format!("opening map {}", args.map))?;
@@ -292,12 +292,13 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         runtime.block_on(publish_rig(&client, rig))?;
     }
     // The rig is the first frame's: wait for it before building the filter.
-    let frames = runtime
-        .block_on(client.subscribe_frames(&args.robot, args.from))
-        .context("following the robot's frames")?;
-    let mut queue = FrameQueue::spawn(frames, args.idle_exit);
+    let mut queue = runtime.block_on(FrameQueue::follow(
+        &client,
+        &args.robot,
+        args.from,
+        args.idle_exit,
+    ))?;
     let mut shutdown = Box::pin(deog_harness::shutdown_signal());
-    tracing::info!(robot = %args.robot, from = args.from, "waiting for the robot's first frame");
     let first = runtime.block_on(async {
         tokio::select! {
             () = &mut shutdown => Ok(None),

@@ -255,9 +255,8 @@ pub fn run(args: MapArgs) -> Result<()> {
     let client_id = format!("carto/{}", args.robot);
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     runtime.block_on(async {
-        let client = MapClient::connect(args.connection.client_config()?)
-            .await
-            .with_context(|| format!("connecting to the map server at {}", args.connection.server))?;
+        let client =
+            MapClient::connect(args.connection.client_config()?.retrying_forever()).await?;
         let info = client
             .ensure_map(pb::CreateMapRequest {
                 name: args.map.clone(),
@@ -305,11 +304,7 @@ pub fn run(args: MapArgs) -> Result<()> {
             )),
             None => None,
         };
-        let frames = client
-            .subscribe_frames(&args.robot, start)
-            .await
-            .context("following the robot's frames")?;
-        let mut queue = FrameQueue::spawn(frames, args.idle_exit);
+        let mut queue = FrameQueue::follow(&client, &args.robot, start, args.idle_exit).await?;
         let mut estimates = (args.pose == MapPoseSource::Estimate).then(|| {
             let map = args.estimate_map.as_deref().unwrap_or(&args.map);
             tracing::info!(robot = %args.robot, estimates_on = map, "mapping from the localizer's converged estimates");

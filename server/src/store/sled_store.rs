@@ -119,13 +119,7 @@ impl OpenStore {
     /// The one place the database is opened.
     fn open(config: &SledConfig) -> Result<Self, StoreError> {
         remove_unfinished_snapshots(&config.path)?;
-        let db = sled::Config::new()
-            .path(&config.path)
-            .cache_capacity(config.cache_bytes)
-            // Durability comes from the writer's explicit flush after each
-            // group of writes; the periodic flush only bounds dirty memory.
-            .flush_every_ms(Some(1000))
-            .open()?;
+        let db = open_db(config)?;
         let frames = db.open_tree("frames")?;
         let poses = db.open_tree("poses")?;
         let rigs = db.open_tree("rigs")?;
@@ -162,6 +156,34 @@ impl OpenStore {
             .get(name)
             .cloned()
             .ok_or_else(|| StoreError::MapNotFound(name.to_string()))
+    }
+}
+
+/// How long an opening waits for the directory lock an earlier opening in
+/// this process still holds: sled lets go of it from its own threads, a
+/// moment after the last handle is dropped.
+const LOCK_WAIT: std::time::Duration = std::time::Duration::from_secs(3);
+
+fn open_db(config: &SledConfig) -> Result<sled::Db, StoreError> {
+    let started = std::time::Instant::now();
+    loop {
+        let opened = sled::Config::new()
+            .path(&config.path)
+            .cache_capacity(config.cache_bytes)
+            // Durability comes from the writer's explicit flush after each
+            // group of writes; the periodic flush only bounds dirty memory.
+            .flush_every_ms(Some(1000))
+            .open();
+        match opened {
+            // sled words a held lock only in its message.
+            Err(sled::Error::Io(error))
+                if error.to_string().contains("could not acquire lock")
+                    && started.elapsed() < LOCK_WAIT =>
+            {
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+            other => return Ok(other?),
+        }
     }
 }
 
