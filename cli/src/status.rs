@@ -158,11 +158,10 @@ fn print_block(text: &str, clear: bool) -> Result<bool> {
 
 impl Sampler {
     async fn connect(config: ClientConfig, address: String) -> Result<Self> {
-        let client = MapClient::connect(config.clone()).await?;
-        let (channel, _) = deog_robot_client::connect::connect(&config).await?;
+        let client = MapClient::connect(config).await?;
         let mut sampler = Self {
+            health: HealthClient::new(client.channel()),
             client,
-            health: HealthClient::new(channel),
             address,
             started: Instant::now(),
             arrivals: Arc::default(),

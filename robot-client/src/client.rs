@@ -16,6 +16,7 @@ use tokio_stream::StreamExt;
 #[derive(Debug, Clone)]
 pub struct MapClient {
     raw: RawMapClient,
+    channel: tonic::transport::Channel,
     config: ClientConfig,
 }
 
@@ -23,10 +24,20 @@ impl MapClient {
     /// Connects, retrying with backoff while the server is not up yet.
     pub async fn connect(config: ClientConfig) -> Result<Self, ClientError> {
         let (channel, interceptor) = connect(&config).await?;
-        let raw = MapServiceClient::with_interceptor(channel, interceptor)
+        let raw = MapServiceClient::with_interceptor(channel.clone(), interceptor)
             .max_decoding_message_size(usize::MAX)
             .max_encoding_message_size(usize::MAX);
-        Ok(Self { raw, config })
+        Ok(Self {
+            raw,
+            channel,
+            config,
+        })
+    }
+
+    /// The connection itself, for the services beside the map service
+    /// (health), which take no token.
+    pub fn channel(&self) -> tonic::transport::Channel {
+        self.channel.clone()
     }
 
     /// The generated client, for the calls no process makes and this type
