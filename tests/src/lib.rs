@@ -374,6 +374,37 @@ impl Drop for SmallDisk {
     }
 }
 
+/// A query for every tile of map `map`.
+pub fn whole_map(map: &str) -> deog_proto::v1::TileQuery {
+    use deog_proto::v1 as pb;
+    pb::TileQuery {
+        map: map.into(),
+        selection: Some(pb::tile_query::Selection::Region(pb::CellBox {
+            min_x: i32::MIN,
+            min_y: i32::MIN,
+            max_x: i32::MAX,
+            max_y: i32::MAX,
+        })),
+        newer_than_version: 0,
+    }
+}
+
+/// Waits (bounded: 30 s) until the process at `url` reports `service` as
+/// `wanted`; panics if it never does.
+pub async fn wait_for_health(
+    url: &str,
+    service: &str,
+    wanted: tonic_health::pb::health_check_response::ServingStatus,
+) {
+    for _ in 0..300 {
+        if health_status(url, service).await == Some(wanted) {
+            return;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    panic!("the health of {service} at {url} never became {wanted:?}");
+}
+
 /// The health a serving process reports for `service` at `url` (plain
 /// HTTP/2), or `None` when it does not answer within 2 s.
 pub async fn health_status(

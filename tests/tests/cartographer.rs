@@ -88,16 +88,7 @@ async fn the_map_is_the_frames_applied_in_order_and_a_restart_resumes_exactly() 
         }
     }
     let tiles = client
-        .tiles(pb::TileQuery {
-            map: "m".into(),
-            selection: Some(pb::tile_query::Selection::Region(pb::CellBox {
-                min_x: i32::MIN,
-                min_y: i32::MIN,
-                max_x: i32::MAX,
-                max_y: i32::MAX,
-            })),
-            newer_than_version: 0,
-        })
+        .tiles(deog_tests::whole_map("m"))
         .await
         .expect("tiles");
     let expected: Vec<_> = reference.tiles().collect();

@@ -10,7 +10,7 @@ use std::time::Duration;
 use deog_grid::{TileDelta, TileKey, TileSize};
 use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient, RetryPolicy, UpdateSenderConfig};
-use deog_tests::{ServerProcess, SmallDisk, free_loopback_addr, health_status};
+use deog_tests::{ServerProcess, SmallDisk, free_loopback_addr, wait_for_health};
 use tonic_health::pb::health_check_response::ServingStatus;
 
 const WRITERS: i32 = 2;
@@ -62,16 +62,6 @@ async fn write(client: MapClient, w: i32, stop: Arc<AtomicBool>) -> u32 {
     pushed
 }
 
-async fn wait_for_health(server: &ServerProcess, wanted: ServingStatus) {
-    for _ in 0..300 {
-        if health_status(&server.url(), "deog.v1.MapService").await == Some(wanted) {
-            return;
-        }
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
-    panic!("the map service's health never became {wanted:?}");
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn acknowledged_batches_survive_kills_and_a_full_disk_exactly_once() {
     let disk = SmallDisk::mount("64m");
@@ -116,10 +106,15 @@ async fn acknowledged_batches_survive_kills_and_a_full_disk_exactly_once() {
     if let Some(disk) = &disk {
         tokio::time::sleep(Duration::from_millis(1000)).await;
         disk.fill();
-        wait_for_health(&server, ServingStatus::NotServing).await;
+        wait_for_health(
+            &server.url(),
+            "deog.v1.MapService",
+            ServingStatus::NotServing,
+        )
+        .await;
         tokio::time::sleep(Duration::from_millis(1500)).await;
         disk.empty();
-        wait_for_health(&server, ServingStatus::Serving).await;
+        wait_for_health(&server.url(), "deog.v1.MapService", ServingStatus::Serving).await;
     }
     tokio::time::sleep(Duration::from_millis(1000)).await;
     server.kill();
@@ -132,16 +127,7 @@ async fn acknowledged_batches_survive_kills_and_a_full_disk_exactly_once() {
     }
 
     let tiles = client
-        .tiles(pb::TileQuery {
-            map: "chaos".into(),
-            selection: Some(pb::tile_query::Selection::Region(pb::CellBox {
-                min_x: i32::MIN,
-                min_y: i32::MIN,
-                max_x: i32::MAX,
-                max_y: i32::MAX,
-            })),
-            newer_than_version: 0,
-        })
+        .tiles(deog_tests::whole_map("chaos"))
         .await
         .expect("tiles");
     let stored = tiles.len();

@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_client::MapServiceClient;
-use deog_tests::{ServerProcess, SmallDisk, health_status};
+use deog_tests::{ServerProcess, SmallDisk, wait_for_health};
 use tonic::transport::Channel;
 use tonic_health::pb::health_check_response::ServingStatus;
 
@@ -72,16 +72,7 @@ async fn stored(
 ) -> Result<HashMap<(i32, i32), i16>, tonic::Status> {
     let read = async {
         let mut stream = client
-            .get_tiles(pb::TileQuery {
-                map: "m".into(),
-                selection: Some(pb::tile_query::Selection::Region(pb::CellBox {
-                    min_x: i32::MIN,
-                    min_y: i32::MIN,
-                    max_x: i32::MAX,
-                    max_y: i32::MAX,
-                })),
-                newer_than_version: 0,
-            })
+            .get_tiles(deog_tests::whole_map("m"))
             .await?
             .into_inner();
         let mut out = HashMap::new();
@@ -97,22 +88,12 @@ async fn stored(
         .expect("tiles within 20 s")
 }
 
-/// Waits (bounded: 30 s) until the map service's health is `wanted`.
-async fn wait_for_health(server: &ServerProcess, wanted: ServingStatus) {
-    for _ in 0..300 {
-        if health_status(&server.url(), "deog.v1.MapService").await == Some(wanted) {
-            return;
-        }
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
-    panic!("the map service's health never became {wanted:?}");
-}
-
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_full_disk_is_reported_refused_and_healed_with_nothing_acknowledged_lost() {
+/// A map server on a 24 MiB tmpfs with map "m", and a client of it; `None`
+/// (saying so) where the test may not mount.
+async fn server_on_a_small_disk() -> Option<(SmallDisk, ServerProcess, MapServiceClient<Channel>)> {
     let Some(disk) = SmallDisk::mount("24m") else {
         eprintln!("skipped: this machine does not let the test mount a tmpfs");
-        return;
+        return None;
     };
     let server = ServerProcess::start(&disk.path().join("data"), &[]).await;
     let mut client = MapServiceClient::connect(server.url())
@@ -129,6 +110,14 @@ async fn a_full_disk_is_reported_refused_and_healed_with_nothing_acknowledged_lo
         })
         .await
         .expect("create map");
+    Some((disk, server, client))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_full_disk_is_reported_refused_and_healed_with_nothing_acknowledged_lost() {
+    let Some((disk, server, mut client)) = server_on_a_small_disk().await else {
+        return;
+    };
     let mut acknowledged = Vec::new();
     for sequence in 1..=10u64 {
         assert!(
@@ -160,7 +149,12 @@ async fn a_full_disk_is_reported_refused_and_healed_with_nothing_acknowledged_lo
         "{}",
         status.message()
     );
-    wait_for_health(&server, ServingStatus::NotServing).await;
+    wait_for_health(
+        &server.url(),
+        "deog.v1.MapService",
+        ServingStatus::NotServing,
+    )
+    .await;
     // While it cannot write, a write is refused at once.
     let status = send(&mut client, first_refused)
         .await
@@ -186,7 +180,7 @@ async fn a_full_disk_is_reported_refused_and_healed_with_nothing_acknowledged_lo
     }
 
     disk.empty();
-    wait_for_health(&server, ServingStatus::Serving).await;
+    wait_for_health(&server.url(), "deog.v1.MapService", ServingStatus::Serving).await;
     // The refused batch again, and more: a refused batch may have reached
     // the disk all the same, and is then acknowledged as already applied.
     for sequence in first_refused..first_refused + 10 {
@@ -215,22 +209,9 @@ async fn a_full_disk_is_reported_refused_and_healed_with_nothing_acknowledged_lo
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_failed_last_flush_fails_the_shutdown() {
-    let Some(disk) = SmallDisk::mount("24m") else {
-        eprintln!("skipped: this machine does not let the test mount a tmpfs");
+    let Some((disk, server, mut client)) = server_on_a_small_disk().await else {
         return;
     };
-    let server = ServerProcess::start(&disk.path().join("data"), &[]).await;
-    let mut client = MapServiceClient::connect(server.url())
-        .await
-        .expect("connect");
-    client
-        .create_map(pb::CreateMapRequest {
-            name: "m".into(),
-            tile_size: SIDE as u32,
-            ..Default::default()
-        })
-        .await
-        .expect("create map");
     disk.fill();
     let mut failed = false;
     for sequence in 1..=400u64 {

@@ -46,16 +46,7 @@ fn numbered_batch(i: u64) -> pb::UpdateBatch {
 
 async fn stored_tiles(client: &mut MapServiceClient<Channel>) -> HashMap<i32, Vec<u8>> {
     let mut stream = client
-        .get_tiles(pb::TileQuery {
-            map: "durable".into(),
-            selection: Some(pb::tile_query::Selection::Region(pb::CellBox {
-                min_x: i32::MIN,
-                min_y: i32::MIN,
-                max_x: i32::MAX,
-                max_y: i32::MAX,
-            })),
-            newer_than_version: 0,
-        })
+        .get_tiles(deog_tests::whole_map("durable"))
         .await
         .expect("get tiles")
         .into_inner();

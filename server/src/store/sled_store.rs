@@ -558,8 +558,9 @@ mod tests {
     use crate::store::{MapSettings, SequenceCheck};
     use deog_grid::{Resolution, TileSize};
 
-    #[test]
-    fn a_cursor_written_before_the_applied_list_still_loads() {
+    /// A store in a fresh directory (kept while the guard lives) holding an
+    /// empty map "m".
+    fn store_with_map_m() -> (tempfile::TempDir, SledStore) {
         let dir = tempfile::tempdir().unwrap();
         let store = SledStore::open(&SledConfig::new(dir.path())).unwrap();
         let settings =
@@ -567,6 +568,12 @@ mod tests {
         store
             .create_map(&MapRecord::new("m".into(), settings))
             .unwrap();
+        (dir, store)
+    }
+
+    #[test]
+    fn a_cursor_written_before_the_applied_list_still_loads() {
+        let (_dir, store) = store_with_map_m();
         // The highest sequence alone, as servers before the list wrote it.
         store
             .tree("m")
@@ -581,13 +588,7 @@ mod tests {
 
     #[test]
     fn a_recovery_opens_the_store_again_once_no_call_holds_the_old_one() {
-        let dir = tempfile::tempdir().unwrap();
-        let store = SledStore::open(&SledConfig::new(dir.path())).unwrap();
-        let settings =
-            MapSettings::new(Resolution::DEFAULT, TileSize::DEFAULT, (0.1, 0.9)).unwrap();
-        store
-            .create_map(&MapRecord::new("m".into(), settings))
-            .unwrap();
+        let (_dir, store) = store_with_map_m();
         store.flush().unwrap();
         let reader = store.current().unwrap();
         let error = store.recover("disk full").unwrap_err();
