@@ -3,6 +3,7 @@
 mod bench;
 mod completions;
 mod connection;
+mod copy;
 mod demo;
 mod eval;
 mod export;
@@ -67,6 +68,9 @@ enum Command {
     /// CARMEN log (--carmen) as a robot's frames (--robot), or a map_server
     /// map as a map (--map).
     Import(import::ImportArgs),
+    /// Copies maps (tiles, cursors), frames, pose estimates and rigs from
+    /// one store to another, resumably, checking each map at the end
+    Copy(copy::CopyArgs),
     /// Exports a map, even one still being built, to map_server files
     /// (PGM + YAML) and a PNG.
     Export(export::ExportArgs),
@@ -114,6 +118,7 @@ fn run(command: Command) -> Result<()> {
         Command::Sim(args) => sim::run(args),
         Command::Wander(args) => wander::run(args),
         Command::Import(args) => import::run(args),
+        Command::Copy(args) => copy::run(args),
         Command::Export(args) => export::run(args),
         Command::Map(args) => map::run(args),
         Command::Localize(args) => localize::run(args),

@@ -6,10 +6,12 @@
 //! [`MapWrite`] lands whole or not at all, and [`Store::flush`] makes every
 //! earlier write durable. The group-commit writer builds on exactly that.
 
+mod copy;
 mod cursor;
 mod record;
 mod sled_store;
 
+pub use copy::{CopyError, CopyReport, MapCopied, copy_store};
 pub use cursor::{ClientCursor, RECENT_SEQUENCES, SequenceCheck};
 pub use record::{MapRecord, MapSettings, RobotSummary, StoredTile};
 pub use sled_store::{SledConfig, SledStore};
