@@ -89,6 +89,8 @@ fn client_config(
         tls_ca_pem,
         tls_domain: tls_domain.map(str::to_string),
         peer,
+        // A person's command says what it waits for.
+        announce: true,
         ..ClientConfig::new(endpoint.to_string())
     })
 }

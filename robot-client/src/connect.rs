@@ -65,6 +65,10 @@ pub struct ClientConfig {
     /// Give up connecting after this long, whatever the retry policy
     /// allows (one-shot commands); `None` follows the policy alone.
     pub connect_timeout: Option<Duration>,
+    /// Say what it connects to and, while it cannot, why (at info and
+    /// warn), as a person's command should; otherwise only at debug, for
+    /// processes that start their own server and wait for it.
+    pub announce: bool,
 }
 
 /// How long an unanswered first attempt goes before the client says it is
@@ -81,6 +85,7 @@ impl std::fmt::Debug for ClientConfig {
             .field("retry", &self.retry)
             .field("peer", &self.peer)
             .field("connect_timeout", &self.connect_timeout)
+            .field("announce", &self.announce)
             .finish()
     }
 }
@@ -201,7 +206,15 @@ pub async fn connect(config: &ClientConfig) -> Result<(Channel, TokenInterceptor
         .transpose()?;
     let peer = config.peer;
     let address = config.endpoint.as_str();
-    tracing::info!("connecting to the {} at {address}", peer.name());
+    // A hint names the address as `--listen` takes it: host and port.
+    let listen = address.split_once("://").map_or(address, |(_, rest)| rest);
+    let announce = config.announce;
+    tell!(
+        announce,
+        info,
+        "connecting to the {} at {address}",
+        peer.name()
+    );
     let started = Instant::now();
     let deadline = config.connect_timeout.map(|t| started + t);
     let mut last_notice: Option<Instant> = None;
@@ -235,7 +248,7 @@ pub async fn connect(config: &ClientConfig) -> Result<(Channel, TokenInterceptor
                 result = &mut connecting => break Some(result),
                 () = &mut give_up => break None,
                 () = silent_too_long => {
-                    tracing::warn!(
+                    tell!(announce, warn,
                         "no answer yet from the {} at {address}; still trying",
                         peer.name()
                     );
@@ -246,7 +259,9 @@ pub async fn connect(config: &ClientConfig) -> Result<(Channel, TokenInterceptor
         let reason = match result {
             Some(Ok(channel)) => {
                 if last_notice.is_some() {
-                    tracing::info!(
+                    tell!(
+                        announce,
+                        info,
                         "reached the {} at {address} after {:.1} s",
                         peer.name(),
                         started.elapsed().as_secs_f64()
@@ -272,9 +287,11 @@ pub async fn connect(config: &ClientConfig) -> Result<(Channel, TokenInterceptor
             });
         }
         if last_notice.is_none_or(|at| at.elapsed() >= NOTICE_EVERY) {
-            tracing::warn!(
+            tell!(
+                announce,
+                warn,
                 "cannot reach the {} at {address} ({reason}): is `{}` running there? \
-                 start one with `{} --listen {address}`; retrying",
+                 start one with `{} --listen {listen}`; retrying",
                 peer.name(),
                 peer.command(),
                 peer.command()
@@ -285,6 +302,18 @@ pub async fn connect(config: &ClientConfig) -> Result<(Channel, TokenInterceptor
         attempt += 1;
     }
 }
+
+/// Logs at `$loud` when announcing, else at debug.
+macro_rules! tell {
+    ($announce:expr, $loud:ident, $($arg:tt)*) => {
+        if $announce {
+            tracing::$loud!($($arg)*);
+        } else {
+            tracing::debug!($($arg)*);
+        }
+    };
+}
+use tell;
 
 /// The most specific cause of an error: what the operating system or the
 /// TLS layer said, without the wrappers that repeat it.

@@ -12,9 +12,10 @@ pub enum ClientError {
     /// connect timeout.
     #[error(
         "cannot reach the {peer} at {endpoint} ({last_error}; {attempts} attempts in {waited_s:.1} s): \
-         is `{command}` running there? start one with `{command} --listen {endpoint}`",
+         is `{command}` running there? start one with `{command} --listen {listen}`",
         peer = peer.name(),
-        command = peer.command()
+        command = peer.command(),
+        listen = endpoint.split_once("://").map_or(endpoint.as_str(), |(_, rest)| rest)
     )]
     Unreachable {
         /// What was being reached.

@@ -59,6 +59,20 @@ fn a_server_that_is_not_running_is_named_with_a_hint_within_the_timeout() {
             "deog {args:?}: {line}"
         );
     }
+    // What it connects to, at once, and that it cannot, before giving up.
+    let output = run_deog(
+        &["frames", "--server", &addr, "--connect-timeout", "2"],
+        &[("RUST_LOG", "info".to_string())],
+    );
+    let stderr = failure(&output);
+    let said = |text: &str| stderr.lines().position(|l| l.contains(text));
+    let connecting = said(&format!("connecting to the map server at {addr}"));
+    let retrying = said("; retrying");
+    let gave_up = said("error: cannot reach");
+    assert!(
+        connecting.is_some() && connecting < retrying && retrying < gave_up,
+        "{stderr}"
+    );
     let line = error_line(&[
         "teleport",
         "--robot",
