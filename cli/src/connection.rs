@@ -155,3 +155,29 @@ pub fn connection_limits(
         handshake_timeout: std::time::Duration::from_secs_f64(handshake_timeout_s),
     })
 }
+
+/// What a person may do about an error whose words alone do not say: a
+/// plain HTTP/2 client talking to a TLS port gets only a transport or
+/// protocol error.
+pub fn hint_for(error: &str) -> Option<&'static str> {
+    ["h2 protocol error", "http2 error", "transport error"]
+        .iter()
+        .any(|words| error.contains(words))
+        .then_some(
+            "if the server serves TLS, a plain client gets only this: give --tls-ca, or --sim-tls-ca for the simulator",
+        )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_protocol_error_gets_the_tls_hint_and_others_none() {
+        assert!(
+            hint_for("teleporting t: h2 protocol error: http2 error (unknown error)")
+                .is_some_and(|h| h.contains("--tls-ca"))
+        );
+        assert_eq!(hint_for("map \"x\" does not exist (not found)"), None);
+    }
+}

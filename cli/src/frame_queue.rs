@@ -35,15 +35,21 @@ impl FrameQueue {
             .await
             .ok()
             .and_then(|robots| robots.into_iter().find(|r| r.robot == robot));
+        // Sequence 0 asks for everything: frames are numbered from 1.
+        let start = if from == 0 {
+            "its first frame".to_string()
+        } else {
+            format!("sequence {from}")
+        };
         match held {
             Some(r) => tracing::info!(
-                "waiting for frames of robot {robot} from sequence {from} (the server holds {} of them, {}..={})",
+                "waiting for frames of robot {robot} from {start} (the server holds {} of them, {}..={})",
                 r.frame_count,
                 r.first_sequence,
                 r.last_sequence
             ),
             None => tracing::info!(
-                "waiting for frames of robot {robot} from sequence {from}: it has published none yet"
+                "waiting for frames of robot {robot} from {start}: it has published none yet"
             ),
         }
         let stream = client

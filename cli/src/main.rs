@@ -105,7 +105,11 @@ fn main() -> std::process::ExitCode {
         Err(error) => {
             // The chain of causes on one line, without a backtrace: this is
             // for the person at the terminal.
-            eprintln!("error: {error:#}");
+            let text = format!("{error:#}");
+            match connection::hint_for(&text) {
+                Some(hint) => eprintln!("error: {text} ({hint})"),
+                None => eprintln!("error: {text}"),
+            }
             std::process::ExitCode::FAILURE
         }
     }
