@@ -34,6 +34,25 @@ pub const KEEPALIVE_INTERVAL: Duration = Duration::from_secs(30);
 /// See [`KEEPALIVE_INTERVAL`].
 pub const KEEPALIVE_TIMEOUT: Duration = Duration::from_secs(20);
 
+/// The transport both servers build on: at most `max_streams` calls open
+/// per connection, keepalive pings, and TLS with `tls` when given. Made
+/// first, so that a bad certificate or key starts nothing.
+pub fn server_builder(
+    max_streams: u32,
+    tls: Option<&crate::tls::TlsIdentity>,
+) -> Result<tonic::transport::Server, crate::tls::TlsError> {
+    let builder = tonic::transport::Server::builder()
+        .max_concurrent_streams(Some(max_streams))
+        .http2_keepalive_interval(Some(KEEPALIVE_INTERVAL))
+        .http2_keepalive_timeout(Some(KEEPALIVE_TIMEOUT));
+    match tls {
+        None => Ok(builder),
+        Some(identity) => builder
+            .tls_config(identity.server_config()?)
+            .map_err(|e| crate::tls::TlsError::Setup(crate::tls::error_chain(&e))),
+    }
+}
+
 /// First and longest wait after an accept failed for want of resources.
 const ACCEPT_BACKOFF: (Duration, Duration) = (Duration::from_millis(50), Duration::from_secs(1));
 

@@ -7,8 +7,8 @@ use crate::service::{MapServer, ReadStreamLimits, ServiceSettings};
 use crate::store::Store;
 use crate::writer::{StoreHealth, Writer};
 use deog_proto::auth::BearerAuth;
-use deog_proto::connection::{self, ConnectionLimits, KEEPALIVE_INTERVAL, KEEPALIVE_TIMEOUT};
-use deog_proto::tls::{TlsError, TlsIdentity, error_chain};
+use deog_proto::connection::{self, ConnectionLimits};
+use deog_proto::tls::{TlsError, TlsIdentity};
 use deog_proto::v1::map_service_server::MapServiceServer;
 use std::future::Future;
 use std::sync::Arc;
@@ -17,7 +17,6 @@ use thiserror::Error;
 use tokio::net::TcpListener;
 use tokio::sync::watch;
 use tokio_util::sync::CancellationToken;
-use tonic::transport::Server;
 
 /// The gRPC name of the map service, as the health service reports it.
 pub const MAP_SERVICE_NAME: &str = "deog.v1.MapService";
@@ -130,17 +129,8 @@ pub async fn serve<S: Store>(
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), ServeError> {
     // TLS first: a bad certificate or key leaves no writer thread behind.
-    // Keepalive pings find peers that vanished without closing (a robot
-    // that lost power holds its connection otherwise).
-    let mut builder = Server::builder()
-        .max_concurrent_streams(Some(config.max_streams_per_connection))
-        .http2_keepalive_interval(Some(KEEPALIVE_INTERVAL))
-        .http2_keepalive_timeout(Some(KEEPALIVE_TIMEOUT));
-    if let Some(identity) = &config.tls {
-        builder = builder
-            .tls_config(identity.server_config()?)
-            .map_err(|e| TlsError::Setup(error_chain(&e)))?;
-    }
+    let mut builder =
+        connection::server_builder(config.max_streams_per_connection, config.tls.as_ref())?;
     let rigs = Arc::new(RigRegistry::load(store.as_ref())?);
     let events = Arc::new(Events::new(config.event_buffer));
     let writer = Writer::start(store.clone(), events.clone(), config.write_queue)?;

@@ -8,13 +8,12 @@ use std::future::Future;
 use std::time::Duration;
 
 use deog_proto::auth::BearerAuth;
-use deog_proto::connection::{self, ConnectionLimits, KEEPALIVE_INTERVAL, KEEPALIVE_TIMEOUT};
-use deog_proto::tls::{TlsError, TlsIdentity, error_chain};
+use deog_proto::connection::{self, ConnectionLimits};
+use deog_proto::tls::{TlsIdentity, error_chain};
 use deog_proto::v1::robot_service_server::RobotServiceServer;
 use tokio::net::TcpListener;
 use tokio_util::sync::CancellationToken;
 use tonic::service::interceptor::InterceptedService;
-use tonic::transport::Server;
 
 use crate::error::SimError;
 use crate::service::SimServer;
@@ -159,15 +158,9 @@ pub async fn serve_sim_server(
 ) -> Result<(), SimError> {
     let config = server.config().clone();
     // TLS first: a bad certificate or key starts nothing.
-    let mut builder = Server::builder()
-        .max_concurrent_streams(Some(config.max_streams_per_connection))
-        .http2_keepalive_interval(Some(KEEPALIVE_INTERVAL))
-        .http2_keepalive_timeout(Some(KEEPALIVE_TIMEOUT));
-    if let Some(identity) = &config.tls {
-        builder = builder
-            .tls_config(identity.server_config().map_err(SimError::Tls)?)
-            .map_err(|e| SimError::Tls(TlsError::Setup(error_chain(&e))))?;
-    }
+    let mut builder =
+        connection::server_builder(config.max_streams_per_connection, config.tls.as_ref())
+            .map_err(SimError::Tls)?;
     // At most two sonar periods per tick: a stalled process slows the world
     // instead of skipping frames.
     let max_step = Duration::from_millis(200);
