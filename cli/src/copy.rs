@@ -32,6 +32,13 @@ pub fn run(args: CopyArgs) -> Result<()> {
     if !args.from.is_dir() {
         bail!("--from {}: no such data directory", args.from.display());
     }
+    // Opening creates a store: a folder that holds none must stay as it is.
+    if !args.from.join("db").is_file() {
+        bail!(
+            "--from {}: not a map server's data directory (it holds no store)",
+            args.from.display()
+        );
+    }
     if args.to.exists()
         && let (Ok(from), Ok(to)) = (args.from.canonicalize(), args.to.canonicalize())
         && from == to

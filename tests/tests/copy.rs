@@ -150,6 +150,18 @@ fn a_missing_store_or_the_same_one_twice_is_refused() {
         &[],
     ));
     assert!(missing.contains("no such data directory"), "{missing}");
-    let same = failure(&run_deog(&["copy", "--from", &path, "--to", &path], &[]));
+    let not_a_store = failure(&run_deog(
+        &["copy", "--from", &path, "--to", &format!("{path}/copy")],
+        &[],
+    ));
+    assert!(not_a_store.contains("holds no store"), "{not_a_store}");
+    assert!(
+        std::fs::read_dir(dir.path()).expect("dir").next().is_none(),
+        "the folder that was no store was written to"
+    );
+    std::fs::create_dir(dir.path().join("store")).expect("mkdir");
+    std::fs::write(dir.path().join("store/db"), b"").expect("db file");
+    let store = dir.path().join("store").to_string_lossy().into_owned();
+    let same = failure(&run_deog(&["copy", "--from", &store, "--to", &store], &[]));
     assert!(same.contains("the same store"), "{same}");
 }
