@@ -75,14 +75,20 @@ pub enum StoreError {
     /// write); the call may succeed later.
     #[error("the store is unavailable: {0}")]
     Unavailable(String),
+    /// The write met a concurrent one through another server and was
+    /// rolled back (a deadlock or serialization failure the database
+    /// resolved); sending it again succeeds.
+    #[error("the write met a concurrent one and was rolled back: {0}")]
+    Conflict(String),
     /// A group of writes was not committed; `reason` is the error that
     /// stopped it, already worded (every write of the group gets it).
     #[error("{reason}")]
     NotCommitted {
         /// Why.
         reason: String,
-        /// The device was full: the write may succeed once it has room.
-        out_of_space: bool,
+        /// The cause passes (a full device, a lost database connection, a
+        /// concurrent write): the write may succeed if sent again.
+        transient: bool,
     },
     /// Stored bytes could not be decoded: the data directory is damaged or
     /// was written by an incompatible version.
@@ -96,6 +102,49 @@ pub enum StoreError {
 }
 
 impl StoreError {
+    /// Whether this is the store's own failure rather than a refusal of
+    /// one request.
+    pub fn is_backend(&self) -> bool {
+        matches!(
+            self,
+            Self::Backend(_)
+                | Self::OutOfSpace(_)
+                | Self::Unavailable(_)
+                | Self::Conflict(_)
+                | Self::Corrupt { .. }
+        )
+    }
+
+    /// The same failure again, for each later call that meets it.
+    pub fn again(&self) -> Self {
+        match self {
+            Self::Backend(reason) => Self::Backend(reason.clone()),
+            Self::OutOfSpace(reason) => Self::OutOfSpace(reason.clone()),
+            Self::Unavailable(reason) => Self::Unavailable(reason.clone()),
+            Self::Conflict(reason) => Self::Conflict(reason.clone()),
+            Self::Corrupt { what, reason } => Self::Corrupt {
+                what: what.clone(),
+                reason: reason.clone(),
+            },
+            other => Self::Backend(other.to_string()),
+        }
+    }
+
+    /// Whether the cause passes by itself, so the same write sent again
+    /// may succeed.
+    pub fn is_transient(&self) -> bool {
+        matches!(
+            self,
+            Self::OutOfSpace(_) | Self::Unavailable(_) | Self::Conflict(_) | Self::ShuttingDown
+        ) || matches!(
+            self,
+            Self::NotCommitted {
+                transient: true,
+                ..
+            }
+        )
+    }
+
     /// An invalid-argument error naming `field`.
     pub fn invalid(field: impl Into<String>, reason: impl Into<String>) -> Self {
         Self::InvalidArgument {
@@ -138,11 +187,12 @@ impl From<StoreError> for Status {
             StoreError::UnknownRig { .. } | StoreError::SequenceOutOfOrder { .. } => {
                 Code::FailedPrecondition
             }
-            StoreError::ShuttingDown | StoreError::OutOfSpace(_) | StoreError::Unavailable(_) => {
-                Code::Unavailable
-            }
-            StoreError::NotCommitted { out_of_space, .. } => {
-                if *out_of_space {
+            StoreError::ShuttingDown
+            | StoreError::OutOfSpace(_)
+            | StoreError::Unavailable(_)
+            | StoreError::Conflict(_) => Code::Unavailable,
+            StoreError::NotCommitted { transient, .. } => {
+                if *transient {
                     Code::Unavailable
                 } else {
                     Code::Internal

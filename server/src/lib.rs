@@ -37,4 +37,4 @@ pub use error::StoreError;
 pub use rigs::RigRegistry;
 pub use serve::{MAP_SERVICE_NAME, ServeError, ServerConfig, serve};
 pub use service::ReadStreamLimits;
-pub use store::{SledConfig, SledStore, Store};
+pub use store::{PostgresConfig, PostgresStore, SledConfig, SledStore, Store};

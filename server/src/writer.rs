@@ -11,11 +11,11 @@ use crate::error::StoreError;
 use crate::events::{Events, FrameNote, MapEvent};
 use crate::store::{
     ClientCursor, FrameWrite, MapRecord, MapWrite, RobotSummary, SequenceCheck, Store, StoredTile,
+    Transaction,
 };
 use deog_grid::{CellBox, CellIndex, LogOdds, Tile, TileDelta, TileKey, TileSize};
 use deog_proto::v1::PoseEstimate;
-use std::collections::hash_map::Entry;
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -236,7 +236,7 @@ fn run<S: Store>(
             stopping = true;
             group.truncate(at);
         }
-        if let Some((failure, unconfirmed)) = Group::new(store).run(group, events) {
+        if let Some((failure, unconfirmed)) = commit_group(store, group, events) {
             if !stopping {
                 stopping = recover(store, events, &mut receiver, health, failure, unconfirmed);
             }
@@ -386,101 +386,129 @@ impl Unconfirmed {
     }
 }
 
-/// Why a group was not committed: the first error, worded, and whether
-/// the device was full.
+/// Why a group was not committed: the first error, worded, whether its
+/// cause passes, and whether it was a concurrent write (the group is then
+/// applied again).
 #[derive(Debug, Clone)]
 struct GroupFailure {
     reason: String,
-    out_of_space: bool,
+    transient: bool,
+    conflict: bool,
 }
 
 impl GroupFailure {
     fn of(error: &StoreError) -> Self {
         Self {
             reason: error.to_string(),
-            out_of_space: matches!(error, StoreError::OutOfSpace(_)),
+            transient: error.is_transient(),
+            conflict: matches!(error, StoreError::Conflict(_)),
         }
     }
 }
 
-/// A reply held back until the group is durable; given the commit's
-/// failure, if any.
-type Deferred = Box<dyn FnOnce(Option<&GroupFailure>) + Send>;
+/// How many times a group that met a concurrent write through another
+/// server is applied; the database resolved the clash by rolling it back.
+const CONFLICT_ATTEMPTS: u32 = 8;
 
-fn defer<T: Send + 'static>(reply: Reply<T>, value: Result<T, StoreError>) -> Deferred {
-    Box::new(move |failure| {
+/// Applies `ops` in one transaction, again while it meets concurrent
+/// writes, then answers them and tells the watchers; if the commit failed,
+/// returns why with the changes it held.
+fn commit_group<S: Store>(
+    store: &S,
+    ops: Vec<WriteOp>,
+    events: &Events,
+) -> Option<(GroupFailure, Unconfirmed)> {
+    let mut attempt = 1;
+    let applied = loop {
+        let applied = Group::apply_all(store, &ops);
+        match &applied.failure {
+            Some(failure) if failure.conflict && attempt < CONFLICT_ATTEMPTS => {
+                tracing::debug!(attempt, reason = %failure.reason, "group met a concurrent write; applying it again");
+                // Back off a little longer each time, so the two sides part.
+                std::thread::sleep(Duration::from_millis(u64::from(attempt) * 3));
+                attempt += 1;
+            }
+            _ => break applied,
+        }
+    };
+    applied.finish(ops, events)
+}
+
+/// What applying one request gave, to be answered once the group's fate
+/// is known.
+enum Outcome {
+    Map(Result<MapRecord, StoreError>),
+    Unit(Result<(), StoreError>),
+    Ack(Result<Ack, StoreError>),
+    Frames(Result<(u32, u32), StoreError>),
+    /// The request was never applied (the transaction could not begin).
+    Skipped,
+}
+
+/// Answers `op` with its outcome, or with the group's failure.
+fn respond(op: WriteOp, outcome: Outcome, failure: Option<&GroupFailure>) {
+    fn send<T>(reply: Reply<T>, value: Result<T, StoreError>, failure: Option<&GroupFailure>) {
         let result = match failure {
             Some(failure) => Err(StoreError::NotCommitted {
                 reason: failure.reason.clone(),
-                out_of_space: failure.out_of_space,
+                transient: failure.transient,
             }),
             None => value,
         };
         let _ = reply.send(result);
-    })
+    }
+    fn skipped<T>() -> Result<T, StoreError> {
+        Err(StoreError::Backend("the write was not applied".into()))
+    }
+    match (op, outcome) {
+        (WriteOp::CreateMap(_, r) | WriteOp::ClearMap(_, r), Outcome::Map(value)) => {
+            send(r, value, failure)
+        }
+        (WriteOp::CreateMap(_, r) | WriteOp::ClearMap(_, r), _) => send(r, skipped(), failure),
+        (WriteOp::DeleteMap(_, r) | WriteOp::Pose(_, _, r), Outcome::Unit(value)) => {
+            send(r, value, failure)
+        }
+        (WriteOp::DeleteMap(_, r) | WriteOp::Pose(_, _, r), _) => send(r, skipped(), failure),
+        (WriteOp::Apply(_, r), Outcome::Ack(value)) => send(r, value, failure),
+        (WriteOp::Apply(_, r), _) => send(r, skipped(), failure),
+        (WriteOp::Frames(_, r), Outcome::Frames(value)) => send(r, value, failure),
+        (WriteOp::Frames(_, r), _) => send(r, skipped(), failure),
+        (WriteOp::Stop, _) => {}
+    }
 }
 
-/// A map's state while a group is being applied.
-struct PendingMap {
-    record: MapRecord,
-    tiles: HashMap<TileKey, StoredTile>,
-    /// Tiles changed in this group, with the version of their last change.
-    dirty: BTreeMap<TileKey, u64>,
-    cursors: HashMap<String, ClientCursor>,
-    dirty_cursors: HashSet<String>,
-    record_dirty: bool,
-}
-
-/// A robot's summary and the frames (sequence, encoded frame) added to it
-/// in this group.
-type PendingFrames = (RobotSummary, Vec<(u64, Vec<u8>)>);
-
-struct Group<'s, S> {
-    store: &'s S,
-    maps: HashMap<String, PendingMap>,
-    frames: BTreeMap<String, PendingFrames>,
-    poses: Vec<(String, u64, Vec<u8>)>,
-    replies: Vec<Deferred>,
+/// A group after its transaction ended.
+struct Applied {
+    outcomes: Vec<Outcome>,
+    failure: Option<GroupFailure>,
     map_events: Vec<(String, MapEvent)>,
     frame_events: Vec<FrameNote>,
     pose_events: Vec<Arc<PoseEstimate>>,
-    failure: Option<GroupFailure>,
 }
 
-impl<'s, S: Store> Group<'s, S> {
-    fn new(store: &'s S) -> Self {
+impl Applied {
+    fn failed(failure: GroupFailure) -> Self {
         Self {
-            store,
-            maps: HashMap::new(),
-            frames: BTreeMap::new(),
-            poses: Vec::new(),
-            replies: Vec::new(),
+            outcomes: Vec::new(),
+            failure: Some(failure),
             map_events: Vec::new(),
             frame_events: Vec::new(),
             pose_events: Vec::new(),
-            failure: None,
         }
     }
 
-    /// Applies and commits `ops`, answers them and tells the watchers;
-    /// if the commit failed, returns why with the changes it held.
-    fn run(mut self, ops: Vec<WriteOp>, events: &Events) -> Option<(GroupFailure, Unconfirmed)> {
-        for op in ops {
-            self.apply(op);
-        }
-        self.write_maps();
-        self.write_rest();
-        if self.failure.is_none()
-            && let Err(error) = self.store.flush()
-        {
-            self.failure = Some(GroupFailure::of(&error));
-        }
+    /// Answers every request and tells the watchers what landed.
+    fn finish(self, ops: Vec<WriteOp>, events: &Events) -> Option<(GroupFailure, Unconfirmed)> {
         if let Some(failure) = &self.failure {
             tracing::error!(failure = %failure.reason, "group commit failed");
         }
         let failure = self.failure.as_ref();
-        for reply in self.replies {
-            reply(failure);
+        let outcomes = self
+            .outcomes
+            .into_iter()
+            .chain(std::iter::repeat_with(|| Outcome::Skipped));
+        for (op, outcome) in ops.into_iter().zip(outcomes) {
+            respond(op, outcome, failure);
         }
         if let Some(failure) = self.failure {
             let unconfirmed = Unconfirmed {
@@ -505,64 +533,231 @@ impl<'s, S: Store> Group<'s, S> {
         }
         None
     }
+}
 
-    fn apply(&mut self, op: WriteOp) {
-        match op {
-            WriteOp::CreateMap(record, reply) => {
-                self.write_maps();
-                let result = self.store.create_map(&record).map(|()| record);
-                self.replies.push(defer(reply, result));
-            }
-            WriteOp::ClearMap(name, reply) => {
-                self.write_maps();
-                let result = self.clear(&name);
-                self.replies.push(defer(reply, result));
-            }
-            WriteOp::DeleteMap(name, reply) => {
-                self.write_maps();
-                let result = self.store.delete_map(&name);
-                if result.is_ok() {
-                    self.map_events.push((name, MapEvent::Deleted));
+/// A map's state while a group is being applied.
+struct PendingMap {
+    record: MapRecord,
+    tiles: HashMap<TileKey, StoredTile>,
+    /// Keys read from the store (stored or not), so each is read once.
+    read_tiles: HashSet<TileKey>,
+    /// Tiles changed in this group, with the version of their last change.
+    dirty: BTreeMap<TileKey, u64>,
+    cursors: HashMap<String, ClientCursor>,
+    dirty_cursors: HashSet<String>,
+    record_dirty: bool,
+}
+
+impl PendingMap {
+    /// Reads the tiles among `keys` not read yet.
+    fn read_tiles(
+        &mut self,
+        txn: &mut dyn Transaction,
+        keys: impl Iterator<Item = TileKey>,
+    ) -> Result<(), StoreError> {
+        let missing: Vec<TileKey> = keys.filter(|k| !self.read_tiles.contains(k)).collect();
+        if missing.is_empty() {
+            return Ok(());
+        }
+        for (key, tile) in txn.tiles(&self.record, &missing)? {
+            self.tiles.insert(key, tile);
+        }
+        self.read_tiles.extend(missing);
+        Ok(())
+    }
+}
+
+/// A robot's summary, the sequences it has stored among those this group
+/// brings, and the frames (sequence, encoded frame) added in this group.
+struct PendingRobot {
+    summary: RobotSummary,
+    stored: HashSet<u64>,
+    frames: Vec<(u64, Vec<u8>)>,
+}
+
+/// What a group will touch, gathered before it is applied, so the store
+/// is read in a few large reads and locked in one order.
+#[derive(Default)]
+struct Wanted {
+    /// Per map: tile keys and client ids its batches name.
+    maps: BTreeMap<String, (BTreeSet<TileKey>, BTreeSet<String>)>,
+    /// Per robot: the frame sequences the group brings.
+    robots: BTreeMap<String, BTreeSet<u64>>,
+}
+
+impl Wanted {
+    fn of(ops: &[WriteOp]) -> Self {
+        let mut wanted = Self::default();
+        for op in ops {
+            match op {
+                WriteOp::Apply(batch, _) => {
+                    let (keys, clients) = wanted.maps.entry(batch.map.clone()).or_default();
+                    keys.extend(batch.deltas.iter().map(|d| d.key));
+                    clients.insert(batch.client_id.clone());
                 }
-                self.replies.push(defer(reply, result));
+                WriteOp::ClearMap(name, _) | WriteOp::DeleteMap(name, _) => {
+                    wanted.maps.entry(name.clone()).or_default();
+                }
+                WriteOp::Frames(frames, _) => {
+                    for frame in frames {
+                        wanted
+                            .robots
+                            .entry(frame.robot.clone())
+                            .or_default()
+                            .insert(frame.sequence);
+                    }
+                }
+                WriteOp::CreateMap(..) | WriteOp::Pose(..) | WriteOp::Stop => {}
             }
-            WriteOp::Apply(batch, reply) => {
+        }
+        wanted
+    }
+}
+
+struct Group<'t> {
+    txn: Box<dyn Transaction + 't>,
+    wanted: Wanted,
+    maps: HashMap<String, PendingMap>,
+    robots: BTreeMap<String, PendingRobot>,
+    poses: Vec<(String, u64, Vec<u8>)>,
+    map_events: Vec<(String, MapEvent)>,
+    frame_events: Vec<FrameNote>,
+    pose_events: Vec<Arc<PoseEstimate>>,
+    failure: Option<GroupFailure>,
+}
+
+impl<'t> Group<'t> {
+    /// Applies `ops` in one transaction of `store` and commits it.
+    fn apply_all<S: Store>(store: &'t S, ops: &[WriteOp]) -> Applied {
+        let txn = match store.begin() {
+            Ok(txn) => txn,
+            Err(error) => return Applied::failed(GroupFailure::of(&error)),
+        };
+        let mut group = Group {
+            txn,
+            wanted: Wanted::of(ops),
+            maps: HashMap::new(),
+            robots: BTreeMap::new(),
+            poses: Vec::new(),
+            map_events: Vec::new(),
+            frame_events: Vec::new(),
+            pose_events: Vec::new(),
+            failure: None,
+        };
+        let outcomes = match group.lock() {
+            Ok(()) => ops.iter().map(|op| group.apply(op)).collect(),
+            Err(error) => {
+                group.fail(&error);
+                Vec::new()
+            }
+        };
+        group.write_maps();
+        group.write_rest();
+        let Group {
+            txn,
+            mut failure,
+            map_events,
+            frame_events,
+            pose_events,
+            ..
+        } = group;
+        if failure.is_none() {
+            failure = txn.commit().err().map(|error| GroupFailure::of(&error));
+        }
+        Applied {
+            outcomes,
+            failure,
+            map_events,
+            frame_events,
+            pose_events,
+        }
+    }
+
+    /// Locks what the group writes, maps before robots, each in name order.
+    fn lock(&mut self) -> Result<(), StoreError> {
+        let maps: Vec<&str> = self.wanted.maps.keys().map(String::as_str).collect();
+        self.txn.lock_maps(&maps)?;
+        let robots: Vec<&str> = self.wanted.robots.keys().map(String::as_str).collect();
+        self.txn.lock_robots(&robots)
+    }
+
+    /// Records the first failure of the store itself: the whole group
+    /// fails with it.
+    fn fail(&mut self, error: &StoreError) {
+        self.failure.get_or_insert_with(|| GroupFailure::of(error));
+    }
+
+    /// Passes a request's result on, failing the group if the store failed.
+    fn check<T>(&mut self, result: Result<T, StoreError>) -> Result<T, StoreError> {
+        if let Err(error) = &result
+            && error.is_backend()
+        {
+            self.fail(error);
+        }
+        result
+    }
+
+    fn apply(&mut self, op: &WriteOp) -> Outcome {
+        match op {
+            WriteOp::CreateMap(record, _) => {
+                self.write_maps();
+                let result = self.txn.create_map(record).map(|()| record.clone());
+                Outcome::Map(self.check(result))
+            }
+            WriteOp::ClearMap(name, _) => {
+                self.write_maps();
+                let result = self.clear(name);
+                Outcome::Map(self.check(result))
+            }
+            WriteOp::DeleteMap(name, _) => {
+                self.write_maps();
+                let result = self.txn.delete_map(name);
+                if result.is_ok() {
+                    self.map_events.push((name.clone(), MapEvent::Deleted));
+                }
+                Outcome::Unit(self.check(result))
+            }
+            WriteOp::Apply(batch, _) => {
                 let result = self.apply_batch(batch);
-                self.replies.push(defer(reply, result));
+                Outcome::Ack(self.check(result))
             }
-            WriteOp::Frames(frames, reply) => {
+            WriteOp::Frames(frames, _) => {
                 let result = self.add_frames(frames);
-                self.replies.push(defer(reply, result));
+                Outcome::Frames(self.check(result))
             }
-            WriteOp::Pose(pose, bytes, reply) => {
+            WriteOp::Pose(pose, bytes, _) => {
                 // Checked here rather than in the handler, so that a map
                 // deleted meanwhile cannot slip in between.
-                let result = match self.store.map(&pose.map) {
-                    Ok(Some(_)) => Ok(()),
-                    Ok(None) => Err(StoreError::MapNotFound(pose.map.clone())),
-                    Err(error) => Err(error),
+                let result = if self.maps.contains_key(&pose.map) {
+                    Ok(())
+                } else {
+                    match self.txn.map(&pose.map) {
+                        Ok(Some(_)) => Ok(()),
+                        Ok(None) => Err(StoreError::MapNotFound(pose.map.clone())),
+                        Err(error) => Err(error),
+                    }
                 };
                 if result.is_ok() {
                     self.poses
-                        .push((pose.robot.clone(), pose.frame_sequence, bytes));
-                    self.pose_events.push(pose);
+                        .push((pose.robot.clone(), pose.frame_sequence, bytes.clone()));
+                    self.pose_events.push(pose.clone());
                 }
-                self.replies.push(defer(reply, result));
+                Outcome::Unit(self.check(result))
             }
-            WriteOp::Stop => {}
+            WriteOp::Stop => Outcome::Skipped,
         }
     }
 
     fn clear(&mut self, name: &str) -> Result<MapRecord, StoreError> {
         let mut record = self
-            .store
+            .txn
             .map(name)?
             .ok_or_else(|| StoreError::MapNotFound(name.to_string()))?;
         record.version += 1;
         record.tile_count = 0;
         record.cell_count = 0;
         record.bounds = None;
-        self.store.write_map(
+        self.txn.write_map(
             name,
             MapWrite {
                 record: Some(record.clone()),
@@ -579,37 +774,53 @@ impl<'s, S: Store> Group<'s, S> {
         Ok(record)
     }
 
-    fn pending(&mut self, name: &str) -> Result<&mut PendingMap, StoreError> {
-        if !self.maps.contains_key(name) {
-            let record = self
-                .store
-                .map(name)?
-                .ok_or_else(|| StoreError::MapNotFound(name.to_string()))?;
-            self.maps.insert(
-                name.to_string(),
-                PendingMap {
-                    record,
-                    tiles: HashMap::new(),
-                    dirty: BTreeMap::new(),
-                    cursors: HashMap::new(),
-                    dirty_cursors: HashSet::new(),
-                    record_dirty: false,
-                },
-            );
+    /// Reads map `name` into the group, with the tiles and cursors its
+    /// batches in this group name, unless it is there already.
+    fn pend(&mut self, name: &str) -> Result<(), StoreError> {
+        if self.maps.contains_key(name) {
+            return Ok(());
         }
-        // Inserted just above when missing.
-        self.maps
-            .get_mut(name)
-            .ok_or_else(|| StoreError::MapNotFound(name.to_string()))
+        let record = self
+            .txn
+            .map(name)?
+            .ok_or_else(|| StoreError::MapNotFound(name.to_string()))?;
+        let mut map = PendingMap {
+            record,
+            tiles: HashMap::new(),
+            read_tiles: HashSet::new(),
+            dirty: BTreeMap::new(),
+            cursors: HashMap::new(),
+            dirty_cursors: HashSet::new(),
+            record_dirty: false,
+        };
+        if let Some((keys, clients)) = self.wanted.maps.get(name) {
+            map.read_tiles(self.txn.as_mut(), keys.iter().copied())?;
+            let clients: Vec<&str> = clients.iter().map(String::as_str).collect();
+            map.cursors = self.txn.cursors(name, &clients)?.into_iter().collect();
+            for client in clients {
+                map.cursors.entry(client.to_string()).or_default();
+            }
+        }
+        self.maps.insert(name.to_string(), map);
+        Ok(())
     }
 
-    fn apply_batch(&mut self, batch: Batch) -> Result<Ack, StoreError> {
-        let store = self.store;
-        let map = self.pending(&batch.map)?;
-        let cursor = match map.cursors.entry(batch.client_id.clone()) {
-            Entry::Occupied(entry) => entry.into_mut(),
-            Entry::Vacant(entry) => entry.insert(store.cursor(&batch.map, &batch.client_id)?),
-        };
+    fn apply_batch(&mut self, batch: &Batch) -> Result<Ack, StoreError> {
+        self.pend(&batch.map)?;
+        let Group { maps, txn, .. } = self;
+        let map = maps
+            .get_mut(&batch.map)
+            .ok_or_else(|| StoreError::MapNotFound(batch.map.clone()))?;
+        if !map.cursors.contains_key(&batch.client_id) {
+            let read = txn.cursors(&batch.map, &[batch.client_id.as_str()])?;
+            let cursor = read.into_iter().next().map(|(_, c)| c).unwrap_or_default();
+            map.cursors.insert(batch.client_id.clone(), cursor);
+        }
+        let cursor = map
+            .cursors
+            .get(&batch.client_id)
+            .cloned()
+            .unwrap_or_default();
         match cursor.check(batch.sequence) {
             SequenceCheck::Next => {}
             // Below the kept sequences a batch out of order cannot be told
@@ -622,8 +833,8 @@ impl<'s, S: Store> Group<'s, S> {
             }
             SequenceCheck::NeverApplied => {
                 return Err(StoreError::SequenceOutOfOrder {
-                    map: batch.map,
-                    client: batch.client_id,
+                    map: batch.map.clone(),
+                    client: batch.client_id.clone(),
                     sequence: batch.sequence,
                     last: cursor.last,
                 });
@@ -639,14 +850,9 @@ impl<'s, S: Store> Group<'s, S> {
                 ),
             ));
         }
+        map.read_tiles(txn.as_mut(), batch.deltas.iter().map(|d| d.key))?;
         let version = map.record.version + 1;
         for delta in &batch.deltas {
-            if !map.tiles.contains_key(&delta.key) {
-                let stored = store.tile(&map.record, delta.key)?;
-                if let Some(stored) = stored {
-                    map.tiles.insert(delta.key, stored);
-                }
-            }
             let is_new = !map.tiles.contains_key(&delta.key);
             let newly_observed = delta
                 .raw()
@@ -689,15 +895,17 @@ impl<'s, S: Store> Group<'s, S> {
         }
         map.record.version = version;
         map.record_dirty = true;
-        cursor.applied(batch.sequence);
-        map.dirty_cursors.insert(batch.client_id);
+        if let Some(cursor) = map.cursors.get_mut(&batch.client_id) {
+            cursor.applied(batch.sequence);
+        }
+        map.dirty_cursors.insert(batch.client_id.clone());
         Ok(Ack {
             applied: true,
             map_version: version,
         })
     }
 
-    /// Writes every pending map (without flushing), before an admin
+    /// Writes every pending map (within the transaction), before an admin
     /// operation or at the end of the group.
     fn write_maps(&mut self) {
         for (name, map) in std::mem::take(&mut self.maps) {
@@ -720,8 +928,8 @@ impl<'s, S: Store> Group<'s, S> {
                 tiles,
                 cursors,
             };
-            if let Err(error) = self.store.write_map(&name, write) {
-                self.failure.get_or_insert(GroupFailure::of(&error));
+            if let Err(error) = self.txn.write_map(&name, write) {
+                self.fail(&error);
                 continue;
             }
             for (key, version) in map.dirty {
@@ -731,25 +939,37 @@ impl<'s, S: Store> Group<'s, S> {
         }
     }
 
-    fn add_frames(&mut self, frames: Vec<EncodedFrame>) -> Result<(u32, u32), StoreError> {
+    fn add_frames(&mut self, frames: &[EncodedFrame]) -> Result<(u32, u32), StoreError> {
         let (mut stored, mut duplicates) = (0u32, 0u32);
         for frame in frames {
-            if !self.frames.contains_key(&frame.robot) {
-                let summary = self.store.robot(&frame.robot)?.unwrap_or_default();
-                self.frames
-                    .insert(frame.robot.clone(), (summary, Vec::new()));
+            if !self.robots.contains_key(&frame.robot) {
+                let summary = self.txn.robot(&frame.robot)?.unwrap_or_default();
+                let sequences: Vec<u64> = self
+                    .wanted
+                    .robots
+                    .get(&frame.robot)
+                    .map(|s| s.iter().copied().collect())
+                    .unwrap_or_default();
+                let known = self.txn.stored_frames(&frame.robot, &sequences)?;
+                self.robots.insert(
+                    frame.robot.clone(),
+                    PendingRobot {
+                        summary,
+                        stored: known.into_iter().collect(),
+                        frames: Vec::new(),
+                    },
+                );
             }
-            let Some((summary, pending)) = self.frames.get_mut(&frame.robot) else {
+            let Some(robot) = self.robots.get_mut(&frame.robot) else {
                 continue;
             };
-            let seen = pending.iter().any(|(s, _)| *s == frame.sequence)
-                || self.store.has_frame(&frame.robot, frame.sequence)?;
-            if seen {
+            if robot.stored.contains(&frame.sequence) {
                 duplicates += 1;
                 continue;
             }
-            *summary = summary.with(frame.sequence);
-            pending.push((frame.sequence, frame.bytes));
+            robot.stored.insert(frame.sequence);
+            robot.summary = robot.summary.with(frame.sequence);
+            robot.frames.push((frame.sequence, frame.bytes.clone()));
             self.frame_events.push(FrameNote {
                 robot: Arc::from(frame.robot.as_str()),
                 sequence: frame.sequence,
@@ -760,25 +980,25 @@ impl<'s, S: Store> Group<'s, S> {
     }
 
     fn write_rest(&mut self) {
-        let writes: Vec<FrameWrite> = std::mem::take(&mut self.frames)
+        let writes: Vec<FrameWrite> = std::mem::take(&mut self.robots)
             .into_iter()
-            .filter(|(_, (_, frames))| !frames.is_empty())
-            .map(|(robot, (summary, frames))| FrameWrite {
-                robot,
-                summary,
-                frames,
+            .filter(|(_, robot)| !robot.frames.is_empty())
+            .map(|(name, robot)| FrameWrite {
+                robot: name,
+                summary: robot.summary,
+                frames: robot.frames,
             })
             .collect();
         if !writes.is_empty()
-            && let Err(error) = self.store.write_frames(writes)
+            && let Err(error) = self.txn.write_frames(writes)
         {
-            self.failure.get_or_insert(GroupFailure::of(&error));
+            self.fail(&error);
         }
         let poses = std::mem::take(&mut self.poses);
         if !poses.is_empty()
-            && let Err(error) = self.store.write_poses(poses)
+            && let Err(error) = self.txn.write_poses(poses)
         {
-            self.failure.get_or_insert(GroupFailure::of(&error));
+            self.fail(&error);
         }
     }
 }
@@ -813,9 +1033,13 @@ mod tests {
 
     #[test]
     fn a_failed_commit_reaches_each_write_worded_once() {
-        let (reply, answer) = oneshot::channel::<Result<u64, StoreError>>();
+        let (reply, answer) = oneshot::channel::<Result<(), StoreError>>();
         let failure = GroupFailure::of(&StoreError::Backend("disk full".into()));
-        defer(reply, Ok(7))(Some(&failure));
+        respond(
+            WriteOp::DeleteMap("m".into(), reply),
+            Outcome::Unit(Ok(())),
+            Some(&failure),
+        );
         let error = answer.blocking_recv().unwrap().unwrap_err();
         assert_eq!(error.to_string(), "storage failure: disk full");
         assert_eq!(tonic::Status::from(error).code(), tonic::Code::Internal);

@@ -8,13 +8,17 @@
 
 mod copy;
 mod cursor;
+pub mod postgres;
 mod record;
 mod sled_store;
+mod transaction;
 
 pub use copy::{CopyError, CopyReport, MapCopied, copy_store};
 pub use cursor::{ClientCursor, RECENT_SEQUENCES, SequenceCheck};
+pub use postgres::{PostgresConfig, PostgresStore, is_postgres_url};
 pub use record::{MapRecord, MapSettings, RobotSummary, StoredTile};
 pub use sled_store::{SledConfig, SledStore};
+pub use transaction::{Direct, Transaction};
 
 use crate::error::StoreError;
 use deog_grid::TileKey;
@@ -128,6 +132,12 @@ pub trait Store: Send + Sync + 'static {
 
     /// Makes every earlier write durable.
     fn flush(&self) -> Result<(), StoreError>;
+
+    /// Begins one group commit. A store whose writes come from one writer
+    /// alone (sled: one process holds it) may return [`Direct`], which
+    /// writes through and flushes at commit; a store shared by several
+    /// servers returns a real transaction.
+    fn begin(&self) -> Result<Box<dyn Transaction + '_>, StoreError>;
 
     /// After a failed write: lets go of whatever the store holds in memory
     /// (it may include writes that never became durable), opens it again

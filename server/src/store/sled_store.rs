@@ -11,7 +11,8 @@
 //! robot's frames sort by sequence.
 
 use super::{
-    ClientCursor, FrameWrite, MapRecord, MapWrite, RobotSummary, Store, StoredTile, TileRange,
+    ClientCursor, Direct, FrameWrite, MapRecord, MapWrite, RobotSummary, Store, StoredTile,
+    TileRange, Transaction,
 };
 use crate::error::StoreError;
 use deog_grid::TileKey;
@@ -506,6 +507,11 @@ impl Store for SledStore {
     fn flush(&self) -> Result<(), StoreError> {
         self.current()?.db.flush()?;
         Ok(())
+    }
+
+    fn begin(&self) -> Result<Box<dyn Transaction + '_>, StoreError> {
+        // One process holds the directory and one writer thread writes it.
+        Ok(Box::new(Direct(self)))
     }
 
     fn recover(&self, failure: &str) -> Result<(), StoreError> {

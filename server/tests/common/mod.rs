@@ -10,9 +10,11 @@ use deog_grid::TileKey;
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_client::MapServiceClient;
 use deog_server::store::{
-    ClientCursor, FrameWrite, MapRecord, MapWrite, RobotSummary, StoredTile, TileRange,
+    ClientCursor, FrameWrite, MapRecord, MapWrite, RobotSummary, StoredTile, TileRange, Transaction,
 };
-use deog_server::{ServerConfig, SledConfig, SledStore, Store, StoreError};
+use deog_server::{
+    PostgresConfig, PostgresStore, ServerConfig, SledConfig, SledStore, Store, StoreError,
+};
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -24,8 +26,8 @@ use tonic::transport::Channel;
 
 /// A store backend the suite can run on.
 pub trait TestBackend {
-    /// The store it opens.
-    type Store: Store;
+    /// The store it opens (a [`Store`], or a box of one).
+    type Store;
     /// Opens the store kept in `path`, creating it if missing; a restart
     /// reopens the same path and must find what was flushed there.
     fn open(path: &Path) -> Self::Store;
@@ -42,8 +44,95 @@ impl TestBackend for Sled {
     }
 }
 
-/// The backend every test of the suite runs on.
-pub type SuiteBackend = Sled;
+/// PostgreSQL: a database of its own per store path, on the server
+/// `DEOG_TEST_POSTGRES` names (a URL to its `postgres` database) or else
+/// on a private server this test process starts and stops.
+pub struct Postgres;
+
+impl TestBackend for Postgres {
+    type Store = PostgresStore;
+
+    fn open(path: &Path) -> PostgresStore {
+        let url = postgres_database(path);
+        PostgresStore::open(&PostgresConfig::new(url)).expect("open PostgreSQL store")
+    }
+}
+
+/// The URL of the database standing for store `path`, created on first use.
+pub fn postgres_database(path: &Path) -> String {
+    static DATABASES: std::sync::Mutex<Vec<(PathBuf, String)>> = std::sync::Mutex::new(Vec::new());
+    let mut databases = DATABASES.lock().expect("database list");
+    if let Some((_, url)) = databases.iter().find(|(p, _)| p == path) {
+        return url.clone();
+    }
+    let name = format!("deog_test_{}_{}", std::process::id(), databases.len() + 1);
+    let url = create_postgres_database(&name);
+    databases.push((path.to_path_buf(), url.clone()));
+    url
+}
+
+/// Creates database `name` (dropping an older one of that name) on the
+/// test server and returns its URL.
+fn create_postgres_database(name: &str) -> String {
+    let admin = std::env::var("DEOG_TEST_POSTGRES")
+        .expect("DEOG_TEST_POSTGRES: the URL of a PostgreSQL server's postgres database");
+    let base = admin
+        .rsplit_once('/')
+        .map(|(base, _)| base.to_string())
+        .expect("a URL ending in /DATABASE");
+    let name = name.to_string();
+    let url = format!("{base}/{name}");
+    // Its own thread: the tests run inside a runtime, which may not block.
+    std::thread::spawn(move || {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .expect("runtime");
+        runtime.block_on(async {
+            let (client, connection) = tokio_postgres::connect(&admin, tokio_postgres::NoTls)
+                .await
+                .expect("connect to the test PostgreSQL");
+            tokio::spawn(connection);
+            for statement in [
+                format!("DROP DATABASE IF EXISTS {name}"),
+                format!("CREATE DATABASE {name}"),
+            ] {
+                client
+                    .batch_execute(&statement)
+                    .await
+                    .expect("create the test database");
+            }
+        });
+    })
+    .join()
+    .expect("create database");
+    url
+}
+
+/// The backend every test of the suite runs on: `DEOG_TEST_STORE=postgres`
+/// runs the whole suite on PostgreSQL, anything else on sled.
+pub struct SuiteBackend;
+
+impl TestBackend for SuiteBackend {
+    type Store = SuiteStore;
+
+    fn open(path: &Path) -> SuiteStore {
+        let inner: Box<dyn Store> = if on_postgres() {
+            Box::new(Postgres::open(path))
+        } else {
+            Box::new(Sled::open(path))
+        };
+        SuiteStore {
+            inner,
+            flushes: Arc::new(AtomicU64::new(0)),
+        }
+    }
+}
+
+/// Whether the suite runs on PostgreSQL.
+pub fn on_postgres() -> bool {
+    std::env::var("DEOG_TEST_STORE").is_ok_and(|v| v == "postgres")
+}
 
 pub struct TestServer {
     pub addr: SocketAddr,
@@ -70,9 +159,9 @@ impl TestServer {
     /// A server over an existing directory (a restart).
     pub async fn start_at(path: PathBuf, config: ServerConfig) -> Self {
         let flushes = Arc::new(AtomicU64::new(0));
-        let store = CountingStore {
-            inner: SuiteBackend::open(&path),
+        let store = SuiteStore {
             flushes: flushes.clone(),
+            ..SuiteBackend::open(&path)
         };
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
             .await
@@ -165,12 +254,12 @@ impl Drop for TestServer {
 
 /// A store of any backend that counts its successful flushes, so tests can
 /// see how writes were grouped.
-struct CountingStore<S> {
-    inner: S,
+pub struct SuiteStore {
+    inner: Box<dyn Store>,
     flushes: Arc<AtomicU64>,
 }
 
-impl<S: Store> Store for CountingStore<S> {
+impl Store for SuiteStore {
     fn maps(&self) -> Result<Vec<MapRecord>, StoreError> {
         self.inner.maps()
     }
@@ -249,6 +338,71 @@ impl<S: Store> Store for CountingStore<S> {
     }
     fn recover(&self, failure: &str) -> Result<(), StoreError> {
         self.inner.recover(failure)
+    }
+    fn begin(&self) -> Result<Box<dyn Transaction + '_>, StoreError> {
+        Ok(Box::new(CountingTransaction {
+            inner: self.inner.begin()?,
+            commits: &self.flushes,
+        }))
+    }
+}
+
+/// A transaction that counts its successful commits as flushes.
+struct CountingTransaction<'s> {
+    inner: Box<dyn Transaction + 's>,
+    commits: &'s AtomicU64,
+}
+
+impl Transaction for CountingTransaction<'_> {
+    fn lock_maps(&mut self, names: &[&str]) -> Result<(), StoreError> {
+        self.inner.lock_maps(names)
+    }
+    fn lock_robots(&mut self, names: &[&str]) -> Result<(), StoreError> {
+        self.inner.lock_robots(names)
+    }
+    fn map(&mut self, name: &str) -> Result<Option<MapRecord>, StoreError> {
+        self.inner.map(name)
+    }
+    fn create_map(&mut self, record: &MapRecord) -> Result<(), StoreError> {
+        self.inner.create_map(record)
+    }
+    fn delete_map(&mut self, name: &str) -> Result<(), StoreError> {
+        self.inner.delete_map(name)
+    }
+    fn write_map(&mut self, name: &str, write: MapWrite) -> Result<(), StoreError> {
+        self.inner.write_map(name, write)
+    }
+    fn tiles(
+        &mut self,
+        map: &MapRecord,
+        keys: &[TileKey],
+    ) -> Result<Vec<(TileKey, StoredTile)>, StoreError> {
+        self.inner.tiles(map, keys)
+    }
+    fn cursors(
+        &mut self,
+        name: &str,
+        clients: &[&str],
+    ) -> Result<Vec<(String, ClientCursor)>, StoreError> {
+        self.inner.cursors(name, clients)
+    }
+    fn robot(&mut self, robot: &str) -> Result<Option<RobotSummary>, StoreError> {
+        self.inner.robot(robot)
+    }
+    fn stored_frames(&mut self, robot: &str, sequences: &[u64]) -> Result<Vec<u64>, StoreError> {
+        self.inner.stored_frames(robot, sequences)
+    }
+    fn write_frames(&mut self, writes: Vec<FrameWrite>) -> Result<(), StoreError> {
+        self.inner.write_frames(writes)
+    }
+    fn write_poses(&mut self, poses: Vec<(String, u64, Vec<u8>)>) -> Result<(), StoreError> {
+        self.inner.write_poses(poses)
+    }
+    fn commit(self: Box<Self>) -> Result<(), StoreError> {
+        let commits = self.commits;
+        self.inner.commit()?;
+        commits.fetch_add(1, Ordering::Relaxed);
+        Ok(())
     }
 }
 

@@ -1,0 +1,285 @@
+//! Connections to PostgreSQL, pooled, with their prepared statements, and
+//! the one place database errors become [`StoreError`]s.
+//!
+//! The connections' sockets are driven by a small runtime of the store's
+//! own; a statement is sent from the calling thread, which parks until the
+//! answer comes. That keeps the store synchronous, as its contract is, and
+//! usable from any thread, inside an async handler or not.
+
+use super::PostgresConfig;
+use crate::error::StoreError;
+use std::collections::HashMap;
+use std::future::Future;
+use std::sync::{Arc, Mutex};
+use std::task::{Context, Poll, Wake, Waker};
+use std::time::Duration;
+use tokio_postgres::error::SqlState;
+use tokio_postgres::types::ToSql;
+use tokio_postgres::{Client, NoTls, Row, Statement};
+use tokio_stream::Stream;
+
+/// How long a connection attempt may take when the connection string does
+/// not say (`connect_timeout`).
+const CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// Waits on this thread for `future`, parking between polls. The futures
+/// it is given only talk to connection tasks over channels, so they need
+/// no runtime of their own.
+fn block_on<F: Future>(future: F) -> F::Output {
+    struct Unpark(std::thread::Thread);
+    impl Wake for Unpark {
+        fn wake(self: Arc<Self>) {
+            self.0.unpark();
+        }
+    }
+    let waker = Waker::from(Arc::new(Unpark(std::thread::current())));
+    let mut context = Context::from_waker(&waker);
+    let mut future = std::pin::pin!(future);
+    loop {
+        if let Poll::Ready(output) = future.as_mut().poll(&mut context) {
+            return output;
+        }
+        std::thread::park();
+    }
+}
+
+/// The store's connections.
+pub(super) struct Pool {
+    config: tokio_postgres::Config,
+    runtime: Option<tokio::runtime::Runtime>,
+    idle: Mutex<Vec<Conn>>,
+    max_idle: usize,
+}
+
+impl Drop for Pool {
+    fn drop(&mut self) {
+        if let Some(runtime) = self.runtime.take() {
+            // Dropping a runtime may not block inside another one.
+            runtime.shutdown_background();
+        }
+    }
+}
+
+impl Pool {
+    pub(super) fn new(config: &PostgresConfig) -> Result<Self, StoreError> {
+        let mut parsed: tokio_postgres::Config = config.url.parse().map_err(|e| {
+            StoreError::invalid(
+                "store",
+                format!("not a PostgreSQL connection string: {}", worded(&e)),
+            )
+        })?;
+        if parsed.get_connect_timeout().is_none() {
+            parsed.connect_timeout(CONNECT_TIMEOUT);
+        }
+        if parsed.get_application_name().is_none() {
+            parsed.application_name("deog");
+        }
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .thread_name("deog-postgres")
+            .enable_all()
+            .build()
+            .map_err(|e| StoreError::Backend(format!("cannot start the database runtime: {e}")))?;
+        Ok(Self {
+            config: parsed,
+            runtime: Some(runtime),
+            idle: Mutex::new(Vec::new()),
+            max_idle: config.pool_size.max(1),
+        })
+    }
+
+    /// The database and hosts, without credentials.
+    pub(super) fn describe(&self) -> String {
+        let hosts: Vec<String> = self
+            .config
+            .get_hosts()
+            .iter()
+            .map(|host| match host {
+                tokio_postgres::config::Host::Tcp(name) => name.clone(),
+                tokio_postgres::config::Host::Unix(path) => path.display().to_string(),
+            })
+            .collect();
+        format!(
+            "{} on {}",
+            self.config.get_dbname().unwrap_or("(default)"),
+            hosts.join(",")
+        )
+    }
+
+    /// An idle connection, or a new one.
+    pub(super) fn get(&self) -> Result<Conn, StoreError> {
+        loop {
+            let conn = self.idle.lock().ok().and_then(|mut idle| idle.pop());
+            match conn {
+                Some(conn) if conn.client.is_closed() => continue,
+                Some(conn) => return Ok(conn),
+                None => return self.connect(),
+            }
+        }
+    }
+
+    /// Returns a connection for reuse, unless it broke.
+    pub(super) fn put(&self, conn: Conn) {
+        if conn.client.is_closed() {
+            return;
+        }
+        if let Ok(mut idle) = self.idle.lock()
+            && idle.len() < self.max_idle
+        {
+            idle.push(conn);
+        }
+    }
+
+    /// Drops every idle connection (after a failure that may have broken
+    /// them all, such as a failover).
+    pub(super) fn clear(&self) {
+        if let Ok(mut idle) = self.idle.lock() {
+            idle.clear();
+        }
+    }
+
+    fn connect(&self) -> Result<Conn, StoreError> {
+        let runtime = self
+            .runtime
+            .as_ref()
+            .ok_or_else(|| StoreError::Unavailable("the store is closing".into()))?;
+        let config = self.config.clone();
+        let (sender, receiver) = std::sync::mpsc::sync_channel(1);
+        runtime.spawn(async move {
+            match config.connect(NoTls).await {
+                Ok((client, connection)) => {
+                    let _ = sender.send(Ok(client));
+                    if let Err(error) = connection.await {
+                        tracing::debug!(error = %worded(&error), "database connection ended");
+                    }
+                }
+                Err(error) => {
+                    let _ = sender.send(Err(error));
+                }
+            }
+        });
+        let client = receiver
+            .recv()
+            .map_err(|_| StoreError::Unavailable("the database runtime stopped".into()))?
+            .map_err(|error| {
+                StoreError::Unavailable(format!(
+                    "cannot connect to PostgreSQL ({}): {}",
+                    self.describe(),
+                    worded(&error)
+                ))
+            })?;
+        Ok(Conn {
+            client,
+            statements: HashMap::new(),
+        })
+    }
+}
+
+/// One connection and the statements prepared on it.
+pub(super) struct Conn {
+    client: Client,
+    statements: HashMap<&'static str, Statement>,
+}
+
+impl Conn {
+    fn statement(&mut self, sql: &'static str) -> Result<Statement, StoreError> {
+        if let Some(statement) = self.statements.get(sql) {
+            return Ok(statement.clone());
+        }
+        let statement = block_on(self.client.prepare(sql)).map_err(store_error)?;
+        self.statements.insert(sql, statement.clone());
+        Ok(statement)
+    }
+
+    /// Runs a query and returns all its rows.
+    pub(super) fn query(
+        &mut self,
+        sql: &'static str,
+        params: &[&(dyn ToSql + Sync)],
+    ) -> Result<Vec<Row>, StoreError> {
+        let statement = self.statement(sql)?;
+        block_on(self.client.query(&statement, params)).map_err(store_error)
+    }
+
+    /// Runs a statement and returns how many rows it changed.
+    pub(super) fn execute(
+        &mut self,
+        sql: &'static str,
+        params: &[&(dyn ToSql + Sync)],
+    ) -> Result<u64, StoreError> {
+        let statement = self.statement(sql)?;
+        block_on(self.client.execute(&statement, params)).map_err(store_error)
+    }
+
+    /// Runs statements without parameters (BEGIN, COMMIT, the schema).
+    pub(super) fn batch(&mut self, sql: &str) -> Result<(), StoreError> {
+        block_on(self.client.batch_execute(sql)).map_err(store_error)
+    }
+
+    /// Runs a query and hands its rows to `visit` as they arrive, until it
+    /// returns false: a large read never sits in memory whole.
+    pub(super) fn stream(
+        &mut self,
+        sql: &'static str,
+        params: &[&(dyn ToSql + Sync)],
+        visit: &mut dyn FnMut(&Row) -> Result<bool, StoreError>,
+    ) -> Result<(), StoreError> {
+        let statement = self.statement(sql)?;
+        let rows = block_on(self.client.query_raw(&statement, params.iter().copied()))
+            .map_err(store_error)?;
+        let mut rows = std::pin::pin!(rows);
+        while let Some(row) = block_on(std::future::poll_fn(|cx| rows.as_mut().poll_next(cx))) {
+            if !visit(&row.map_err(store_error)?)? {
+                break;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A database error in words: the server's message where there is one.
+pub(super) fn worded(error: &tokio_postgres::Error) -> String {
+    match error.as_db_error() {
+        Some(db) => match db.detail() {
+            Some(detail) => format!("{} ({detail})", db.message()),
+            None => db.message().to_string(),
+        },
+        None => {
+            let mut text = error.to_string();
+            let mut source = std::error::Error::source(error);
+            while let Some(cause) = source {
+                text.push_str(": ");
+                text.push_str(&cause.to_string());
+                source = cause.source();
+            }
+            text
+        }
+    }
+}
+
+/// The one mapping of database errors: a lost connection or a server that
+/// cannot take writes now is unavailable (the writer recovers); a deadlock
+/// or serialization failure is a conflict (the group is applied again); a
+/// full disk is out of space; anything else is the backend's failure.
+pub(super) fn store_error(error: tokio_postgres::Error) -> StoreError {
+    let text = worded(&error);
+    let Some(code) = error.code() else {
+        // No SQLSTATE: the connection itself failed.
+        return StoreError::Unavailable(format!("PostgreSQL connection lost: {text}"));
+    };
+    if *code == SqlState::T_R_DEADLOCK_DETECTED || *code == SqlState::T_R_SERIALIZATION_FAILURE {
+        StoreError::Conflict(text)
+    } else if *code == SqlState::DISK_FULL {
+        StoreError::OutOfSpace(text)
+    } else if code.code().starts_with("08")
+        || code.code().starts_with("57P")
+        || *code == SqlState::READ_ONLY_SQL_TRANSACTION
+        || *code == SqlState::TOO_MANY_CONNECTIONS
+    {
+        // Connection exceptions, a server shutting down, or a standby not
+        // yet promoted.
+        StoreError::Unavailable(text)
+    } else {
+        StoreError::Backend(format!("PostgreSQL: {text}"))
+    }
+}
