@@ -17,6 +17,7 @@ mod rig_args;
 mod server;
 mod sim;
 mod status;
+mod store_location;
 mod teleport;
 mod wander;
 

@@ -1,10 +1,9 @@
 //! `deog server`: the map server process.
 
+use crate::store_location::StoreLocation;
 use anyhow::{Context, Result};
 use clap::Args;
-use deog_server::{
-    ConnectionLimits, Limits, ReadStreamLimits, ServerConfig, SledConfig, SledStore,
-};
+use deog_server::{ConnectionLimits, Limits, ReadStreamLimits, ServerConfig, Store};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -19,6 +18,12 @@ pub struct ServerArgs {
     /// Data directory of the embedded store; created if missing.
     #[arg(long, env = "DEOG_DATA", default_value = "deog-data")]
     data: PathBuf,
+    /// The store: a data directory (as --data), or a PostgreSQL database,
+    /// `postgres://USER@HOST/DB`, which several servers may share. Give
+    /// several hosts and `target_session_attrs=read-write` to follow a
+    /// failover. The server creates and migrates the schema.
+    #[arg(long, env = "DEOG_STORE")]
+    store: Option<String>,
     /// File holding the bearer token every map call must carry.
     #[arg(long, env = "DEOG_TOKEN_FILE")]
     token_file: Option<PathBuf>,
@@ -97,20 +102,37 @@ pub fn run(args: ServerArgs) -> Result<()> {
         },
         ..ServerConfig::default()
     };
-    let store = SledStore::open(&SledConfig {
-        path: args.data.clone(),
-        cache_bytes: args.cache_mb << 20,
-    })
-    .with_context(|| format!("opening the store in {}", args.data.display()))?;
+    let location = match &args.store {
+        Some(store) => StoreLocation::parse(store)?,
+        None => StoreLocation::Directory(args.data.clone()),
+    };
+    match &location {
+        StoreLocation::Directory(path) => {
+            let store = StoreLocation::open_sled(path, args.cache_mb, "--data")?;
+            serve(store, &location, args.listen, config)
+        }
+        StoreLocation::Postgres(url) => {
+            let store = StoreLocation::open_postgres(url, "--store")?;
+            serve(store, &location, args.listen, config)
+        }
+    }
+}
+
+fn serve<S: Store>(
+    store: S,
+    location: &StoreLocation,
+    listen: SocketAddr,
+    config: ServerConfig,
+) -> Result<()> {
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     runtime.block_on(async move {
-        let listener = tokio::net::TcpListener::bind(args.listen)
+        let listener = tokio::net::TcpListener::bind(listen)
             .await
-            .with_context(|| format!("binding {}", args.listen))?;
+            .with_context(|| format!("binding {listen}"))?;
         let addr = listener.local_addr()?;
         tracing::info!(
             %addr,
-            data = %args.data.display(),
+            store = %location.describe(),
             tls = config.tls.is_some(),
             auth = config.token.is_some(),
             "map server listening"

@@ -31,19 +31,37 @@ impl RigRegistry {
             let rig = built_in_rig(name).expect("a built-in rig");
             known.insert(name.to_owned(), Arc::new(rig));
         }
-        for (name, bytes) in store.rigs()? {
-            let corrupt = |reason: String| StoreError::Corrupt {
-                what: format!("rig {name:?}"),
-                reason,
-            };
-            let wire = pb::Rig::decode(bytes.as_slice()).map_err(|e| corrupt(e.to_string()))?;
-            let rig = rig_from_wire(&wire).map_err(|e| corrupt(e.to_string()))?;
-            known.insert(name, Arc::new(rig));
-        }
+        known.extend(stored_rigs(store)?);
         Ok(Self {
             known: RwLock::new(known),
             writing: Mutex::new(()),
         })
+    }
+
+    /// The rig called `name`, looking in `store` too when it is not known
+    /// here: on a store shared by several servers, another one may have
+    /// stored it. Blocks on the store only for a name not known here.
+    pub fn find<S: Store + ?Sized>(
+        &self,
+        store: &S,
+        name: &str,
+    ) -> Result<Option<Arc<Rig>>, StoreError> {
+        if let Some(rig) = self.get(name) {
+            return Ok(Some(rig));
+        }
+        self.refresh(store)?;
+        Ok(self.get(name))
+    }
+
+    /// Learns the rigs stored in `store` since this registry was loaded
+    /// (by another server sharing it).
+    pub fn refresh<S: Store + ?Sized>(&self, store: &S) -> Result<(), StoreError> {
+        let stored = stored_rigs(store)?;
+        let mut known = self.known.write().unwrap_or_else(|e| e.into_inner());
+        for (name, rig) in stored {
+            known.entry(name).or_insert(rig);
+        }
+        Ok(())
     }
 
     /// The rig called `name`, if the server knows one.
@@ -83,7 +101,7 @@ impl RigRegistry {
     ) -> Result<Arc<Rig>, StoreError> {
         let rig = rig_from_wire(wire).map_err(|e| StoreError::invalid("rig", e.to_string()))?;
         let _writing = self.writing.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(existing) = self.get(rig.name()) {
+        if let Some(existing) = self.find(store, rig.name())? {
             return if *existing == rig {
                 Ok(existing)
             } else {
@@ -99,4 +117,21 @@ impl RigRegistry {
             .insert(rig.name().to_owned(), rig.clone());
         Ok(rig)
     }
+}
+
+/// Every rig `store` holds, decoded.
+fn stored_rigs<S: Store + ?Sized>(store: &S) -> Result<Vec<(String, Arc<Rig>)>, StoreError> {
+    store
+        .rigs()?
+        .into_iter()
+        .map(|(name, bytes)| {
+            let corrupt = |reason: String| StoreError::Corrupt {
+                what: format!("rig {name:?}"),
+                reason,
+            };
+            let wire = pb::Rig::decode(bytes.as_slice()).map_err(|e| corrupt(e.to_string()))?;
+            let rig = rig_from_wire(&wire).map_err(|e| corrupt(e.to_string()))?;
+            Ok((name, Arc::new(rig)))
+        })
+        .collect()
 }

@@ -196,10 +196,13 @@ impl<S: Store> MapServer<S> {
     /// ranges.
     fn check_rig(&self, field: &str, frame: &pb::SonarFrame) -> Result<(), StoreError> {
         let name = deog_proto::rig::frame_rig_name(&frame.rig);
-        let rig = self.rigs.get(name).ok_or_else(|| StoreError::UnknownRig {
-            field: format!("{field}.rig"),
-            rig: name.to_owned(),
-        })?;
+        let rig =
+            self.rigs
+                .find(self.store.as_ref(), name)?
+                .ok_or_else(|| StoreError::UnknownRig {
+                    field: format!("{field}.rig"),
+                    rig: name.to_owned(),
+                })?;
         if rig.readings() != frame.ranges.len() {
             return Err(StoreError::invalid(
                 format!("{field}.ranges"),
@@ -781,7 +784,10 @@ impl<S: Store> MapService for MapServer<S> {
 
     async fn get_rig(&self, request: Request<pb::RigRef>) -> Result<Response<pb::Rig>, Status> {
         let name = request.into_inner().name;
-        let rig = self.rigs.get(&name).ok_or(StoreError::RigNotFound(name))?;
+        let rig = self
+            .rigs
+            .find(self.store.as_ref(), &name)?
+            .ok_or(StoreError::RigNotFound(name))?;
         Ok(Response::new(deog_proto::rig::rig_to_wire(&rig)))
     }
 
@@ -789,6 +795,7 @@ impl<S: Store> MapService for MapServer<S> {
         &self,
         _request: Request<pb::ListRigsRequest>,
     ) -> Result<Response<pb::ListRigsResponse>, Status> {
+        self.rigs.refresh(self.store.as_ref())?;
         let rigs = self
             .rigs
             .list()

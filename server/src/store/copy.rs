@@ -109,7 +109,7 @@ const EVERYWHERE: TileRange = TileRange {
 /// Copies `maps` (every map when empty), and every robot's frames and
 /// poses and every rig, from `source` into `destination`, then checks each
 /// map; `progress` hears a line per step.
-pub fn copy_store<A: Store, B: Store>(
+pub fn copy_store<A: Store + ?Sized, B: Store + ?Sized>(
     source: &A,
     destination: &B,
     maps: &[String],
@@ -148,7 +148,7 @@ pub fn copy_store<A: Store, B: Store>(
     Ok(report)
 }
 
-fn copy_rigs<A: Store, B: Store>(
+fn copy_rigs<A: Store + ?Sized, B: Store + ?Sized>(
     source: &A,
     destination: &B,
     report: &mut CopyReport,
@@ -173,7 +173,7 @@ fn copy_rigs<A: Store, B: Store>(
     Ok(())
 }
 
-fn copy_map<A: Store, B: Store>(
+fn copy_map<A: Store + ?Sized, B: Store + ?Sized>(
     source: &A,
     destination: &B,
     record: &MapRecord,
@@ -281,7 +281,7 @@ fn copy_map<A: Store, B: Store>(
 }
 
 /// A map's tile count and checksum.
-fn summarise<S: Store>(store: &S, record: &MapRecord) -> Result<(u64, u64), StoreError> {
+fn summarise<S: Store + ?Sized>(store: &S, record: &MapRecord) -> Result<(u64, u64), StoreError> {
     let mut sum = Fnv::new();
     let mut count = 0u64;
     store.tiles_in(record, EVERYWHERE, &mut |key, tile| {
@@ -293,7 +293,7 @@ fn summarise<S: Store>(store: &S, record: &MapRecord) -> Result<(u64, u64), Stor
     Ok((count, sum.value()))
 }
 
-fn copy_frames_and_poses<A: Store, B: Store>(
+fn copy_frames_and_poses<A: Store + ?Sized, B: Store + ?Sized>(
     source: &A,
     destination: &B,
     report: &mut CopyReport,
