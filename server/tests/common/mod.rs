@@ -46,7 +46,8 @@ impl TestBackend for Sled {
 
 /// PostgreSQL: a database of its own per store path, on the server
 /// `DEOG_TEST_POSTGRES` names (a URL to its `postgres` database) or else
-/// on a private server this test process starts and stops.
+/// on a private server this test process starts; it stops with the
+/// process.
 pub struct Postgres;
 
 impl TestBackend for Postgres {
@@ -71,11 +72,21 @@ pub fn postgres_database(path: &Path) -> String {
     url
 }
 
+/// The private PostgreSQL server of this test process, started on first
+/// use; it stops when the process ends, however it ends.
+fn local_cluster() -> &'static deog_pg_cluster::LocalCluster {
+    static CLUSTER: std::sync::OnceLock<deog_pg_cluster::LocalCluster> =
+        std::sync::OnceLock::new();
+    CLUSTER.get_or_init(|| {
+        deog_pg_cluster::LocalCluster::start().expect("start a private PostgreSQL server")
+    })
+}
+
 /// Creates database `name` (dropping an older one of that name) on the
 /// test server and returns its URL.
 fn create_postgres_database(name: &str) -> String {
     let admin = std::env::var("DEOG_TEST_POSTGRES")
-        .expect("DEOG_TEST_POSTGRES: the URL of a PostgreSQL server's postgres database");
+        .unwrap_or_else(|_| local_cluster().url("postgres"));
     let base = admin
         .rsplit_once('/')
         .map(|(base, _)| base.to_string())
@@ -109,8 +120,8 @@ fn create_postgres_database(name: &str) -> String {
     url
 }
 
-/// The backend every test of the suite runs on: `DEOG_TEST_STORE=postgres`
-/// runs the whole suite on PostgreSQL, anything else on sled.
+/// The backend every test of the suite runs on: PostgreSQL where
+/// [`on_postgres`] says so, sled otherwise.
 pub struct SuiteBackend;
 
 impl TestBackend for SuiteBackend {
@@ -129,9 +140,12 @@ impl TestBackend for SuiteBackend {
     }
 }
 
-/// Whether the suite runs on PostgreSQL.
+/// Whether the suite runs on PostgreSQL: in the `on_postgres` test
+/// binary, which holds the whole suite again, or when `DEOG_TEST_STORE`
+/// says `postgres`.
 pub fn on_postgres() -> bool {
-    std::env::var("DEOG_TEST_STORE").is_ok_and(|v| v == "postgres")
+    env!("CARGO_CRATE_NAME") == "on_postgres"
+        || std::env::var("DEOG_TEST_STORE").is_ok_and(|v| v == "postgres")
 }
 
 pub struct TestServer {
