@@ -3,6 +3,10 @@
 //! private PostgreSQL server this test process starts (see
 //! `common::on_postgres`).
 
+// Each suite file declares `mod common` for itself, as it does when built
+// alone; here that loads the helpers once per file.
+#![allow(clippy::duplicate_mod)]
+
 #[path = "../bad_input.rs"]
 mod bad_input;
 #[path = "../frames_and_poses.rs"]
