@@ -28,6 +28,9 @@ pub enum MapEvent {
     },
     /// The map itself was deleted.
     Deleted,
+    /// Changes made through another server may have been missed: a
+    /// watcher reads again what it follows.
+    Resync,
 }
 
 /// A newly stored frame.
@@ -82,6 +85,15 @@ impl Events {
             // No receiver left is not an error: nobody is watching.
             let _ = sender.send(event);
         }
+    }
+
+    /// The maps someone is watching.
+    pub fn watched_maps(&self) -> Vec<String> {
+        let maps = self.maps.lock().unwrap_or_else(|p| p.into_inner());
+        maps.iter()
+            .filter(|(_, sender)| sender.receiver_count() > 0)
+            .map(|(name, _)| name.clone())
+            .collect()
     }
 
     /// Follows newly stored frames of every robot.

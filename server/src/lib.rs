@@ -23,6 +23,7 @@
 pub mod convert;
 pub mod error;
 pub mod events;
+mod foreign;
 pub mod rigs;
 pub mod serve;
 pub mod service;

@@ -135,6 +135,14 @@ pub async fn serve<S: Store>(
     let events = Arc::new(Events::new(config.event_buffer));
     let writer = Writer::start(store.clone(), events.clone(), config.write_queue)?;
     let stop_streams = CancellationToken::new();
+    if let Some(feed) = store.foreign_changes() {
+        tokio::spawn(crate::foreign::relay(
+            store.clone(),
+            events.clone(),
+            feed,
+            stop_streams.clone(),
+        ));
+    }
     let service = MapServer::new(
         store,
         rigs,

@@ -608,6 +608,20 @@ impl<S: Store> MapService for MapServer<S> {
                             .await;
                         break;
                     }
+                    Ok(MapEvent::Resync) => {
+                        let map_version = server
+                            .store
+                            .map(&map)
+                            .ok()
+                            .flatten()
+                            .map_or(0, |r| r.version);
+                        tracing::debug!(map = %map, "changes through another server may have been missed; sending resync");
+                        Event::Resync(pb::Resync {
+                            map_version,
+                            reason: "changes made through another map server may have been missed"
+                                .into(),
+                        })
+                    }
                     Err(broadcast::error::RecvError::Lagged(missed)) => {
                         let map_version = server
                             .store

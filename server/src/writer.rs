@@ -348,6 +348,8 @@ impl Unconfirmed {
             let record = store.map(&map).ok().flatten();
             let landed = match (&event, &record) {
                 (MapEvent::Deleted, record) => record.is_none(),
+                // The writer makes none.
+                (MapEvent::Resync, _) => false,
                 (MapEvent::Cleared { version }, Some(record)) => record.version >= *version,
                 (MapEvent::TileChanged { key, version }, Some(record)) => store
                     .tile(record, *key)

@@ -6,6 +6,7 @@
 //! [`MapWrite`] lands whole or not at all, and [`Store::flush`] makes every
 //! earlier write durable. The group-commit writer builds on exactly that.
 
+mod change;
 mod copy;
 mod cursor;
 pub mod postgres;
@@ -13,6 +14,7 @@ mod record;
 mod sled_store;
 mod transaction;
 
+pub use change::{StoreChange, decode_changes, encode_changes};
 pub use copy::{CopyError, CopyReport, MapCopied, copy_store};
 pub use cursor::{ClientCursor, RECENT_SEQUENCES, SequenceCheck};
 pub use postgres::{PostgresConfig, PostgresStore, is_postgres_url};
@@ -147,4 +149,11 @@ pub trait Store: Send + Sync + 'static {
     /// was flushed, so nothing acknowledged is lost. `failure` says why the
     /// commit failed, for the errors calls get meanwhile.
     fn recover(&self, failure: &str) -> Result<(), StoreError>;
+
+    /// Changes committed through other servers sharing this store, as they
+    /// arrive, so that watchers here hear of them; `None` (the default)
+    /// for a store no other server writes. Called once, by the server.
+    fn foreign_changes(&self) -> Option<tokio::sync::mpsc::Receiver<StoreChange>> {
+        None
+    }
 }

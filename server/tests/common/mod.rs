@@ -10,7 +10,8 @@ use deog_grid::TileKey;
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_client::MapServiceClient;
 use deog_server::store::{
-    ClientCursor, FrameWrite, MapRecord, MapWrite, RobotSummary, StoredTile, TileRange, Transaction,
+    ClientCursor, FrameWrite, MapRecord, MapWrite, RobotSummary, StoreChange, StoredTile,
+    TileRange, Transaction,
 };
 use deog_server::{
     PostgresConfig, PostgresStore, ServerConfig, SledConfig, SledStore, Store, StoreError,
@@ -75,8 +76,7 @@ pub fn postgres_database(path: &Path) -> String {
 /// The private PostgreSQL server of this test process, started on first
 /// use; it stops when the process ends, however it ends.
 fn local_cluster() -> &'static deog_pg_cluster::LocalCluster {
-    static CLUSTER: std::sync::OnceLock<deog_pg_cluster::LocalCluster> =
-        std::sync::OnceLock::new();
+    static CLUSTER: std::sync::OnceLock<deog_pg_cluster::LocalCluster> = std::sync::OnceLock::new();
     CLUSTER.get_or_init(|| {
         deog_pg_cluster::LocalCluster::start().expect("start a private PostgreSQL server")
     })
@@ -85,8 +85,8 @@ fn local_cluster() -> &'static deog_pg_cluster::LocalCluster {
 /// Creates database `name` (dropping an older one of that name) on the
 /// test server and returns its URL.
 fn create_postgres_database(name: &str) -> String {
-    let admin = std::env::var("DEOG_TEST_POSTGRES")
-        .unwrap_or_else(|_| local_cluster().url("postgres"));
+    let admin =
+        std::env::var("DEOG_TEST_POSTGRES").unwrap_or_else(|_| local_cluster().url("postgres"));
     let base = admin
         .rsplit_once('/')
         .map(|(base, _)| base.to_string())
@@ -172,11 +172,23 @@ impl TestServer {
 
     /// A server over an existing directory (a restart).
     pub async fn start_at(path: PathBuf, config: ServerConfig) -> Self {
-        let flushes = Arc::new(AtomicU64::new(0));
+        let store = SuiteBackend::open(&path);
+        Self::start_over(store, path, config).await
+    }
+
+    /// A server on PostgreSQL whatever the suite runs on, over the
+    /// database standing for `path`: several servers started at one path
+    /// share one database.
+    pub async fn start_postgres_at(path: PathBuf, config: ServerConfig) -> Self {
         let store = SuiteStore {
-            flushes: flushes.clone(),
-            ..SuiteBackend::open(&path)
+            inner: Box::new(Postgres::open(&path)),
+            flushes: Arc::new(AtomicU64::new(0)),
         };
+        Self::start_over(store, path, config).await
+    }
+
+    async fn start_over(store: SuiteStore, path: PathBuf, config: ServerConfig) -> Self {
+        let flushes = store.flushes.clone();
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
             .await
             .expect("bind");
@@ -352,6 +364,9 @@ impl Store for SuiteStore {
     }
     fn recover(&self, failure: &str) -> Result<(), StoreError> {
         self.inner.recover(failure)
+    }
+    fn foreign_changes(&self) -> Option<tokio::sync::mpsc::Receiver<StoreChange>> {
+        self.inner.foreign_changes()
     }
     fn begin(&self) -> Result<Box<dyn Transaction + '_>, StoreError> {
         Ok(Box::new(CountingTransaction {

@@ -8,11 +8,14 @@
 
 use super::PostgresConfig;
 use crate::error::StoreError;
+use crate::store::change::{StoreChange, decode_changes};
 use std::collections::HashMap;
 use std::future::Future;
 use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll, Wake, Waker};
 use std::time::Duration;
+use tokio::sync::mpsc;
+use tokio_postgres::AsyncMessage;
 use tokio_postgres::error::SqlState;
 use tokio_postgres::types::ToSql;
 use tokio_postgres::{Client, NoTls, Row, Statement};
@@ -46,6 +49,9 @@ fn block_on<F: Future>(future: F) -> F::Output {
 /// The store's connections.
 pub(super) struct Pool {
     config: tokio_postgres::Config,
+    /// Names this store's changes, so that its own notifications are
+    /// told apart from other servers'.
+    origin: String,
     runtime: Option<tokio::runtime::Runtime>,
     idle: Mutex<Vec<Conn>>,
     max_idle: usize,
@@ -80,12 +86,39 @@ impl Pool {
             .enable_all()
             .build()
             .map_err(|e| StoreError::Backend(format!("cannot start the database runtime: {e}")))?;
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos());
         Ok(Self {
+            origin: format!("{}-{nanos:x}", std::process::id()),
             config: parsed,
             runtime: Some(runtime),
             idle: Mutex::new(Vec::new()),
             max_idle: config.pool_size.max(1),
         })
+    }
+
+    /// What names this store's changes.
+    pub(super) fn origin(&self) -> &str {
+        &self.origin
+    }
+
+    /// Follows the changes other servers notify on `channel`: a task on
+    /// the store's runtime listens on a connection of its own, connects
+    /// again whenever it is lost, and sends [`StoreChange::Resync`] each
+    /// time it starts listening (what came meanwhile was not heard). Ends
+    /// when the receiver is dropped.
+    pub(super) fn listen(&self, channel: &'static str) -> mpsc::Receiver<StoreChange> {
+        let (sender, receiver) = mpsc::channel(FEED_BUFFER);
+        if let Some(runtime) = &self.runtime {
+            runtime.spawn(listen(
+                self.config.clone(),
+                channel,
+                self.origin.clone(),
+                sender,
+            ));
+        }
+        receiver
     }
 
     /// The database and hosts, without credentials.
@@ -172,6 +205,83 @@ impl Pool {
             client,
             statements: HashMap::new(),
         })
+    }
+}
+
+/// Changes waiting for the server to relay them.
+const FEED_BUFFER: usize = 4096;
+/// How long the listener waits before connecting again.
+const LISTEN_RETRY: Duration = Duration::from_secs(1);
+
+async fn listen(
+    config: tokio_postgres::Config,
+    channel: &'static str,
+    origin: String,
+    sender: mpsc::Sender<StoreChange>,
+) {
+    let mut attempts = 0u64;
+    while !sender.is_closed() {
+        attempts += 1;
+        match config.connect(NoTls).await {
+            Ok((client, mut connection)) => {
+                let (payloads, mut received) = mpsc::unbounded_channel();
+                let driver = tokio::spawn(async move {
+                    while let Some(message) =
+                        std::future::poll_fn(|cx| connection.poll_message(cx)).await
+                    {
+                        match message {
+                            Ok(AsyncMessage::Notification(note)) => {
+                                if payloads.send(note.payload().to_string()).is_err() {
+                                    break;
+                                }
+                            }
+                            Ok(_) => {}
+                            Err(error) => {
+                                tracing::warn!(error = %worded(&error), "lost the connection that hears other servers' changes");
+                                break;
+                            }
+                        }
+                    }
+                });
+                match client.batch_execute(&format!("LISTEN {channel}")).await {
+                    Ok(()) => {
+                        if attempts > 1 {
+                            tracing::info!("hearing other servers' changes again");
+                        }
+                        attempts = 0;
+                        if sender.send(StoreChange::Resync).await.is_err() {
+                            return;
+                        }
+                        while let Some(payload) = received.recv().await {
+                            let changes = match decode_changes(&payload) {
+                                Ok((from, _)) if from == origin => continue,
+                                Ok((_, changes)) => changes,
+                                Err(line) => {
+                                    tracing::warn!(%line, "a change notification could not be read; resyncing");
+                                    vec![StoreChange::Resync]
+                                }
+                            };
+                            for change in changes {
+                                if sender.send(change).await.is_err() {
+                                    return;
+                                }
+                            }
+                        }
+                    }
+                    Err(error) => {
+                        tracing::warn!(error = %worded(&error), "cannot listen for other servers' changes");
+                    }
+                }
+                driver.abort();
+                drop(client);
+            }
+            Err(error) => {
+                if attempts == 1 || attempts % 60 == 0 {
+                    tracing::warn!(error = %worded(&error), attempts, "cannot connect to hear other servers' changes; retrying every second");
+                }
+            }
+        }
+        tokio::time::sleep(LISTEN_RETRY).await;
     }
 }
 

@@ -21,14 +21,19 @@
 mod connection;
 pub mod schema;
 
+use super::change::{StoreChange, encode_changes};
 use super::{
     ClientCursor, FrameWrite, MapRecord, MapWrite, RobotSummary, Store, StoredTile, TileRange,
     Transaction,
 };
 use crate::error::StoreError;
+use crate::events::MapEvent;
 use connection::{Conn, Pool};
 use deog_grid::{Tile, TileKey};
 use std::collections::BTreeMap;
+
+/// The channel servers tell each other their changes on.
+const CHANGES_CHANNEL: &str = "deog_changes";
 
 /// How to open the PostgreSQL store.
 #[derive(Debug, Clone)]
@@ -351,6 +356,10 @@ impl Store for PostgresStore {
         Ok(Box::new(PostgresTransaction::begin(&self.pool)?))
     }
 
+    fn foreign_changes(&self) -> Option<tokio::sync::mpsc::Receiver<StoreChange>> {
+        Some(self.pool.listen(CHANGES_CHANNEL))
+    }
+
     fn recover(&self, _failure: &str) -> Result<(), StoreError> {
         // Connections the failure broke are dropped as they are found;
         // recovered once a write lands on a fresh one.
@@ -411,6 +420,8 @@ pub struct PostgresTransaction<'p> {
     pool: &'p Pool,
     conn: Option<Conn>,
     failed: Option<StoreError>,
+    /// What it changed, told to the other servers when it commits.
+    changes: Vec<StoreChange>,
 }
 
 impl<'p> PostgresTransaction<'p> {
@@ -421,6 +432,7 @@ impl<'p> PostgresTransaction<'p> {
             pool,
             conn: Some(conn),
             failed: None,
+            changes: Vec::new(),
         })
     }
 
@@ -517,10 +529,35 @@ impl Transaction for PostgresTransaction<'_> {
             conn.execute("DELETE FROM tiles WHERE map = $1", &[&name])?;
             conn.execute("DELETE FROM cursors WHERE map = $1", &[&name])?;
             Ok(())
-        })
+        })?;
+        self.changes.push(StoreChange::Map {
+            map: name.to_string(),
+            event: MapEvent::Deleted,
+        });
+        Ok(())
     }
 
     fn write_map(&mut self, name: &str, write: MapWrite) -> Result<(), StoreError> {
+        if write.clear_tiles
+            && let Some(record) = &write.record
+        {
+            self.changes.push(StoreChange::Map {
+                map: name.to_string(),
+                event: MapEvent::Cleared {
+                    version: record.version,
+                },
+            });
+        }
+        let changes = &mut self.changes;
+        for (key, tile) in &write.tiles {
+            changes.push(StoreChange::Map {
+                map: name.to_string(),
+                event: MapEvent::TileChanged {
+                    key: *key,
+                    version: tile.version,
+                },
+            });
+        }
         self.run(|conn| {
             if let Some(record) = &write.record {
                 let updated = conn.execute(
@@ -627,6 +664,14 @@ impl Transaction for PostgresTransaction<'_> {
     }
 
     fn write_frames(&mut self, writes: Vec<FrameWrite>) -> Result<(), StoreError> {
+        for write in &writes {
+            for (sequence, _) in &write.frames {
+                self.changes.push(StoreChange::Frame {
+                    robot: write.robot.clone(),
+                    sequence: *sequence,
+                });
+            }
+        }
         self.run(|conn| {
             for write in writes {
                 let mut sequences = Vec::with_capacity(write.frames.len());
@@ -661,6 +706,10 @@ impl Transaction for PostgresTransaction<'_> {
         let mut sequences = Vec::with_capacity(latest.len());
         let mut bytes = Vec::with_capacity(latest.len());
         for ((robot, sequence), pose) in latest {
+            self.changes.push(StoreChange::Pose {
+                robot: robot.clone(),
+                sequence,
+            });
             robots.push(robot);
             sequences.push(sql_sequence(sequence));
             bytes.push(pose);
@@ -686,6 +735,16 @@ impl Transaction for PostgresTransaction<'_> {
         let Some(mut conn) = self.conn.take() else {
             return Err(StoreError::Backend("the transaction has ended".into()));
         };
+        // Delivered to listeners when, and only if, the transaction commits.
+        for payload in encode_changes(self.pool.origin(), &self.changes) {
+            if let Err(error) =
+                conn.query("SELECT pg_notify($1, $2)", &[&CHANGES_CHANNEL, &payload])
+            {
+                let _ = conn.batch("ROLLBACK");
+                self.pool.put(conn);
+                return Err(error);
+            }
+        }
         // A failed COMMIT leaves its fate unknown to us; the connection is
         // not reused.
         conn.batch("COMMIT")?;

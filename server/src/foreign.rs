@@ -1,0 +1,73 @@
+//! Changes made through other servers sharing the store, relayed to the
+//! watchers of this one: the store hears them (PostgreSQL's LISTEN), this
+//! turns each into the event the writer would have sent for it.
+
+use crate::events::{Events, FrameNote, MapEvent};
+use crate::store::{Store, StoreChange};
+use deog_proto::v1::PoseEstimate;
+use prost::Message as _;
+use std::sync::Arc;
+use tokio::sync::mpsc;
+use tokio_util::sync::CancellationToken;
+
+/// Relays `feed` into `events` until it ends or `stop` is cancelled.
+pub(crate) async fn relay<S: Store>(
+    store: Arc<S>,
+    events: Arc<Events>,
+    mut feed: mpsc::Receiver<StoreChange>,
+    stop: CancellationToken,
+) {
+    loop {
+        let change = tokio::select! {
+            () = stop.cancelled() => break,
+            change = feed.recv() => change,
+        };
+        let Some(change) = change else {
+            break;
+        };
+        match change {
+            StoreChange::Map { map, event } => events.map_changed(&map, [event]),
+            StoreChange::Frame { robot, sequence } => events.frame_stored(FrameNote {
+                robot: Arc::from(robot.as_str()),
+                sequence,
+            }),
+            StoreChange::Pose { robot, sequence } => {
+                let store = store.clone();
+                let read =
+                    tokio::task::spawn_blocking(move || read_pose(&*store, &robot, sequence));
+                if let Ok(Some(pose)) = read.await {
+                    events.pose_stored(Arc::new(pose));
+                }
+            }
+            StoreChange::Resync => {
+                for map in events.watched_maps() {
+                    events.map_changed(&map, [MapEvent::Resync]);
+                }
+                // Frame subscribers catch up from the store on a note past
+                // what they sent.
+                let store = store.clone();
+                let robots = tokio::task::spawn_blocking(move || store.robots()).await;
+                if let Ok(Ok(robots)) = robots {
+                    for (robot, summary) in robots {
+                        events.frame_stored(FrameNote {
+                            robot: Arc::from(robot.as_str()),
+                            sequence: summary.last_sequence,
+                        });
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn read_pose<S: Store + ?Sized>(store: &S, robot: &str, sequence: u64) -> Option<PoseEstimate> {
+    let mut pose = None;
+    let read = store.read_poses(robot, sequence, sequence, &mut |_, bytes| {
+        pose = PoseEstimate::decode(bytes).ok();
+        false
+    });
+    if let Err(error) = read {
+        tracing::warn!(%error, robot, sequence, "cannot read a pose estimate another server stored");
+    }
+    pose
+}

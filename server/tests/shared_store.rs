@@ -1,0 +1,176 @@
+//! Several map servers on one PostgreSQL database, each a real server on
+//! real TCP: batches to the same tiles through different servers all land,
+//! a resend through another server is not applied twice, and watchers on
+//! one server hear what was written through another.
+
+mod common;
+
+use common::{TestServer, all_tiles, batch, create_map, dense_delta, send_batches};
+use deog_proto::v1 as pb;
+use deog_server::ServerConfig;
+use std::collections::HashMap;
+use std::time::{Duration, Instant};
+
+/// Two servers over one fresh database.
+async fn two_servers() -> (TestServer, TestServer, tempfile::TempDir) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("shared");
+    let first = TestServer::start_postgres_at(path.clone(), ServerConfig::default()).await;
+    let second = TestServer::start_postgres_at(path, ServerConfig::default()).await;
+    (first, second, dir)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn concurrent_batches_to_the_same_tiles_through_two_servers_all_land() {
+    let (first, second, _dir) = two_servers().await;
+    let mut admin = first.client().await;
+    create_map(&mut admin, "m", 8).await;
+    // Four clients, two per server, each adding 1 to every cell of the same
+    // four tiles in 40 batches: every cell must end at 160.
+    let mut writers = Vec::new();
+    for client in 0..4 {
+        let server = if client % 2 == 0 { &first } else { &second };
+        let mut connection = server.client().await;
+        writers.push(tokio::spawn(async move {
+            let id = format!("writer-{client}");
+            for sequence in 1..=40u64 {
+                let tiles = (0..4)
+                    .map(|i| dense_delta(i % 2, i / 2, &[1; 64]))
+                    .collect();
+                let (acks, error) =
+                    send_batches(&mut connection, vec![batch("m", &id, sequence, tiles)]).await;
+                assert!(error.is_none(), "{id} batch {sequence}: {error:?}");
+                assert!(acks[0].applied, "{id} batch {sequence} not applied");
+            }
+        }));
+    }
+    for writer in writers {
+        writer.await.expect("writer");
+    }
+    for server in [&first, &second] {
+        let mut client = server.client().await;
+        let tiles = all_tiles(&mut client, "m").await;
+        assert_eq!(tiles.len(), 4);
+        for (key, _, cells) in &tiles {
+            assert!(
+                cells.iter().all(|&c| c == 160),
+                "tile {key:?}: a lost update ({:?})",
+                &cells[..4]
+            );
+        }
+        let info = client
+            .get_map_info(pb::MapRef { name: "m".into() })
+            .await
+            .expect("map")
+            .into_inner();
+        assert_eq!(info.version, 160, "one version per applied batch");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_batch_resent_through_another_server_is_not_applied_twice() {
+    let (first, second, _dir) = two_servers().await;
+    let mut through_first = first.client().await;
+    create_map(&mut through_first, "m", 8).await;
+    let sent = batch("m", "robot-7", 1, vec![dense_delta(0, 0, &[3; 64])]);
+    let (acks, error) = send_batches(&mut through_first, vec![sent.clone()]).await;
+    assert!(error.is_none() && acks[0].applied);
+    // The first server dies; the client sends the same batch to the second.
+    drop(through_first);
+    first.stop().await;
+    let mut through_second = second.client().await;
+    let (acks, error) = send_batches(&mut through_second, vec![sent]).await;
+    assert!(error.is_none(), "{error:?}");
+    assert!(!acks[0].applied, "a resend must not be applied again");
+    let next = batch("m", "robot-7", 2, vec![dense_delta(0, 0, &[1; 64])]);
+    let (acks, _) = send_batches(&mut through_second, vec![next]).await;
+    assert!(acks[0].applied);
+    let tiles = all_tiles(&mut through_second, "m").await;
+    assert!(tiles[0].2.iter().all(|&c| c == 4), "{:?}", &tiles[0].2[..4]);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn watchers_on_one_server_hear_writes_made_through_another() {
+    let (first, second, _dir) = two_servers().await;
+    let mut writer = first.client().await;
+    create_map(&mut writer, "m", 8).await;
+    let mut watcher = second.client().await;
+    let mut tiles = watcher
+        .watch_tiles(pb::WatchTilesRequest {
+            map: "m".into(),
+            region: Some(pb::CellBox {
+                min_x: -1000,
+                min_y: -1000,
+                max_x: 1000,
+                max_y: 1000,
+            }),
+            include_cells: true,
+        })
+        .await
+        .expect("watch")
+        .into_inner();
+    let mut poses = watcher
+        .watch_poses(pb::WatchPosesRequest::default())
+        .await
+        .expect("watch poses")
+        .into_inner();
+    // The watch is set up once the second server has heard anything.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+
+    let mut latencies = HashMap::new();
+    for sequence in 1..=5u64 {
+        let sent_at = Instant::now();
+        let (acks, _) = send_batches(
+            &mut writer,
+            vec![batch(
+                "m",
+                "c",
+                sequence,
+                vec![dense_delta(sequence as i32, 0, &[2; 64])],
+            )],
+        )
+        .await;
+        assert!(acks[0].applied);
+        let event = tokio::time::timeout(Duration::from_secs(5), async {
+            loop {
+                let event = tiles.message().await.expect("stream").expect("event");
+                if let Some(pb::tile_event::Event::Changed(tile)) = event.event {
+                    return tile;
+                }
+            }
+        })
+        .await
+        .expect("the second server heard the change");
+        latencies.insert(sequence, sent_at.elapsed());
+        assert_eq!(
+            event.key,
+            Some(pb::TileKey {
+                x: sequence as i32,
+                y: 0
+            })
+        );
+        assert_eq!(event.version, sequence);
+    }
+    eprintln!("tile change through one server, heard on the other: {latencies:?}");
+
+    writer
+        .publish_pose(pb::PoseEstimate {
+            robot: "r".into(),
+            map: "m".into(),
+            frame_sequence: 9,
+            pose: Some(pb::Pose2 {
+                x: 1.0,
+                y: 2.0,
+                theta: 0.5,
+            }),
+            ..Default::default()
+        })
+        .await
+        .expect("pose");
+    let pose = tokio::time::timeout(Duration::from_secs(5), poses.message())
+        .await
+        .expect("the second server heard the estimate")
+        .expect("stream")
+        .expect("pose");
+    assert_eq!((pose.robot.as_str(), pose.frame_sequence), ("r", 9));
+}
