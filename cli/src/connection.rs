@@ -12,7 +12,9 @@ use std::path::{Path, PathBuf};
 /// Options naming the map server and how to authenticate to it.
 #[derive(Debug, Clone, Args)]
 pub struct ConnectionArgs {
-    /// The map server's address (host:port or a URL).
+    /// The map server's address (host:port or a URL); several, separated
+    /// by commas, for map servers sharing one PostgreSQL store: calls are
+    /// spread over them and go around one that is down.
     #[arg(long, env = "DEOG_SERVER", default_value = "127.0.0.1:50051")]
     pub server: String,
     /// File holding the bearer token the map server expects.

@@ -50,7 +50,9 @@ impl RetryPolicy {
 /// ([`SimClient`](crate::SimClient) takes the same).
 #[derive(Clone, Default)]
 pub struct ClientConfig {
-    /// `http://host:port`, `https://host:port`, or `host:port` (plain).
+    /// `http://host:port`, `https://host:port`, or `host:port` (plain);
+    /// several, separated by commas, reach map servers that share one
+    /// store: calls are spread over them and go around those that are down.
     pub endpoint: String,
     /// Bearer token sent with every call.
     pub token: Option<String>,
@@ -131,19 +133,40 @@ impl ClientConfig {
         self
     }
 
-    fn url(&self) -> String {
-        if self.endpoint.contains("://") {
-            self.endpoint.clone()
+    /// The addresses `endpoint` names: one, or several separated by
+    /// commas (servers sharing one store).
+    fn addresses(&self) -> Vec<&str> {
+        self.endpoint
+            .split(',')
+            .map(str::trim)
+            .filter(|a| !a.is_empty())
+            .collect()
+    }
+
+    fn url(&self, address: &str) -> String {
+        if address.contains("://") {
+            address.to_string()
         } else if self.tls_ca_pem.is_some() {
-            format!("https://{}", self.endpoint)
+            format!("https://{address}")
         } else {
-            format!("http://{}", self.endpoint)
+            format!("http://{address}")
         }
     }
 
-    fn endpoint(&self) -> Result<Endpoint, ClientError> {
-        let mut endpoint = Endpoint::from_shared(self.url())
-            .map_err(|e| ClientError::Config(format!("endpoint {:?}: {e}", self.endpoint)))?
+    fn endpoints(&self) -> Result<Vec<Endpoint>, ClientError> {
+        let addresses = self.addresses();
+        if addresses.is_empty() {
+            return Err(ClientError::Config("no server address given".into()));
+        }
+        addresses
+            .into_iter()
+            .map(|address| self.endpoint(address))
+            .collect()
+    }
+
+    fn endpoint(&self, address: &str) -> Result<Endpoint, ClientError> {
+        let mut endpoint = Endpoint::from_shared(self.url(address))
+            .map_err(|e| ClientError::Config(format!("endpoint {address:?}: {e}")))?
             .connect_timeout(Duration::from_secs(5))
             .tcp_nodelay(true)
             .http2_keep_alive_interval(Duration::from_secs(20))
@@ -158,6 +181,25 @@ impl ClientConfig {
                 .map_err(|e| ClientError::Config(format!("TLS: {e}")))?;
         }
         Ok(endpoint)
+    }
+}
+
+/// A channel to the first of `endpoints` that answers; given several, a
+/// channel over all of them that spreads calls and routes around those
+/// that are down (servers sharing one store), once one answered.
+async fn reach(endpoints: &[Endpoint]) -> Result<Channel, tonic::transport::Error> {
+    let mut last_error = None;
+    for endpoint in endpoints {
+        match endpoint.connect().await {
+            Ok(channel) if endpoints.len() == 1 => return Ok(channel),
+            Ok(_) => return Ok(Channel::balance_list(endpoints.iter().cloned())),
+            Err(error) => last_error = Some(error),
+        }
+    }
+    match last_error {
+        Some(error) => Err(error),
+        // `endpoints` is never empty; an empty list would wait here.
+        None => std::future::pending().await,
     }
 }
 
@@ -194,7 +236,7 @@ pub type RawMapClient = MapServiceClient<InterceptedService<Channel, TokenInterc
 /// what it connects to; while the peer cannot be reached it says so within
 /// a second and again every few seconds, with the reason and a hint.
 pub async fn connect(config: &ClientConfig) -> Result<(Channel, TokenInterceptor), ClientError> {
-    let endpoint = config.endpoint()?;
+    let endpoints = config.endpoints()?;
     let header = config
         .token
         .as_ref()
@@ -227,7 +269,7 @@ pub async fn connect(config: &ClientConfig) -> Result<(Channel, TokenInterceptor
             wait = wait.min(at.saturating_duration_since(Instant::now()));
         }
         tokio::time::sleep(wait).await;
-        let connecting = endpoint.connect();
+        let connecting = reach(&endpoints);
         tokio::pin!(connecting);
         let give_up = async {
             match deadline {

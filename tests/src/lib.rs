@@ -23,11 +23,27 @@ pub fn deog_binary() -> PathBuf {
     BINARY
         .get_or_init(|| {
             let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-            let output = Command::new(cargo)
+            let mut build = Command::new(cargo);
+            build
                 .args(["build", "--quiet", "-p", "deog", "--bin", "deog"])
-                .current_dir(env!("CARGO_MANIFEST_DIR"))
-                .output()
-                .expect("cargo runs");
+                .current_dir(env!("CARGO_MANIFEST_DIR"));
+            // Cargo sets these for the test; some build scripts (ring's)
+            // rebuild when they change. Without them the build is the one a
+            // plain `cargo build` made, reused rather than redone.
+            for (key, _) in std::env::vars() {
+                let per_crate = [
+                    "CARGO_PKG_",
+                    "CARGO_MANIFEST_",
+                    "CARGO_CRATE_",
+                    "CARGO_BIN_",
+                ]
+                .iter()
+                .any(|prefix| key.starts_with(prefix));
+                if per_crate || key == "CARGO_PRIMARY_PACKAGE" || key == "CARGO_TARGET_TMPDIR" {
+                    build.env_remove(key);
+                }
+            }
+            let output = build.output().expect("cargo runs");
             assert!(
                 output.status.success(),
                 "building deog failed:\n{}",
