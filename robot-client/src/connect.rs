@@ -420,12 +420,22 @@ mod tests {
 
     #[test]
     fn plain_addresses_get_a_scheme() {
-        assert_eq!(ClientConfig::new("127.0.0.1:1").url(), "http://127.0.0.1:1");
+        let plain = ClientConfig::new("127.0.0.1:1");
+        assert_eq!(plain.url("127.0.0.1:1"), "http://127.0.0.1:1");
         let tls = ClientConfig {
             tls_ca_pem: Some(Vec::new()),
             ..ClientConfig::new("h:1")
         };
-        assert_eq!(tls.url(), "https://h:1");
-        assert_eq!(ClientConfig::new("https://h:2").url(), "https://h:2");
+        assert_eq!(tls.url("h:1"), "https://h:1");
+        assert_eq!(plain.url("https://h:2"), "https://h:2");
+    }
+
+    #[test]
+    fn several_addresses_are_separated_by_commas() {
+        let config = ClientConfig::new("a:1, http://b:2,,");
+        assert_eq!(config.addresses(), ["a:1", "http://b:2"]);
+        assert_eq!(config.endpoints().unwrap().len(), 2);
+        let error = ClientConfig::new(" , ").endpoints().unwrap_err();
+        assert!(error.to_string().contains("no server address"), "{error}");
     }
 }
