@@ -1,7 +1,8 @@
-//! `deog copy` between two data directories, through the real binary and
-//! real servers: what a server held (tiles, cursors, frames, estimates) is
-//! what a server on the copy serves; a second copy writes nothing; a store
-//! in use and a missing one are refused with a clear line.
+//! `deog copy` between two data directories, and from sled to PostgreSQL
+//! and back, through the real binary and real servers: what a server held
+//! (tiles, cursors, frames, estimates) is what a server on the copy serves;
+//! a second copy writes nothing; a store in use and a missing one are
+//! refused with a clear line.
 
 use deog_grid::{TileDelta, TileKey, TileSize};
 use deog_proto::v1 as pb;
@@ -54,11 +55,9 @@ async fn contents(
     (tiles, robots, poses, cursor)
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_copy_serves_what_the_original_served_and_a_second_copy_writes_nothing() {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let (original, copy) = (dir.path().join("original"), dir.path().join("copy"));
-    let server = ServerProcess::start(&original, &[]).await;
+/// Writes map "m" (300 tile deltas from client "c"), 400 frames each of
+/// robots r and s, and 30 estimates of r through `server`.
+async fn fill(server: &ServerProcess) {
     let client = MapClient::connect(ClientConfig::new(server.addr.to_string()))
         .await
         .expect("connect");
@@ -106,6 +105,14 @@ async fn a_copy_serves_what_the_original_served_and_a_second_copy_writes_nothing
             .await
             .expect("pose");
     }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_copy_serves_what_the_original_served_and_a_second_copy_writes_nothing() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (original, copy) = (dir.path().join("original"), dir.path().join("copy"));
+    let server = ServerProcess::start(&original, &[]).await;
+    fill(&server).await;
     let held = contents(&server).await;
     assert!(
         held.0.len() > 100 && held.1.len() == 2 && held.2 == 30 && held.3 > 0,
@@ -164,4 +171,45 @@ fn a_missing_store_or_the_same_one_twice_is_refused() {
     let store = dir.path().join("store").to_string_lossy().into_owned();
     let same = failure(&run_deog(&["copy", "--from", &store, "--to", &store], &[]));
     assert!(same.contains("the same store"), "{same}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_sled_store_moves_to_postgresql_and_back_whole() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (original, back) = (dir.path().join("original"), dir.path().join("back"));
+    let server = ServerProcess::start(&original, &[]).await;
+    fill(&server).await;
+    let held = contents(&server).await;
+    assert!(server.terminate());
+    let cluster = tokio::task::block_in_place(deog_pg_cluster::LocalCluster::start)
+        .expect("start PostgreSQL");
+    let url = tokio::task::block_in_place(|| cluster.create_database("maps")).expect("database");
+    let original = original.to_string_lossy().into_owned();
+
+    let moved = tokio::task::block_in_place(|| {
+        succeeded(&run_deog(&["copy", "--from", &original, "--to", &url], &[]))
+    });
+    assert!(moved.contains("the same in both stores"), "{moved}");
+    assert!(moved.contains("800 frames written"), "{moved}");
+    let again = tokio::task::block_in_place(|| {
+        succeeded(&run_deog(&["copy", "--from", &original, "--to", &url], &[]))
+    });
+    assert!(
+        again.contains("(0 tiles written)") && again.contains(" 0 frames written"),
+        "{again}"
+    );
+    let on_postgres = ServerProcess::start(&dir.path().join("unused"), &["--store", &url]).await;
+    assert_eq!(contents(&on_postgres).await, held);
+
+    // Out again while a server keeps serving the database.
+    let back_path = back.to_string_lossy().into_owned();
+    let returned = tokio::task::block_in_place(|| {
+        succeeded(&run_deog(
+            &["copy", "--from", &url, "--to", &back_path],
+            &[],
+        ))
+    });
+    assert!(returned.contains("the same in both stores"), "{returned}");
+    let served = ServerProcess::start(&back, &[]).await;
+    assert_eq!(contents(&served).await, held);
 }
