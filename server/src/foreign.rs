@@ -1,11 +1,14 @@
 //! Changes made through other servers sharing the store, relayed to the
 //! watchers of this one: the store hears them (PostgreSQL's LISTEN), this
-//! turns each into the event the writer would have sent for it.
+//! turns each into the event the writer would have sent for it. Where the
+//! store cannot hear them, it asks for a poll once a second, and watchers
+//! of what moved read it again.
 
 use crate::events::{Events, FrameNote, MapEvent};
 use crate::store::{Store, StoreChange};
 use deog_proto::v1::PoseEstimate;
 use prost::Message as _;
+use std::collections::HashMap;
 use std::sync::Arc;
 use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
@@ -17,6 +20,7 @@ pub(crate) async fn relay<S: Store>(
     mut feed: mpsc::Receiver<StoreChange>,
     stop: CancellationToken,
 ) {
+    let mut looked = Looked::default();
     loop {
         let change = tokio::select! {
             () = stop.cancelled() => break,
@@ -39,6 +43,37 @@ pub(crate) async fn relay<S: Store>(
                     events.pose_stored(Arc::new(pose));
                 }
             }
+            StoreChange::Poll => {
+                let store = store.clone();
+                let watched = events.watched_maps();
+                let read = tokio::task::spawn_blocking(move || {
+                    let maps: Vec<(String, u64)> = watched
+                        .into_iter()
+                        .filter_map(|name| {
+                            let version = store.map(&name).ok().flatten()?.version;
+                            Some((name, version))
+                        })
+                        .collect();
+                    (maps, store.robots().unwrap_or_default())
+                })
+                .await;
+                let Ok((maps, robots)) = read else {
+                    continue;
+                };
+                for (map, version) in maps {
+                    if looked.map_moved(&map, version) {
+                        events.map_changed(&map, [MapEvent::Resync]);
+                    }
+                }
+                for (robot, summary) in robots {
+                    if looked.robot_moved(&robot, summary.last_sequence) {
+                        events.frame_stored(FrameNote {
+                            robot: Arc::from(robot.as_str()),
+                            sequence: summary.last_sequence,
+                        });
+                    }
+                }
+            }
             StoreChange::Resync => {
                 for map in events.watched_maps() {
                     events.map_changed(&map, [MapEvent::Resync]);
@@ -57,6 +92,31 @@ pub(crate) async fn relay<S: Store>(
                 }
             }
         }
+    }
+}
+
+/// What the last polls found: each watched map's version and each
+/// robot's last frame.
+#[derive(Default)]
+struct Looked {
+    maps: HashMap<String, u64>,
+    robots: HashMap<String, u64>,
+}
+
+impl Looked {
+    /// Whether `map` moved since the last look (not on the first).
+    fn map_moved(&mut self, map: &str, version: u64) -> bool {
+        self.maps
+            .insert(map.to_string(), version)
+            .is_some_and(|before| before != version)
+    }
+
+    /// Whether `robot` has frames past those of the last look (every
+    /// robot is new on the first).
+    fn robot_moved(&mut self, robot: &str, last_sequence: u64) -> bool {
+        self.robots
+            .insert(robot.to_string(), last_sequence)
+            .is_some_and(|before| before != last_sequence)
     }
 }
 

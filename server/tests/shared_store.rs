@@ -7,7 +7,7 @@ mod common;
 
 use common::{TestServer, all_tiles, batch, create_map, dense_delta, send_batches};
 use deog_proto::v1 as pb;
-use deog_server::ServerConfig;
+use deog_server::{PostgresConfig, ServerConfig};
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
@@ -173,4 +173,51 @@ async fn watchers_on_one_server_hear_writes_made_through_another() {
         .expect("stream")
         .expect("pose");
     assert_eq!((pose.robot.as_str(), pose.frame_sequence), ("r", 9));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn without_notifications_watchers_hear_other_servers_by_polling() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("shared");
+    let polling = |url| PostgresConfig {
+        poll_changes: true,
+        ..PostgresConfig::new(url)
+    };
+    let first =
+        TestServer::start_postgres_with(path.clone(), ServerConfig::default(), polling).await;
+    let second = TestServer::start_postgres_with(path, ServerConfig::default(), polling).await;
+    let mut writer = first.client().await;
+    create_map(&mut writer, "m", 8).await;
+    let mut watcher = second.client().await;
+    let mut tiles = watcher
+        .watch_tiles(pb::WatchTilesRequest {
+            map: "m".into(),
+            region: Some(pb::CellBox {
+                min_x: -1000,
+                min_y: -1000,
+                max_x: 1000,
+                max_y: 1000,
+            }),
+            include_cells: false,
+        })
+        .await
+        .expect("watch")
+        .into_inner();
+    // Two polls: the first only learns where the map stands.
+    tokio::time::sleep(Duration::from_millis(2200)).await;
+    let (acks, _) = send_batches(
+        &mut writer,
+        vec![batch("m", "c", 1, vec![dense_delta(0, 0, &[2; 64])])],
+    )
+    .await;
+    assert!(acks[0].applied);
+    let event = tokio::time::timeout(Duration::from_secs(5), tiles.message())
+        .await
+        .expect("the second server saw the map move")
+        .expect("stream")
+        .expect("event");
+    match event.event {
+        Some(pb::tile_event::Event::Resync(resync)) => assert_eq!(resync.map_version, 1),
+        other => panic!("expected a resync, got {other:?}"),
+    }
 }

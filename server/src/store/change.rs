@@ -38,6 +38,9 @@ pub enum StoreChange {
     /// Changes may have been missed (the feed was interrupted): watchers
     /// read again what they follow.
     Resync,
+    /// The store cannot tell changes as they happen (no `NOTIFY`): look
+    /// whether what watchers follow moved since the last look.
+    Poll,
 }
 
 impl StoreChange {
@@ -59,7 +62,8 @@ impl StoreChange {
                 event: MapEvent::Resync,
                 ..
             }
-            | Self::Resync => return None,
+            | Self::Resync
+            | Self::Poll => return None,
             Self::Frame { robot, sequence } => format!("f {robot} {sequence}"),
             Self::Pose { robot, sequence } => format!("p {robot} {sequence}"),
         })

@@ -180,8 +180,20 @@ impl TestServer {
     /// database standing for `path`: several servers started at one path
     /// share one database.
     pub async fn start_postgres_at(path: PathBuf, config: ServerConfig) -> Self {
+        Self::start_postgres_with(path, config, PostgresConfig::new).await
+    }
+
+    /// As [`TestServer::start_postgres_at`], with the store's settings
+    /// made from the database URL by `settings`.
+    pub async fn start_postgres_with(
+        path: PathBuf,
+        config: ServerConfig,
+        settings: impl FnOnce(String) -> PostgresConfig,
+    ) -> Self {
+        let opened = PostgresStore::open(&settings(postgres_database(&path)))
+            .expect("open PostgreSQL store");
         let store = SuiteStore {
-            inner: Box::new(Postgres::open(&path)),
+            inner: Box::new(opened),
             flushes: Arc::new(AtomicU64::new(0)),
         };
         Self::start_over(store, path, config).await

@@ -55,6 +55,8 @@ pub(super) struct Pool {
     runtime: Option<tokio::runtime::Runtime>,
     idle: Mutex<Vec<Conn>>,
     max_idle: usize,
+    /// Commits notify, and the listener listens; otherwise it polls.
+    notify: bool,
 }
 
 impl Drop for Pool {
@@ -95,6 +97,7 @@ impl Pool {
             runtime: Some(runtime),
             idle: Mutex::new(Vec::new()),
             max_idle: config.pool_size.max(1),
+            notify: true,
         })
     }
 
@@ -111,14 +114,52 @@ impl Pool {
     pub(super) fn listen(&self, channel: &'static str) -> mpsc::Receiver<StoreChange> {
         let (sender, receiver) = mpsc::channel(FEED_BUFFER);
         if let Some(runtime) = &self.runtime {
-            runtime.spawn(listen(
-                self.config.clone(),
-                channel,
-                self.origin.clone(),
-                sender,
-            ));
+            if self.notify {
+                runtime.spawn(listen(
+                    self.config.clone(),
+                    channel,
+                    self.origin.clone(),
+                    sender,
+                ));
+            } else {
+                runtime.spawn(poll(sender));
+            }
         }
         receiver
+    }
+
+    /// Whether commits notify the other servers (the database has
+    /// `NOTIFY`).
+    pub(super) fn notifies(&self) -> bool {
+        self.notify
+    }
+
+    /// Finds whether the database has `NOTIFY`, unless told to poll.
+    pub(super) fn probe_notify(&mut self, conn: &mut Conn, poll: bool) -> Result<(), StoreError> {
+        if poll {
+            self.notify = false;
+            return Ok(());
+        }
+        match block_on(
+            conn.client
+                .simple_query("SELECT pg_notify('deog_probe', '')"),
+        ) {
+            Ok(_) => self.notify = true,
+            Err(error)
+                if error.code().is_some_and(|code| {
+                    *code == SqlState::UNDEFINED_FUNCTION
+                        || *code == SqlState::FEATURE_NOT_SUPPORTED
+                }) =>
+            {
+                tracing::warn!(
+                    error = %worded(&error),
+                    "the database has no NOTIFY: watchers hear other servers' changes by polling, once a second"
+                );
+                self.notify = false;
+            }
+            Err(error) => return Err(store_error(error)),
+        }
+        Ok(())
     }
 
     /// The database and hosts, without credentials.
@@ -282,6 +323,18 @@ async fn listen(
             }
         }
         tokio::time::sleep(LISTEN_RETRY).await;
+    }
+}
+
+/// How often a store without `NOTIFY` asks for a look at what moved.
+const POLL_INTERVAL: Duration = Duration::from_secs(1);
+
+async fn poll(sender: mpsc::Sender<StoreChange>) {
+    loop {
+        tokio::time::sleep(POLL_INTERVAL).await;
+        if sender.send(StoreChange::Poll).await.is_err() {
+            return;
+        }
     }
 }
 

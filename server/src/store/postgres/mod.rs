@@ -44,6 +44,9 @@ pub struct PostgresConfig {
     pub url: String,
     /// Most idle connections kept for reuse.
     pub pool_size: usize,
+    /// Hear other servers' changes by polling even where the database
+    /// has `NOTIFY` (it is used when present otherwise).
+    pub poll_changes: bool,
 }
 
 impl PostgresConfig {
@@ -52,6 +55,7 @@ impl PostgresConfig {
         Self {
             url: url.into(),
             pool_size: 8,
+            poll_changes: false,
         }
     }
 }
@@ -77,13 +81,13 @@ impl std::fmt::Debug for PostgresStore {
 impl PostgresStore {
     /// Connects, and creates or migrates the schema.
     pub fn open(config: &PostgresConfig) -> Result<Self, StoreError> {
-        let pool = Pool::new(config)?;
-        let store = Self { pool };
-        let mut conn = store.pool.get()?;
-        let migrated = schema::migrate(&mut conn);
-        store.pool.put(conn);
-        migrated?;
-        Ok(store)
+        let mut pool = Pool::new(config)?;
+        let mut conn = pool.get()?;
+        let opened = schema::migrate(&mut conn)
+            .and_then(|()| pool.probe_notify(&mut conn, config.poll_changes));
+        pool.put(conn);
+        opened?;
+        Ok(Self { pool })
     }
 
     /// The schema version the database holds.
@@ -736,7 +740,12 @@ impl Transaction for PostgresTransaction<'_> {
             return Err(StoreError::Backend("the transaction has ended".into()));
         };
         // Delivered to listeners when, and only if, the transaction commits.
-        for payload in encode_changes(self.pool.origin(), &self.changes) {
+        let changes = if self.pool.notifies() {
+            encode_changes(self.pool.origin(), &self.changes)
+        } else {
+            Vec::new()
+        };
+        for payload in changes {
             if let Err(error) =
                 conn.query("SELECT pg_notify($1, $2)", &[&CHANGES_CHANNEL, &payload])
             {
