@@ -18,19 +18,23 @@ pub(crate) const MAP: &str = "demo";
 /// seconds.
 const IDLE_EXIT_S: &str = "3";
 
-/// Where the demo's two services listen.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Where the demo's services listen.
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub(crate) struct Addresses {
-    /// The map server.
-    pub server: SocketAddr,
+    /// The map servers (one, or several sharing a PostgreSQL store).
+    pub servers: Vec<SocketAddr>,
     /// The simulator.
     pub sim: SocketAddr,
 }
 
 impl Addresses {
-    /// The map server's URL, as clients take it.
+    /// The map servers' URLs, as clients take them (separated by commas).
     pub fn server_url(&self) -> String {
-        format!("http://{}", self.server)
+        self.servers
+            .iter()
+            .map(|addr| format!("http://{addr}"))
+            .collect::<Vec<_>>()
+            .join(",")
     }
 
     /// The simulator's URL, as clients take it.
@@ -39,11 +43,26 @@ impl Addresses {
     }
 }
 
-/// The map server, on a fresh store in `data`.
-pub(crate) fn server(addresses: &Addresses, data: &Path) -> Vec<OsString> {
-    os(&["server", "--listen", &addresses.server.to_string()])
+/// Map server `index`, on the plan's PostgreSQL store or else a fresh
+/// sled store in `data`.
+pub(crate) fn server(
+    plan: &DemoPlan,
+    addresses: &Addresses,
+    index: usize,
+    data: &Path,
+) -> Vec<OsString> {
+    let listen = addresses
+        .servers
+        .get(index)
+        .map(ToString::to_string)
+        .unwrap_or_default();
+    let store = match &plan.store {
+        Some(url) => [OsString::from("--store"), OsString::from(url)],
+        None => [OsString::from("--data"), data.as_os_str().to_owned()],
+    };
+    os(&["server", "--listen", &listen])
         .into_iter()
-        .chain([OsString::from("--data"), data.as_os_str().to_owned()])
+        .chain(store)
         .collect()
 }
 
@@ -188,12 +207,12 @@ mod tests {
         ])
         .expect("valid options");
         let addresses = Addresses {
-            server: "127.0.0.1:5001".parse().expect("address"),
+            servers: vec!["127.0.0.1:5001".parse().expect("address")],
             sim: "127.0.0.1:5002".parse().expect("address"),
         };
         let robot = &plan.robots[1];
         assert_eq!(
-            line(&server(&addresses, Path::new("out/server-data"))),
+            line(&server(&plan, &addresses, 0, Path::new("out/server-data"))),
             "server --listen 127.0.0.1:5001 --data out/server-data"
         );
         assert_eq!(
@@ -217,9 +236,42 @@ mod tests {
     }
 
     #[test]
+    fn servers_sharing_a_database_are_all_given_to_every_robot_process() {
+        let plan =
+            plan(&["--store", "postgres://deog@db/maps", "--servers", "2"]).expect("valid options");
+        let addresses = Addresses {
+            servers: vec![
+                "127.0.0.1:5001".parse().expect("address"),
+                "127.0.0.1:5003".parse().expect("address"),
+            ],
+            sim: "127.0.0.1:5002".parse().expect("address"),
+        };
+        assert_eq!(
+            line(&server(&plan, &addresses, 1, Path::new("unused"))),
+            "server --listen 127.0.0.1:5003 --store postgres://deog@db/maps"
+        );
+        assert_eq!(
+            line(&map(&plan, &plan.robots[0], &addresses)),
+            "map --robot scout-1 --map demo --idle-exit 3 \
+             --server http://127.0.0.1:5001,http://127.0.0.1:5003"
+        );
+        let error = plan_error(&["--servers", "2"]);
+        assert!(error.contains("needs a --store"), "{error}");
+        let error = plan_error(&["--store", "deog-data"]);
+        assert!(error.contains("PostgreSQL URL"), "{error}");
+    }
+
+    fn plan_error(args: &[&str]) -> String {
+        match plan(args) {
+            Ok(_) => panic!("{args:?} must be refused"),
+            Err(error) => error.to_string(),
+        }
+    }
+
+    #[test]
     fn every_frame_goes_to_the_localizers() {
         let addresses = Addresses {
-            server: "127.0.0.1:5001".parse().expect("address"),
+            servers: vec!["127.0.0.1:5001".parse().expect("address")],
             sim: "127.0.0.1:5002".parse().expect("address"),
         };
         let every = plan(&["--every-frame"]).expect("valid");
@@ -234,7 +286,7 @@ mod tests {
     fn a_realistic_sonar_goes_to_the_simulator_the_cartographers_and_the_localizers() {
         let plan = plan(&["--sonar", "realistic"]).expect("valid options");
         let addresses = Addresses {
-            server: "127.0.0.1:5001".parse().expect("address"),
+            servers: vec!["127.0.0.1:5001".parse().expect("address")],
             sim: "127.0.0.1:5002".parse().expect("address"),
         };
         assert_eq!(

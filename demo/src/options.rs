@@ -63,6 +63,15 @@ pub struct DemoOptions {
     /// demo's pace, where reaching a pose matters more than keeping time.
     #[arg(long)]
     pub every_frame: bool,
+    /// The map servers' store: a PostgreSQL database, `postgres://USER@HOST/DB`,
+    /// empty (no map, no robot), which every server shares. By default one
+    /// server keeps a fresh sled store in --out.
+    #[arg(long)]
+    pub store: Option<String>,
+    /// Map servers to start (1 to 4), all on --store, which more than one
+    /// needs; every robot process is given all their addresses.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4))]
+    pub servers: u32,
     /// Folder for the map, the plots, report.md, report.json, the
     /// processes' logs and the server's data; its earlier demo files are
     /// replaced.

@@ -47,6 +47,11 @@ pub(crate) struct DemoPlan {
     pub keep: bool,
     /// Whether the localizers correct with every frame.
     pub every_frame: bool,
+    /// The PostgreSQL database the servers share; `None` for a sled store
+    /// in the output folder.
+    pub store: Option<String>,
+    /// How many map servers run.
+    pub servers: usize,
 }
 
 impl DemoPlan {
@@ -58,6 +63,21 @@ impl DemoPlan {
         // are not.
         if !(1..=MAX_ROBOTS).contains(&options.robots) {
             bail!("--robots must be 1 to {MAX_ROBOTS}, got {}", options.robots);
+        }
+        if let Some(store) = &options.store
+            && !(store.starts_with("postgres://") || store.starts_with("postgresql://"))
+        {
+            bail!(
+                "--store takes a PostgreSQL URL, postgres://USER@HOST/DB, got {store:?} \
+                 (without --store the demo keeps a sled store in --out)"
+            );
+        }
+        if options.servers > 1 && options.store.is_none() {
+            bail!(
+                "--servers {} needs a --store postgres://USER@HOST/DB that the servers share \
+                 (a sled store belongs to one server)",
+                options.servers
+            );
         }
         let world = load_world_spec(&options.world)?;
         let rig = load_rig_spec(&options.rig).context("--rig")?;
@@ -78,6 +98,8 @@ impl DemoPlan {
             out: options.out.clone(),
             keep: options.keep,
             every_frame: options.every_frame,
+            store: options.store.clone(),
+            servers: options.servers.max(1) as usize,
         })
     }
 

@@ -70,20 +70,53 @@ async fn demo(plan: &DemoPlan) -> Result<()> {
     write_reports(&outcome, out)?;
     print!("{}", markdown::summary(&outcome));
     if plan.keep {
-        demo.children.keep("server");
-        let pid = demo.children.pid("server").unwrap_or_default();
+        let mut pids = Vec::new();
+        for index in 0..plan.servers {
+            let name = server_name(index);
+            demo.children.keep(&name);
+            pids.push(demo.children.pid(&name).unwrap_or_default().to_string());
+        }
+        let data = match &plan.store {
+            Some(_) => "data in the --store database".to_string(),
+            None => format!("data in {}", server_data(out).display()),
+        };
         println!(
-            "the map server keeps running at {} (process {pid}), data in {}; stop it with: kill {pid}",
+            "the map server keeps running at {} (process {}), {data}; stop it with: kill {}",
             demo.addresses.server_url(),
-            server_data(out).display(),
+            pids.join(", "),
+            pids.join(" "),
         );
     }
     Ok(())
 }
 
+/// The name of map server `index` among the demo's processes.
+fn server_name(index: usize) -> String {
+    match index {
+        0 => "server".to_string(),
+        _ => format!("server-{}", index + 1),
+    }
+}
+
 /// The map server's store in the output folder.
 fn server_data(out: &Path) -> PathBuf {
     out.join("server-data")
+}
+
+/// A demo judges what its own robots wrote: a database that already holds
+/// maps or frames would mix in another run's.
+async fn refuse_a_used_database(client: &MapClient) -> Result<()> {
+    let maps = client.maps().await.context("listing the maps")?;
+    let robots = client.robots().await.context("listing the robots")?;
+    if !maps.is_empty() || !robots.is_empty() {
+        bail!(
+            "the --store database already holds {} maps and {} robots' frames: the demo needs an \
+             empty one (createdb a new database, or deog copy this one elsewhere and drop it)",
+            maps.len(),
+            robots.len()
+        );
+    }
+    Ok(())
 }
 
 impl<'a> Demo<'a> {
@@ -95,7 +128,9 @@ impl<'a> Demo<'a> {
         deog_harness::prepare_run_folder(out)?;
         let mut children = Supervisor::new(&out.join("logs"))?;
         let addresses = Addresses {
-            server: free_loopback_addr()?,
+            servers: (0..plan.servers)
+                .map(|_| free_loopback_addr())
+                .collect::<Result<_>>()?,
             sim: free_loopback_addr()?,
         };
         println!(
@@ -106,17 +141,22 @@ impl<'a> Demo<'a> {
             plan.schedule.speed,
             out.display()
         );
-        children.start(
-            "server",
-            Role::Service,
-            &commands::server(&addresses, &server_data(out)),
-        )?;
+        for index in 0..plan.servers {
+            children.start(
+                &server_name(index),
+                Role::Service,
+                &commands::server(plan, &addresses, index, &server_data(out)),
+            )?;
+        }
         children.start("sim", Role::Service, &commands::sim(plan, &addresses))?;
         let server_url = addresses.server_url();
         let map_client = connect(&mut children, "map server", || {
             MapClient::connect(ClientConfig::new(server_url.clone()))
         })
         .await?;
+        if plan.store.is_some() {
+            refuse_a_used_database(&map_client).await?;
+        }
         let sim_url = addresses.sim_url();
         let sim = connect(&mut children, "simulator", || {
             SimClient::connect(ClientConfig::new(sim_url.clone()))

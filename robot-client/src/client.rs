@@ -110,6 +110,18 @@ impl MapClient {
         .into_inner())
     }
 
+    /// Every map the server holds.
+    pub async fn maps(&self) -> Result<Vec<pb::MapInfo>, ClientError> {
+        let raw = self.raw.clone();
+        Ok(with_retry(&self.config.retry, || {
+            let mut raw = raw.clone();
+            async move { raw.list_maps(pb::ListMapsRequest {}).await }
+        })
+        .await?
+        .into_inner()
+        .maps)
+    }
+
     /// The highest batch sequence the server applied for `client_id`.
     pub async fn update_cursor(&self, map: &str, client_id: &str) -> Result<u64, ClientError> {
         let raw = self.raw.clone();

@@ -64,7 +64,14 @@ const MIGRATION_LOCK: i64 = 0x6465_6f67_7363_6d61;
 
 /// The version the database is at (0 for an empty one).
 pub(super) fn version(conn: &mut Conn) -> Result<i32, StoreError> {
-    conn.batch("CREATE TABLE IF NOT EXISTS deog_schema (version integer NOT NULL)")?;
+    let rows = conn.query("SELECT to_regclass('deog_schema') IS NOT NULL", &[])?;
+    if !rows.first().is_some_and(|row| row.get::<_, bool>(0)) {
+        return Ok(0);
+    }
+    recorded_version(conn)
+}
+
+fn recorded_version(conn: &mut Conn) -> Result<i32, StoreError> {
     let rows = conn.query("SELECT max(version) FROM deog_schema", &[])?;
     Ok(rows
         .first()
@@ -72,7 +79,9 @@ pub(super) fn version(conn: &mut Conn) -> Result<i32, StoreError> {
         .unwrap_or(0))
 }
 
-/// Brings the schema to [`CURRENT`].
+/// Brings the schema to [`CURRENT`]. Servers starting together on an
+/// empty database take turns: everything, the first table included, is
+/// created under the lock.
 pub(super) fn migrate(conn: &mut Conn) -> Result<(), StoreError> {
     let found = version(conn)?;
     if found > CURRENT {
@@ -94,12 +103,9 @@ pub(super) fn migrate(conn: &mut Conn) -> Result<(), StoreError> {
 
 fn run_migrations(conn: &mut Conn) -> Result<(), StoreError> {
     conn.query("SELECT pg_advisory_xact_lock($1)", &[&MIGRATION_LOCK])?;
+    conn.batch("CREATE TABLE IF NOT EXISTS deog_schema (version integer NOT NULL)")?;
     // Another server may have migrated while this one waited.
-    let rows = conn.query("SELECT max(version) FROM deog_schema", &[])?;
-    let found = rows
-        .first()
-        .and_then(|row| row.get::<_, Option<i32>>(0))
-        .unwrap_or(0);
+    let found = recorded_version(conn)?;
     if found > CURRENT {
         return Err(refuse_newer(found));
     }
