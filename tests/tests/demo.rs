@@ -117,6 +117,68 @@ fn a_short_demo_localizes_every_robot_and_maps_the_room() {
 }
 
 #[test]
+fn a_demo_on_two_servers_sharing_postgresql_maps_and_localizes() {
+    let cluster = deog_pg_cluster::LocalCluster::start().expect("start PostgreSQL");
+    let url = cluster.create_database("demo").expect("database");
+    let out = tempfile::tempdir().expect("temp dir");
+    let output = Command::new(deog_binary())
+        .args([
+            "demo",
+            "--store",
+            &url,
+            "--servers",
+            "2",
+            "--robots",
+            "2",
+            "--duration",
+            "60",
+            "--localize-at",
+            "30",
+            "--no-kidnap",
+            "--seed",
+            "3",
+            "--every-frame",
+            "--out",
+        ])
+        .arg(out.path())
+        .output()
+        .expect("deog runs");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "demo failed:\n{stdout}\n{stderr}");
+    let text = std::fs::read_to_string(out.path().join("report.json")).expect("report.json");
+    let report: Value = serde_json::from_str(&text).expect("report.json is JSON");
+    let context = format!("{stdout}\n{text}");
+    for robot in report["robots"].as_array().expect("robots") {
+        assert_eq!(robot["converged"], Value::Bool(true), "{context}");
+    }
+    let map = &report["map"];
+    assert!(
+        map["cells_observed"].as_u64().expect("cells") > 10_000,
+        "{context}"
+    );
+    assert!(
+        map["fraction_correct"].as_f64().expect("fraction") > 0.93,
+        "{context}"
+    );
+    for log in ["logs/server.log", "logs/server-2.log"] {
+        let log = std::fs::read_to_string(out.path().join(log)).expect("log");
+        assert!(log.contains("store flushed"), "{log}");
+    }
+    // The same database again is refused: the demo judges its own robots.
+    let again = Command::new(deog_binary())
+        .args(["demo", "--store", &url, "--duration", "10", "--out"])
+        .arg(out.path().join("again"))
+        .output()
+        .expect("deog runs");
+    let stderr = String::from_utf8_lossy(&again.stderr);
+    assert!(
+        !again.status.success() && stderr.contains("needs an"),
+        "{stderr}"
+    );
+}
+
+#[test]
 fn bad_demo_options_are_refused_before_anything_starts() {
     let out = tempfile::tempdir().expect("temp dir");
     for (args, expected) in [
