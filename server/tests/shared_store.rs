@@ -221,3 +221,48 @@ async fn without_notifications_watchers_hear_other_servers_by_polling() {
         other => panic!("expected a resync, got {other:?}"),
     }
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn reads_past_the_connection_limit_wait_their_turn_and_writes_go_on() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let few = |url| PostgresConfig {
+        max_connections: 2,
+        ..PostgresConfig::new(url)
+    };
+    let server =
+        TestServer::start_postgres_with(dir.path().join("few"), ServerConfig::default(), few).await;
+    let mut client = server.client().await;
+    create_map(&mut client, "m", 8).await;
+    let tiles = (0..40).map(|i| dense_delta(i, 0, &[1; 64])).collect();
+    let (acks, _) = send_batches(&mut client, vec![batch("m", "c", 1, tiles)]).await;
+    assert!(acks[0].applied);
+    let mut readers = Vec::new();
+    for reader in 0..8u64 {
+        let mut client = server.client().await;
+        readers.push(tokio::spawn(async move {
+            let tiles = all_tiles(&mut client, "m").await;
+            let (acks, error) = send_batches(
+                &mut client,
+                vec![batch(
+                    "m",
+                    &format!("r{reader}"),
+                    1,
+                    vec![dense_delta(0, 1, &[1; 64])],
+                )],
+            )
+            .await;
+            assert!(error.is_none(), "{error:?}");
+            // The 40 written first, and the one the readers add to.
+            (tiles.len() >= 40, acks[0].applied)
+        }));
+    }
+    for reader in readers {
+        assert_eq!(reader.await.expect("reader"), (true, true));
+    }
+    let tiles = all_tiles(&mut client, "m").await;
+    let row = tiles
+        .iter()
+        .find(|(key, _, _)| key.y == 1)
+        .expect("tile (0, 1)");
+    assert!(row.2.iter().all(|&c| c == 8), "{:?}", &row.2[..4]);
+}

@@ -11,7 +11,7 @@ use crate::error::StoreError;
 use crate::store::change::{StoreChange, decode_changes};
 use std::collections::HashMap;
 use std::future::Future;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Condvar, Mutex};
 use std::task::{Context, Poll, Wake, Waker};
 use std::time::Duration;
 use tokio::sync::mpsc;
@@ -19,7 +19,6 @@ use tokio_postgres::AsyncMessage;
 use tokio_postgres::error::SqlState;
 use tokio_postgres::types::ToSql;
 use tokio_postgres::{Client, NoTls, Row, Statement};
-use tokio_stream::Stream;
 
 /// How long a connection attempt may take when the connection string does
 /// not say (`connect_timeout`).
@@ -55,6 +54,7 @@ pub(super) struct Pool {
     runtime: Option<tokio::runtime::Runtime>,
     idle: Mutex<Vec<Conn>>,
     max_idle: usize,
+    open: Arc<OpenCount>,
     /// Commits notify, and the listener listens; otherwise it polls.
     notify: bool,
 }
@@ -97,6 +97,11 @@ impl Pool {
             runtime: Some(runtime),
             idle: Mutex::new(Vec::new()),
             max_idle: config.pool_size.max(1),
+            open: Arc::new(OpenCount {
+                count: Mutex::new(0),
+                freed: Condvar::new(),
+                limit: config.max_connections.max(1),
+            }),
             notify: true,
         })
     }
@@ -180,15 +185,50 @@ impl Pool {
         )
     }
 
-    /// An idle connection, or a new one.
+    /// An idle connection, or a new one while fewer than the limit are
+    /// open; otherwise waits for one to come back, up to [`BUSY_WAIT`].
     pub(super) fn get(&self) -> Result<Conn, StoreError> {
+        self.take(true)
+    }
+
+    /// A connection for the writer, which never waits behind readers: it
+    /// may open one past the limit (one writer per server).
+    pub(super) fn get_for_writer(&self) -> Result<Conn, StoreError> {
+        self.take(false)
+    }
+
+    fn take(&self, within_limit: bool) -> Result<Conn, StoreError> {
+        let deadline = std::time::Instant::now() + BUSY_WAIT;
         loop {
             let conn = self.idle.lock().ok().and_then(|mut idle| idle.pop());
             match conn {
                 Some(conn) if conn.client.is_closed() => continue,
                 Some(conn) => return Ok(conn),
-                None => return self.connect(),
+                None => {}
             }
+            let mut open = self.open.count.lock().unwrap_or_else(|p| p.into_inner());
+            if !within_limit || *open < self.open.limit {
+                *open += 1;
+                drop(open);
+                let permit = Permit(self.open.clone());
+                return self.connect(permit);
+            }
+            let now = std::time::Instant::now();
+            if now >= deadline {
+                return Err(StoreError::Unavailable(format!(
+                    "all {} connections to PostgreSQL stayed busy for {} s",
+                    self.open.limit,
+                    BUSY_WAIT.as_secs()
+                )));
+            }
+            // Woken when a connection comes back or closes; the idle list
+            // is looked at again either way.
+            let wait = (deadline - now).min(Duration::from_millis(100));
+            let _ = self
+                .open
+                .freed
+                .wait_timeout(open, wait)
+                .map_err(|p| p.into_inner());
         }
     }
 
@@ -202,6 +242,7 @@ impl Pool {
         {
             idle.push(conn);
         }
+        self.open.freed.notify_one();
     }
 
     /// Drops every idle connection (after a failure that may have broken
@@ -212,7 +253,7 @@ impl Pool {
         }
     }
 
-    fn connect(&self) -> Result<Conn, StoreError> {
+    fn connect(&self, permit: Permit) -> Result<Conn, StoreError> {
         let runtime = self
             .runtime
             .as_ref()
@@ -245,7 +286,30 @@ impl Pool {
         Ok(Conn {
             client,
             statements: HashMap::new(),
+            _permit: permit,
         })
+    }
+}
+
+/// How long a call waits for a connection when all are busy.
+const BUSY_WAIT: Duration = Duration::from_secs(30);
+
+/// The connections open, against the limit.
+struct OpenCount {
+    count: Mutex<usize>,
+    freed: Condvar,
+    limit: usize,
+}
+
+/// One open connection's place in the count, given back when it closes.
+struct Permit(Arc<OpenCount>);
+
+impl Drop for Permit {
+    fn drop(&mut self) {
+        let mut count = self.0.count.lock().unwrap_or_else(|p| p.into_inner());
+        *count = count.saturating_sub(1);
+        drop(count);
+        self.0.freed.notify_one();
     }
 }
 
@@ -342,6 +406,7 @@ async fn poll(sender: mpsc::Sender<StoreChange>) {
 pub(super) struct Conn {
     client: Client,
     statements: HashMap<&'static str, Statement>,
+    _permit: Permit,
 }
 
 impl Conn {
@@ -377,26 +442,6 @@ impl Conn {
     /// Runs statements without parameters (BEGIN, COMMIT, the schema).
     pub(super) fn batch(&mut self, sql: &str) -> Result<(), StoreError> {
         block_on(self.client.batch_execute(sql)).map_err(store_error)
-    }
-
-    /// Runs a query and hands its rows to `visit` as they arrive, until it
-    /// returns false: a large read never sits in memory whole.
-    pub(super) fn stream(
-        &mut self,
-        sql: &'static str,
-        params: &[&(dyn ToSql + Sync)],
-        visit: &mut dyn FnMut(&Row) -> Result<bool, StoreError>,
-    ) -> Result<(), StoreError> {
-        let statement = self.statement(sql)?;
-        let rows = block_on(self.client.query_raw(&statement, params.iter().copied()))
-            .map_err(store_error)?;
-        let mut rows = std::pin::pin!(rows);
-        while let Some(row) = block_on(std::future::poll_fn(|cx| rows.as_mut().poll_next(cx))) {
-            if !visit(&row.map_err(store_error)?)? {
-                break;
-            }
-        }
-        Ok(())
     }
 }
 

@@ -32,6 +32,11 @@ use connection::{Conn, Pool};
 use deog_grid::{Tile, TileKey};
 use std::collections::BTreeMap;
 
+/// Rows a long read takes per query. A connection is held only while a
+/// page is read, never while the caller hands rows to a slow client, so a
+/// reader never keeps one from the others for long.
+const PAGE_ROWS: i64 = 256;
+
 /// The channel servers tell each other their changes on.
 const CHANGES_CHANNEL: &str = "deog_changes";
 
@@ -44,6 +49,9 @@ pub struct PostgresConfig {
     pub url: String,
     /// Most idle connections kept for reuse.
     pub pool_size: usize,
+    /// Most connections open at once for reads and one-off writes; a call
+    /// past it waits for one. The writer's own connection comes on top.
+    pub max_connections: usize,
     /// Hear other servers' changes by polling even where the database
     /// has `NOTIFY` (it is used when present otherwise).
     pub poll_changes: bool,
@@ -55,6 +63,7 @@ impl PostgresConfig {
         Self {
             url: url.into(),
             pool_size: 8,
+            max_connections: 16,
             poll_changes: false,
         }
     }
@@ -107,6 +116,39 @@ impl PostgresStore {
         let result = work(&mut conn);
         self.pool.put(conn);
         result
+    }
+
+    /// Visits a robot's rows (frames or poses) with sequence in
+    /// `from..=to` a page at a time; `sql` takes the robot, the bounds,
+    /// whether this is the first page, the last sequence seen and the
+    /// page's size.
+    fn read_sequenced(
+        &self,
+        sql: &'static str,
+        robot: &str,
+        (from, to): (u64, u64),
+        visit: &mut dyn FnMut(u64, &[u8]) -> bool,
+    ) -> Result<(), StoreError> {
+        if from > to {
+            return Ok(());
+        }
+        let (from, to) = (sql_sequence(from), sql_sequence(to));
+        let mut after: Option<i64> = None;
+        loop {
+            let (first, last) = (after.is_none(), after.unwrap_or(from));
+            let rows = self
+                .with(|conn| conn.query(sql, &[&robot, &from, &to, &first, &last, &PAGE_ROWS]))?;
+            for row in &rows {
+                let sequence: i64 = row.get(0);
+                if !visit(stored_sequence(sequence), row.get(1)) {
+                    return Ok(());
+                }
+                after = Some(sequence);
+            }
+            if rows.len() < PAGE_ROWS as usize {
+                return Ok(());
+            }
+        }
     }
 
     /// Runs `work` in a transaction of its own and commits it.
@@ -206,24 +248,41 @@ impl Store for PostgresStore {
         range: TileRange,
         visit: &mut dyn FnMut(TileKey, StoredTile) -> bool,
     ) -> Result<(), StoreError> {
-        self.with(|conn| {
-            conn.stream(
-                "SELECT x, y, version, cells FROM tiles WHERE map = $1 \
-                 AND x BETWEEN $2 AND $3 AND y BETWEEN $4 AND $5 ORDER BY x, y",
-                &[
-                    &map.name,
-                    &range.min.x,
-                    &range.max.x,
-                    &range.min.y,
-                    &range.max.y,
-                ],
-                &mut |row| {
-                    let key = TileKey::new(row.get(0), row.get(1));
-                    let tile = decode_tile(map, row.get(2), row.get(3))?;
-                    Ok(visit(key, tile))
-                },
-            )
-        })
+        let mut after: Option<TileKey> = None;
+        loop {
+            let (first, last) = match after {
+                None => (true, TileKey::new(0, 0)),
+                Some(key) => (false, key),
+            };
+            let rows = self.with(|conn| {
+                conn.query(
+                    "SELECT x, y, version, cells FROM tiles WHERE map = $1 \
+                     AND x BETWEEN $2 AND $3 AND y BETWEEN $4 AND $5 \
+                     AND ($6 OR (map, x, y) > ($1, $7, $8)) ORDER BY x, y LIMIT $9",
+                    &[
+                        &map.name,
+                        &range.min.x,
+                        &range.max.x,
+                        &range.min.y,
+                        &range.max.y,
+                        &first,
+                        &last.x,
+                        &last.y,
+                        &PAGE_ROWS,
+                    ],
+                )
+            })?;
+            for row in &rows {
+                let key = TileKey::new(row.get(0), row.get(1));
+                if !visit(key, decode_tile(map, row.get(2), row.get(3))?) {
+                    return Ok(());
+                }
+                after = Some(key);
+            }
+            if rows.len() < PAGE_ROWS as usize {
+                return Ok(());
+            }
+        }
     }
 
     fn cursor(&self, name: &str, client: &str) -> Result<ClientCursor, StoreError> {
@@ -294,18 +353,13 @@ impl Store for PostgresStore {
         to: u64,
         visit: &mut dyn FnMut(u64, &[u8]) -> bool,
     ) -> Result<(), StoreError> {
-        if from > to {
-            return Ok(());
-        }
-        let (from, to) = (sql_sequence(from), sql_sequence(to));
-        self.with(|conn| {
-            conn.stream(
-                "SELECT sequence, frame FROM frames WHERE robot = $1 \
-                 AND sequence BETWEEN $2 AND $3 ORDER BY sequence",
-                &[&robot, &from, &to],
-                &mut |row| Ok(visit(stored_sequence(row.get(0)), row.get(1))),
-            )
-        })
+        self.read_sequenced(
+            "SELECT sequence, frame FROM frames WHERE robot = $1 AND sequence BETWEEN $2 AND $3 \
+             AND ($4 OR sequence > $5) ORDER BY sequence LIMIT $6",
+            robot,
+            (from, to),
+            visit,
+        )
     }
 
     fn write_poses(&self, poses: Vec<(String, u64, Vec<u8>)>) -> Result<(), StoreError> {
@@ -319,18 +373,13 @@ impl Store for PostgresStore {
         to: u64,
         visit: &mut dyn FnMut(u64, &[u8]) -> bool,
     ) -> Result<(), StoreError> {
-        if from > to {
-            return Ok(());
-        }
-        let (from, to) = (sql_sequence(from), sql_sequence(to));
-        self.with(|conn| {
-            conn.stream(
-                "SELECT sequence, pose FROM poses WHERE robot = $1 \
-                 AND sequence BETWEEN $2 AND $3 ORDER BY sequence",
-                &[&robot, &from, &to],
-                &mut |row| Ok(visit(stored_sequence(row.get(0)), row.get(1))),
-            )
-        })
+        self.read_sequenced(
+            "SELECT sequence, pose FROM poses WHERE robot = $1 AND sequence BETWEEN $2 AND $3 \
+             AND ($4 OR sequence > $5) ORDER BY sequence LIMIT $6",
+            robot,
+            (from, to),
+            visit,
+        )
     }
 
     fn rigs(&self) -> Result<Vec<(String, Vec<u8>)>, StoreError> {
@@ -357,7 +406,8 @@ impl Store for PostgresStore {
     }
 
     fn begin(&self) -> Result<Box<dyn Transaction + '_>, StoreError> {
-        Ok(Box::new(PostgresTransaction::begin(&self.pool)?))
+        let conn = self.pool.get_for_writer()?;
+        Ok(Box::new(PostgresTransaction::begin_on(&self.pool, conn)?))
     }
 
     fn foreign_changes(&self) -> Option<tokio::sync::mpsc::Receiver<StoreChange>> {
@@ -430,7 +480,10 @@ pub struct PostgresTransaction<'p> {
 
 impl<'p> PostgresTransaction<'p> {
     fn begin(pool: &'p Pool) -> Result<Self, StoreError> {
-        let mut conn = pool.get()?;
+        Self::begin_on(pool, pool.get()?)
+    }
+
+    fn begin_on(pool: &'p Pool, mut conn: Conn) -> Result<Self, StoreError> {
         conn.batch("BEGIN")?;
         Ok(Self {
             pool,
