@@ -12,17 +12,25 @@ use super::workload::TILE_SIDE;
 pub(super) struct MapServerFigures<'a> {
     /// The options of the run.
     pub options: &'a MapServerOptions,
-    /// The thesis's mapper on sled.
+    /// The store, as [`super::StoreChoice::label`] names it.
+    pub store: &'static str,
+    /// The thesis's mapper on the store's engine.
     pub baseline: BaselineRun,
-    /// One measurement per `--clients` count, in order.
+    /// One measurement per `--servers` count and `--clients` count, in
+    /// that order.
     pub throughput: Vec<ThroughputRun>,
     /// The memory test, unless `--cells` was 0.
     pub memory: Option<MemoryRun>,
 }
 
-/// `x` in millions, as the table shows rates.
+/// `x` in millions, as the table shows rates; small rates (the thesis's
+/// mapper on PostgreSQL) with the digits that tell them apart.
 fn millions(x: f64) -> String {
-    format!("{:.2} M", x / 1e6)
+    if x < 1e5 {
+        format!("{:.4} M", x / 1e6)
+    } else {
+        format!("{:.2} M", x / 1e6)
+    }
 }
 
 /// kB as MB (of 1024 kB), as the table and the JSON show memory.
@@ -38,17 +46,18 @@ impl MapServerFigures<'_> {
         let mut out = String::new();
         let _ = writeln!(
             out,
-            "\nmap server bench: {} s per measurement, batches of {} tiles of {TILE_SIDE}x{TILE_SIDE}, window {}, region {}x{} tiles",
-            o.duration_s, o.batch_tiles, o.window, o.region_tiles, o.region_tiles
+            "\nmap server bench on {}: {} s per measurement, batches of {} tiles of {TILE_SIDE}x{TILE_SIDE}, window {}, region {}x{} tiles",
+            self.store, o.duration_s, o.batch_tiles, o.window, o.region_tiles, o.region_tiles
         );
         let _ = writeln!(
             out,
-            "\n| measure | cell updates/s | vs baseline | cells | seconds | server CPU s | bench CPU s |"
+            "\n| measure | cell updates/s | vs baseline | cells | seconds | server CPU s | database CPU s | bench CPU s |"
         );
-        let _ = writeln!(out, "|---|---|---|---|---|---|---|");
+        let _ = writeln!(out, "|---|---|---|---|---|---|---|---|");
         let _ = writeln!(
             out,
-            "| thesis Fig. 7.1 on sled, 1 thread (baseline) | {} | 1.0x | {} | {:.2} | - | - |",
+            "| thesis Fig. 7.1 on {}, 1 thread (baseline) | {} | 1.0x | {} | {:.2} | - | - | - |",
+            b.engine,
             millions(b.cells_per_s()),
             b.updates,
             b.seconds
@@ -56,13 +65,16 @@ impl MapServerFigures<'_> {
         for t in &self.throughput {
             let _ = writeln!(
                 out,
-                "| map server, {} client(s), durable | {} | {:.1}x | {} | {:.2} | {:.2} | {:.2} |",
+                "| {} map server(s), {} client(s), durable | {} | {:.1}x | {} | {:.2} | {:.2} | {} | {:.2} |",
+                t.servers,
                 t.clients,
                 millions(t.cells_per_s()),
                 t.cells_per_s() / b.cells_per_s(),
                 t.cells,
                 t.seconds,
                 t.server_cpu_s,
+                t.database_cpu_s
+                    .map_or_else(|| "-".to_string(), |s| format!("{s:.2}")),
                 t.bench_cpu_s
             );
         }
@@ -74,8 +86,8 @@ impl MapServerFigures<'_> {
         for t in &self.throughput {
             let _ = writeln!(
                 out,
-                "{} client(s): {} batches acknowledged as applied, map version {}",
-                t.clients, t.batches, t.map_version
+                "{} server(s), {} client(s): {} batches acknowledged as applied, map version {}",
+                t.servers, t.clients, t.batches, t.map_version
             );
         }
         if let Some(m) = &self.memory {
@@ -122,10 +134,19 @@ fn memory_table(out: &mut String, m: &MemoryRun) {
         mb(m.hwm_kb)
     );
     let _ = writeln!(out, "| server VmRSS after | {:.1} MB |", mb(m.rss_after_kb));
-    let _ = writeln!(
-        out,
-        "| data directory (apparent / allocated) | {:.1} MB / {:.1} MB |",
-        m.data_apparent_bytes as f64 / 1e6,
-        m.data_allocated_bytes as f64 / 1e6
-    );
+    if let (Some(apparent), Some(allocated)) = (m.data_apparent_bytes, m.data_allocated_bytes) {
+        let _ = writeln!(
+            out,
+            "| data directory (apparent / allocated) | {:.1} MB / {:.1} MB |",
+            apparent as f64 / 1e6,
+            allocated as f64 / 1e6
+        );
+    }
+    if let Some(bytes) = m.database_bytes {
+        let _ = writeln!(
+            out,
+            "| database size (pg_database_size) | {:.1} MB |",
+            bytes as f64 / 1e6
+        );
+    }
 }

@@ -1,6 +1,6 @@
 //! The server's memory while a map grows to a target cell count through
 //! four clients, each tile visited once, with the resident set sampled
-//! every 100 ms from `/proc`.
+//! every 100 ms from `/proc`; then the size of the store.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -13,6 +13,7 @@ use deog_harness::proc_stats;
 use deog_robot_client::{ClientConfig, MapClient, UpdateSenderConfig};
 
 use super::ServerUnderTest;
+use super::store::StoreUnderTest;
 use super::workload::{create_map_request, evidence_pattern};
 
 /// Clients growing the map.
@@ -40,17 +41,21 @@ pub(super) struct MemoryRun {
     pub hwm_kb: u64,
     /// The server's `VmRSS` afterwards, kB.
     pub rss_after_kb: u64,
-    /// Bytes of the files in the data directory.
-    pub data_apparent_bytes: u64,
+    /// Bytes of the files in the data directory (sled's, or the private
+    /// PostgreSQL's with its WAL); `None` when the bench does not know the
+    /// folder (a PostgreSQL it was given).
+    pub data_apparent_bytes: Option<u64>,
     /// Bytes the data directory's files take on disk.
-    pub data_allocated_bytes: u64,
+    pub data_allocated_bytes: Option<u64>,
+    /// `pg_database_size` of the database, on PostgreSQL.
+    pub database_bytes: Option<u64>,
 }
 
-/// Grows map `bench-memory` to `target_cells` cells and reads the server's
-/// memory and its data directory `data` around it.
+/// Grows map `bench-memory` to `target_cells` cells through `server` and
+/// reads its memory around it, and the size of `store` afterwards.
 pub(super) async fn memory_growth(
     server: &ServerUnderTest,
-    data: &Path,
+    store: &StoreUnderTest,
     target_cells: u64,
     size: TileSize,
     config: UpdateSenderConfig,
@@ -137,7 +142,14 @@ pub(super) async fn memory_growth(
     let info = admin.map_info(map).await?;
     let hwm_kb = server.status_kb("VmHWM")?;
     let rss_after_kb = server.status_kb("VmRSS")?;
-    let (data_apparent_bytes, data_allocated_bytes) = dir_size(data)?;
+    let (data_apparent_bytes, data_allocated_bytes) = match store.data_dir() {
+        Some(data) => {
+            let (apparent, allocated) = dir_size(data)?;
+            (Some(apparent), Some(allocated))
+        }
+        None => (None, None),
+    };
+    let database_bytes = store.database_bytes().await?;
     Ok(MemoryRun {
         target_cells,
         tiles,
@@ -151,6 +163,7 @@ pub(super) async fn memory_growth(
         rss_after_kb,
         data_apparent_bytes,
         data_allocated_bytes,
+        database_bytes,
     })
 }
 
@@ -160,7 +173,10 @@ fn dir_size(path: &Path) -> Result<(u64, u64)> {
     let (mut apparent, mut allocated) = (0u64, 0u64);
     for entry in std::fs::read_dir(path).with_context(|| format!("reading {}", path.display()))? {
         let entry = entry?;
-        let meta = entry.metadata()?;
+        // PostgreSQL may remove a file (a recycled WAL segment) meanwhile.
+        let Ok(meta) = entry.metadata() else {
+            continue;
+        };
         if meta.is_dir() {
             let (a, b) = dir_size(&entry.path())?;
             apparent += a;

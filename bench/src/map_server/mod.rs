@@ -1,27 +1,35 @@
-//! `deog bench map-server`: starts the real map server as a child process
-//! (this same executable, `deog server`, on a free port and a fresh data
-//! directory) and measures, in one run:
+//! `deog bench map-server`: starts the real map server as child processes
+//! (this same executable, `deog server`, on free ports and a fresh store:
+//! a sled data directory, a private PostgreSQL, or a PostgreSQL database
+//! it is given) and measures, in one run:
 //!
-//! 1. durable throughput: cell updates per second acknowledged by the server
-//!    (acknowledged means flushed to disk), from 1 and from 4 concurrent
-//!    clients each sending dense tile deltas over a shared region of tiles;
+//! 1. durable throughput: cell updates per second acknowledged by the
+//!    servers (acknowledged means committed to disk), for each `--servers`
+//!    count of servers sharing the store and each `--clients` count of
+//!    concurrent clients, spread round-robin over the servers, each
+//!    sending dense tile deltas over a shared region of tiles;
 //! 2. the thesis baseline on the same store engine: the mapper of the
-//!    thesis's Fig. 7.1 on sled, one key per cell (`(x << 16) + y`), a get,
-//!    the Bayes update and an insert per cell update, a flush every 300
-//!    updates, single-threaded, over the same cells;
-//! 3. memory: the server's resident set while a map grows to `--cells`
-//!    cells through 4 clients, with the map's cell count and the size of the
-//!    data directory afterwards.
+//!    thesis's Fig. 7.1, one key (or row) per cell (`(x << 16) + y`), a
+//!    read, the Bayes update and a write per cell update, a commit every
+//!    300 updates, single-threaded, over the same cells;
+//! 3. memory: the first server's resident set while a map grows to
+//!    `--cells` cells through 4 clients, with the map's cell count and the
+//!    size of the data directory (and, on PostgreSQL, of the database)
+//!    afterwards.
 //!
-//! Its parts: `workload` (the region the clients update and the evidence
-//! they send), `baseline` (the thesis's mapper on sled), `throughput`,
-//! `memory`, `figures` (everything measured, as the table printed) and
-//! `record` (the same as the JSON `--out` writes).
+//! Its parts: `store` (the store the servers share), `workload` (the
+//! region the clients update and the evidence they send), `baseline` (the
+//! thesis's mapper on sled, and the cells it updates), `baseline_postgres`
+//! (the same mapper on PostgreSQL), `throughput`, `memory`, `figures`
+//! (everything measured, as the table printed) and `record` (the same as
+//! the JSON `--out` writes).
 
 mod baseline;
+mod baseline_postgres;
 mod figures;
 mod memory;
 mod record;
+mod store;
 mod throughput;
 mod workload;
 
@@ -35,8 +43,10 @@ use deog_harness::{Role, Supervisor, connect, free_loopback_addr, log_tail, os, 
 use deog_robot_client::{ClientConfig, MapClient, UpdateSenderConfig};
 
 use figures::MapServerFigures;
+use store::StoreUnderTest;
 
 use crate::option_error::{OptionError, require};
+pub use store::StoreChoice;
 use workload::{TILE_SIDE, region_tiles};
 
 /// Options of `deog bench map-server`.
@@ -66,6 +76,17 @@ pub struct MapServerOptions {
     /// Page cache of the server's store, MiB.
     #[arg(long, default_value_t = 64)]
     pub cache_mb: u64,
+    /// The store the servers share: `sled` (a fresh data directory),
+    /// `postgres` (a private PostgreSQL the bench starts, fsync and
+    /// synchronous_commit on), or the `postgres://USER@HOST/DB` URL of a
+    /// fresh database. The thesis baseline runs on the same engine.
+    #[arg(long, default_value = "sled")]
+    pub store: String,
+    /// Numbers of servers sharing the store to measure, comma-separated;
+    /// clients are spread over them round-robin. More than one needs
+    /// PostgreSQL.
+    #[arg(long, default_value = "1", value_delimiter = ',')]
+    pub servers: Vec<usize>,
 }
 
 impl MapServerOptions {
@@ -81,11 +102,37 @@ impl MapServerOptions {
         )?;
         require(self.region_tiles > 0, "--region-tiles", || {
             "--region-tiles must be at least 1".into()
+        })?;
+        let store = self.store_choice()?;
+        require(
+            !self.servers.is_empty() && self.servers.iter().all(|&n| n > 0),
+            "--servers",
+            || "--servers needs one or more counts of at least 1".into(),
+        )?;
+        require(
+            store.is_shared() || self.servers.iter().all(|&n| n == 1),
+            "--servers",
+            || {
+                "--servers: a sled store belongs to one server; several servers need \
+                 --store postgres or a postgres:// URL"
+                    .into()
+            },
+        )
+    }
+
+    /// `--store`, read.
+    pub fn store_choice(&self) -> Result<StoreChoice, OptionError> {
+        StoreChoice::parse(&self.store).ok_or_else(|| OptionError {
+            flag: "--store",
+            message: format!(
+                "--store {}: takes sled, postgres or a postgres:// URL",
+                self.store
+            ),
         })
     }
 }
 
-/// The map server under test: where it serves, and its process for
+/// One map server under test: where it serves, and its process for
 /// `/proc`.
 struct ServerUnderTest {
     url: String,
@@ -108,6 +155,7 @@ impl ServerUnderTest {
 /// them as JSON to `--out` if given.
 pub fn run(options: MapServerOptions) -> Result<()> {
     options.validate()?;
+    let choice = options.store_choice()?;
     let duration = Duration::from_secs(options.duration_s);
     let size = TileSize::new(TILE_SIDE)?;
     let region = region_tiles(options.region_tiles);
@@ -116,62 +164,47 @@ pub fn run(options: MapServerOptions) -> Result<()> {
         window: options.window.max(1),
     };
 
-    eprintln!(
-        "thesis baseline: Fig. 7.1 mapper on sled for {} s ...",
-        options.duration_s
-    );
-    let baseline = baseline::thesis_baseline(duration, size, &region)?;
-
     let work = tempfile::tempdir().context("creating a temporary directory")?;
-    let data = work.path().join("data");
-    // The server's log is `server.log` in the work directory.
-    let mut children = Supervisor::new(work.path())?;
-    let addr = free_loopback_addr()?;
-    children.start(
-        "server",
-        Role::Service,
-        &os(&["server", "--listen", &addr.to_string(), "--data"])
-            .into_iter()
-            .chain([data.clone().into_os_string()])
-            .chain(os(&["--cache-mb", &options.cache_mb.to_string()]))
-            .collect::<Vec<_>>(),
-    )?;
-    let server = ServerUnderTest {
-        url: format!("http://{addr}"),
-        pid: children
-            .pid("server")
-            .context("the map server has no process id")?,
-    };
-    eprintln!("map server: pid {}, {}", server.pid, server.url);
-
+    if choice == StoreChoice::PrivatePostgres {
+        eprintln!("starting a private PostgreSQL (fsync and synchronous_commit on) ...");
+    }
+    let store = StoreUnderTest::open(&choice, work.path())?;
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    runtime.block_on(store.check_fresh())?;
+
+    let baseline = match store.postgres_url() {
+        None => {
+            eprintln!(
+                "thesis baseline: Fig. 7.1 mapper on sled for {} s ...",
+                options.duration_s
+            );
+            baseline::thesis_baseline(duration, size, &region)?
+        }
+        Some(url) => {
+            eprintln!(
+                "thesis baseline: Fig. 7.1 mapper on PostgreSQL for {} s ...",
+                options.duration_s
+            );
+            baseline_postgres::thesis_baseline(url, duration, size, &region)?
+        }
+    };
+
     let result = runtime.block_on(async {
-        // Started in its own process group, the server does not see a
+        // Started in their own process groups, the servers do not see a
         // ctrl-c at the terminal: this run ends on it, and the supervisor
-        // stops the server on the way out.
+        // stops them on the way out.
         let mut shutdown = std::pin::pin!(deog_harness::shutdown_signal());
         tokio::select! {
-            () = &mut shutdown => bail!("interrupted: the map server was stopped"),
-            connected = connect(&mut children, "map server", || {
-                MapClient::connect(ClientConfig::new(server.url.clone()))
-            }) => { connected?; }
+            () = &mut shutdown => bail!("interrupted: the map servers were stopped"),
+            measured = measure(&options, &store, work.path(), size, &region, sender_config) => measured,
         }
-        let measured = tokio::select! {
-            () = &mut shutdown => bail!("interrupted: the map server was stopped"),
-            measured = measure(&options, &server, &data, size, &region, sender_config) => measured,
-        };
-        if measured.is_err() {
-            let log = work.path().join("server.log");
-            eprintln!("last lines of the server's log ({}):", log.display());
-            eprint!("{}", log_tail(&log, 20));
-        }
-        measured
     });
-    drop(children);
     let (throughput, memory) = result?;
+    drop(store);
 
     let figures = MapServerFigures {
         options: &options,
+        store: choice.label(),
         baseline,
         throughput,
         memory,
@@ -185,38 +218,102 @@ pub fn run(options: MapServerOptions) -> Result<()> {
     Ok(())
 }
 
-/// The measurements against the running server: throughput for each
-/// client count, then, unless `--cells` is 0, the memory test.
+/// The measurements: for each `--servers` count, that many servers
+/// started on the store and throughput for each client count; then, on
+/// the last set of servers and unless `--cells` is 0, the memory test on
+/// the first of them.
 async fn measure(
     options: &MapServerOptions,
-    server: &ServerUnderTest,
-    data: &Path,
+    store: &StoreUnderTest,
+    work: &Path,
     size: TileSize,
     region: &[TileKey],
     sender_config: UpdateSenderConfig,
 ) -> Result<(Vec<throughput::ThroughputRun>, Option<memory::MemoryRun>)> {
     let duration = Duration::from_secs(options.duration_s);
     let mut runs = Vec::new();
-    for &clients in &options.clients {
-        eprintln!(
-            "durable throughput: {clients} client(s) for {} s ...",
-            options.duration_s
-        );
-        let run =
-            throughput::durable_throughput(server, clients, duration, size, region, sender_config)
+    let mut memory = None;
+    for (index, &count) in options.servers.iter().enumerate() {
+        // Each set logs into a folder of its own, `servers-N/server-I.log`.
+        let logs = work.join(format!("servers-{count}"));
+        let mut children = Supervisor::new(&logs)?;
+        let measured = async {
+            let servers = start_servers(&mut children, store, count, options.cache_mb).await?;
+            for &clients in &options.clients {
+                eprintln!(
+                    "durable throughput: {count} server(s), {clients} client(s) for {} s ...",
+                    options.duration_s
+                );
+                let run = throughput::durable_throughput(
+                    &servers,
+                    store,
+                    clients,
+                    duration,
+                    size,
+                    region,
+                    sender_config,
+                )
                 .await?;
-        runs.push(run);
+                runs.push(run);
+            }
+            if index + 1 == options.servers.len() && options.cells > 0 {
+                eprintln!(
+                    "memory: growing a map to {} cells through 4 clients of the first server ...",
+                    options.cells
+                );
+                memory = Some(
+                    memory::memory_growth(&servers[0], store, options.cells, size, sender_config)
+                        .await?,
+                );
+            }
+            anyhow::Ok(())
+        }
+        .await;
+        if measured.is_err() {
+            for i in 1..=count {
+                let log = logs.join(format!("server-{i}.log"));
+                eprintln!("last lines of server {i}'s log ({}):", log.display());
+                eprint!("{}", log_tail(&log, 20));
+            }
+        }
+        // Stops this set before the next starts.
+        drop(children);
+        measured?;
     }
-    let memory = if options.cells > 0 {
-        eprintln!(
-            "memory: growing a map to {} cells through 4 clients ...",
-            options.cells
-        );
-        Some(memory::memory_growth(server, data, options.cells, size, sender_config).await?)
-    } else {
-        None
-    };
     Ok((runs, memory))
+}
+
+/// Starts `count` servers on `store`, `server-1` … `server-N`, and waits
+/// until each answers.
+async fn start_servers(
+    children: &mut Supervisor,
+    store: &StoreUnderTest,
+    count: usize,
+    cache_mb: u64,
+) -> Result<Vec<ServerUnderTest>> {
+    let mut servers = Vec::with_capacity(count);
+    for i in 1..=count {
+        let name = format!("server-{i}");
+        let addr = free_loopback_addr()?;
+        let args: Vec<_> = os(&["server", "--listen", &addr.to_string()])
+            .into_iter()
+            .chain(store.server_args(cache_mb))
+            .collect();
+        children.start(&name, Role::Service, &args)?;
+        let server = ServerUnderTest {
+            url: format!("http://{addr}"),
+            pid: children
+                .pid(&name)
+                .with_context(|| format!("map server {i} has no process id"))?,
+        };
+        connect(children, "map server", || {
+            MapClient::connect(ClientConfig::new(server.url.clone()))
+        })
+        .await?;
+        eprintln!("map server {i}: pid {}, {}", server.pid, server.url);
+        servers.push(server);
+    }
+    Ok(servers)
 }
 
 #[cfg(test)]
@@ -241,6 +338,8 @@ mod tests {
     fn the_defaults_are_valid() {
         let options = parse(&[]);
         assert_eq!(options.clients, [1, 4]);
+        assert_eq!(options.store, "sled");
+        assert_eq!(options.servers, [1]);
         assert_eq!(options.validate(), Ok(()));
     }
 
@@ -250,10 +349,26 @@ mod tests {
             ("--duration-s", &["--duration-s", "0"][..]),
             ("--clients", &["--clients", "1,0"][..]),
             ("--region-tiles", &["--region-tiles", "0"][..]),
+            ("--store", &["--store", "mysql://db/maps"][..]),
+            ("--servers", &["--servers", "0"][..]),
         ] {
             let err = parse(args).validate().expect_err(flag);
             assert_eq!(err.flag, flag);
             assert!(err.to_string().starts_with(flag), "{err}");
         }
+    }
+
+    #[test]
+    fn several_servers_on_sled_are_refused() {
+        let err = parse(&["--servers", "1,2"])
+            .validate()
+            .expect_err("sled, 2 servers");
+        assert_eq!(err.flag, "--servers");
+        assert!(err.to_string().contains("sled"), "{err}");
+        let options = parse(&["--store", "postgres", "--servers", "1,2"]);
+        assert_eq!(options.servers, [1, 2]);
+        assert_eq!(options.validate(), Ok(()));
+        let options = parse(&["--store", "postgres://deog@db/maps", "--servers", "2"]);
+        assert_eq!(options.validate(), Ok(()));
     }
 }

@@ -28,11 +28,17 @@ struct ConfigRecord {
     region_tiles: i32,
     tile_side: u32,
     cache_mb: u64,
+    /// `sled`, `postgres` (private) or `postgres-url`.
+    store: &'static str,
+    /// The `--servers` counts measured.
+    servers: Vec<usize>,
 }
 
-/// The thesis's mapper on sled.
+/// The thesis's mapper on the store's engine.
 #[derive(Serialize)]
 struct BaselineRecord {
+    /// `sled` or `postgres`.
+    store: &'static str,
     cell_updates: u64,
     inserts: u64,
     rewrites: u64,
@@ -44,6 +50,7 @@ struct BaselineRecord {
 /// One throughput measurement.
 #[derive(Serialize)]
 struct ThroughputRecord {
+    servers: usize,
     clients: usize,
     cell_updates: u64,
     batches: u64,
@@ -51,6 +58,8 @@ struct ThroughputRecord {
     cell_updates_per_s: f64,
     ratio_to_baseline: f64,
     server_cpu_s: f64,
+    /// Null unless the bench started the PostgreSQL.
+    database_cpu_s: Option<f64>,
     bench_cpu_s: f64,
 }
 
@@ -67,8 +76,11 @@ struct MemoryRecord {
     samples: u64,
     vm_hwm_mb: f64,
     rss_after_mb: f64,
-    data_apparent_bytes: u64,
-    data_allocated_bytes: u64,
+    /// Null when the bench does not know the folder.
+    data_apparent_bytes: Option<u64>,
+    data_allocated_bytes: Option<u64>,
+    /// Null on sled.
+    database_bytes: Option<u64>,
 }
 
 /// `x` rounded to `decimals` places.
@@ -88,8 +100,11 @@ impl MapServerFigures<'_> {
                 region_tiles: o.region_tiles,
                 tile_side: TILE_SIDE,
                 cache_mb: o.cache_mb,
+                store: self.store,
+                servers: o.servers.clone(),
             },
             baseline: BaselineRecord {
+                store: b.engine,
                 cell_updates: b.updates,
                 inserts: b.inserts,
                 rewrites: b.rewrites,
@@ -101,6 +116,7 @@ impl MapServerFigures<'_> {
                 .throughput
                 .iter()
                 .map(|t| ThroughputRecord {
+                    servers: t.servers,
                     clients: t.clients,
                     cell_updates: t.cells,
                     batches: t.batches,
@@ -108,6 +124,7 @@ impl MapServerFigures<'_> {
                     cell_updates_per_s: round(t.cells_per_s(), 1),
                     ratio_to_baseline: round(t.cells_per_s() / b.cells_per_s(), 2),
                     server_cpu_s: round(t.server_cpu_s, 2),
+                    database_cpu_s: t.database_cpu_s.map(|s| round(s, 2)),
                     bench_cpu_s: round(t.bench_cpu_s, 2),
                 })
                 .collect(),
@@ -124,6 +141,7 @@ impl MapServerFigures<'_> {
                 rss_after_mb: round(mb(m.rss_after_kb), 1),
                 data_apparent_bytes: m.data_apparent_bytes,
                 data_allocated_bytes: m.data_allocated_bytes,
+                database_bytes: m.database_bytes,
             }),
         }
     }
@@ -152,13 +170,17 @@ mod tests {
             window: 32,
             region_tiles: 32,
             cache_mb: 64,
+            store: "sled".into(),
+            servers: vec![1],
         }
     }
 
     fn figures(options: &MapServerOptions, memory: bool) -> MapServerFigures<'_> {
         MapServerFigures {
             options,
+            store: "sled",
             baseline: BaselineRun {
+                engine: "sled",
                 updates: 300,
                 inserts: 300,
                 rewrites: 0,
@@ -166,11 +188,13 @@ mod tests {
                 seconds: 2.0004,
             },
             throughput: vec![ThroughputRun {
+                servers: 1,
                 clients: 1,
                 cells: 4096,
                 batches: 1,
                 seconds: 2.0,
                 server_cpu_s: 0.5,
+                database_cpu_s: None,
                 bench_cpu_s: 0.25,
                 map_version: 1,
             }],
@@ -185,8 +209,9 @@ mod tests {
                 samples: 2,
                 hwm_kb: 2048,
                 rss_after_kb: 1536,
-                data_apparent_bytes: 10,
-                data_allocated_bytes: 4096,
+                data_apparent_bytes: Some(10),
+                data_allocated_bytes: Some(4096),
+                database_bytes: None,
             }),
         }
     }
@@ -214,6 +239,8 @@ mod tests {
                     "cache_mb",
                     "duration_s",
                     "region_tiles",
+                    "servers",
+                    "store",
                     "tile_side",
                     "window",
                 ],
@@ -227,6 +254,7 @@ mod tests {
                     "inserts",
                     "rewrites",
                     "seconds",
+                    "store",
                 ],
             ),
             (
@@ -237,9 +265,11 @@ mod tests {
                     "cell_updates",
                     "cell_updates_per_s",
                     "clients",
+                    "database_cpu_s",
                     "ratio_to_baseline",
                     "seconds",
                     "server_cpu_s",
+                    "servers",
                 ],
             ),
             (
@@ -248,6 +278,7 @@ mod tests {
                     "cell_count",
                     "data_allocated_bytes",
                     "data_apparent_bytes",
+                    "database_bytes",
                     "peak_rss_sampled_mb",
                     "rss_after_mb",
                     "rss_before_mb",

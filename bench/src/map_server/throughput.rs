@@ -1,6 +1,7 @@
-//! Durable throughput: cell updates a second the server acknowledges as
-//! applied (flushed to disk) from concurrent clients, each sending dense
-//! tile deltas over the shared region.
+//! Durable throughput: cell updates a second the servers acknowledge as
+//! applied (committed to disk) from concurrent clients, spread round-robin
+//! over the servers sharing the store, each sending dense tile deltas over
+//! the shared region of one map.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -12,6 +13,7 @@ use deog_robot_client::{ClientConfig, MapClient, UpdateSenderConfig};
 use tokio::sync::Barrier;
 
 use super::ServerUnderTest;
+use super::store::StoreUnderTest;
 use super::workload::{create_map_request, evidence_pattern};
 
 /// What one throughput client did.
@@ -24,6 +26,8 @@ struct ClientRun {
 
 /// Figures of one throughput measurement.
 pub(super) struct ThroughputRun {
+    /// Servers sharing the store.
+    pub servers: usize,
     /// Concurrent clients.
     pub clients: usize,
     /// Cell updates acknowledged.
@@ -32,8 +36,11 @@ pub(super) struct ThroughputRun {
     pub batches: u64,
     /// From the clients' start to the last one's last acknowledgement.
     pub seconds: f64,
-    /// CPU seconds the server used meanwhile.
+    /// CPU seconds the servers used meanwhile, together.
     pub server_cpu_s: f64,
+    /// CPU seconds the private PostgreSQL used meanwhile; `None` on sled
+    /// or a PostgreSQL the bench did not start.
+    pub database_cpu_s: Option<f64>,
     /// CPU seconds this process (the clients) used meanwhile.
     pub bench_cpu_s: f64,
     /// The map's version afterwards: one per batch applied.
@@ -47,26 +54,29 @@ impl ThroughputRun {
     }
 }
 
-/// `clients` clients, each on its own connection, send the region's tiles
-/// from their own starting points for `duration`; counted once every
-/// batch is acknowledged.
+/// `clients` clients, each on its own connection to a server (client `i`
+/// to server `i mod N`), send the region's tiles of one map from their own
+/// starting points for `duration`; counted once every batch is
+/// acknowledged.
 pub(super) async fn durable_throughput(
-    server: &ServerUnderTest,
+    servers: &[ServerUnderTest],
+    store: &StoreUnderTest,
     clients: usize,
     duration: Duration,
     size: TileSize,
     region: &[TileKey],
     config: UpdateSenderConfig,
 ) -> Result<ThroughputRun> {
-    let map = format!("bench-throughput-{clients}");
-    let admin = MapClient::connect(ClientConfig::new(server.url.clone())).await?;
+    let map = format!("bench-throughput-{}x{clients}", servers.len());
+    let first = servers.first().context("no server to measure")?;
+    let admin = MapClient::connect(ClientConfig::new(first.url.clone())).await?;
     admin.ensure_map(create_map_request(&map)).await?;
     let region = Arc::new(region.to_vec());
     let barrier = Arc::new(Barrier::new(clients + 1));
     let mut tasks = Vec::with_capacity(clients);
     for i in 0..clients {
         let (url, map, region, barrier) = (
-            server.url.clone(),
+            servers[i % servers.len()].url.clone(),
             map.clone(),
             region.clone(),
             barrier.clone(),
@@ -116,15 +126,23 @@ pub(super) async fn durable_throughput(
         }));
     }
     barrier.wait().await;
-    let (start, server_cpu, bench_cpu) =
-        (Instant::now(), server.cpu_seconds()?, own_cpu_seconds()?);
+    let (start, server_cpu, database_cpu, bench_cpu) = (
+        Instant::now(),
+        servers_cpu_seconds(servers)?,
+        store.database_cpu_seconds(),
+        own_cpu_seconds()?,
+    );
     let mut runs = Vec::with_capacity(clients);
     for task in tasks {
         runs.push(task.await.context("client task panicked")??);
     }
     let end = runs.iter().map(|r| r.finished).max().unwrap_or(start);
     let seconds = end.duration_since(start).as_secs_f64();
-    let server_cpu_s = server.cpu_seconds()? - server_cpu;
+    let server_cpu_s = servers_cpu_seconds(servers)? - server_cpu;
+    let database_cpu_s = store
+        .database_cpu_seconds()
+        .zip(database_cpu)
+        .map(|(after, before)| after - before);
     let bench_cpu_s = own_cpu_seconds()? - bench_cpu;
     let info = admin.map_info(&map).await?;
     let batches: u64 = runs.iter().map(|r| r.batches).sum();
@@ -135,12 +153,19 @@ pub(super) async fn durable_throughput(
         info.version
     );
     Ok(ThroughputRun {
+        servers: servers.len(),
         clients,
         cells: runs.iter().map(|r| r.cells).sum(),
         batches,
         seconds,
         server_cpu_s,
+        database_cpu_s,
         bench_cpu_s,
         map_version: info.version,
     })
+}
+
+/// CPU seconds the servers have used, together.
+fn servers_cpu_seconds(servers: &[ServerUnderTest]) -> Result<f64> {
+    servers.iter().map(ServerUnderTest::cpu_seconds).sum()
 }
