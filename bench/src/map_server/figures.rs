@@ -65,9 +65,14 @@ impl MapServerFigures<'_> {
         for t in &self.throughput {
             let _ = writeln!(
                 out,
-                "| {} map server(s), {} client(s), durable | {} | {:.1}x | {} | {:.2} | {:.2} | {} | {:.2} |",
+                "| {} map server(s), {} client(s){}, durable | {} | {:.1}x | {} | {:.2} | {:.2} | {} | {:.2} |",
                 t.servers,
                 t.clients,
+                if t.maps > 1 {
+                    format!(" on {} maps", t.maps)
+                } else {
+                    String::new()
+                },
                 millions(t.cells_per_s()),
                 t.cells_per_s() / b.cells_per_s(),
                 t.cells,

@@ -87,6 +87,11 @@ pub struct MapServerOptions {
     /// PostgreSQL.
     #[arg(long, default_value = "1", value_delimiter = ',')]
     pub servers: Vec<usize>,
+    /// Maps the throughput clients write, client `i` to map `i mod N`: one
+    /// map's commits take turns (its version counts every batch), several
+    /// maps' can overlap.
+    #[arg(long, default_value_t = 1)]
+    pub maps: usize,
 }
 
 impl MapServerOptions {
@@ -104,6 +109,7 @@ impl MapServerOptions {
             "--region-tiles must be at least 1".into()
         })?;
         let store = self.store_choice()?;
+        require(self.maps > 0, "--maps", || "--maps must be at least 1".into())?;
         require(
             !self.servers.is_empty() && self.servers.iter().all(|&n| n > 0),
             "--servers",
@@ -248,6 +254,7 @@ async fn measure(
                     &servers,
                     store,
                     clients,
+                    options.maps,
                     duration,
                     size,
                     region,

@@ -32,6 +32,7 @@ struct ConfigRecord {
     store: &'static str,
     /// The `--servers` counts measured.
     servers: Vec<usize>,
+    maps: usize,
 }
 
 /// The thesis's mapper on the store's engine.
@@ -52,6 +53,7 @@ struct BaselineRecord {
 struct ThroughputRecord {
     servers: usize,
     clients: usize,
+    maps: usize,
     cell_updates: u64,
     batches: u64,
     seconds: f64,
@@ -102,6 +104,7 @@ impl MapServerFigures<'_> {
                 cache_mb: o.cache_mb,
                 store: self.store,
                 servers: o.servers.clone(),
+                maps: o.maps,
             },
             baseline: BaselineRecord {
                 store: b.engine,
@@ -118,6 +121,7 @@ impl MapServerFigures<'_> {
                 .map(|t| ThroughputRecord {
                     servers: t.servers,
                     clients: t.clients,
+                    maps: t.maps,
                     cell_updates: t.cells,
                     batches: t.batches,
                     seconds: round(t.seconds, 3),
@@ -172,6 +176,7 @@ mod tests {
             cache_mb: 64,
             store: "sled".into(),
             servers: vec![1],
+            maps: 1,
         }
     }
 
@@ -190,6 +195,7 @@ mod tests {
             throughput: vec![ThroughputRun {
                 servers: 1,
                 clients: 1,
+                maps: 1,
                 cells: 4096,
                 batches: 1,
                 seconds: 2.0,
@@ -238,6 +244,7 @@ mod tests {
                     "batch_tiles",
                     "cache_mb",
                     "duration_s",
+                    "maps",
                     "region_tiles",
                     "servers",
                     "store",
@@ -266,6 +273,7 @@ mod tests {
                     "cell_updates_per_s",
                     "clients",
                     "database_cpu_s",
+                    "maps",
                     "ratio_to_baseline",
                     "seconds",
                     "server_cpu_s",

@@ -30,6 +30,8 @@ pub(super) struct ThroughputRun {
     pub servers: usize,
     /// Concurrent clients.
     pub clients: usize,
+    /// Maps they wrote.
+    pub maps: usize,
     /// Cell updates acknowledged.
     pub cells: u64,
     /// Batches acknowledged as applied.
@@ -43,7 +45,7 @@ pub(super) struct ThroughputRun {
     pub database_cpu_s: Option<f64>,
     /// CPU seconds this process (the clients) used meanwhile.
     pub bench_cpu_s: f64,
-    /// The map's version afterwards: one per batch applied.
+    /// The maps' versions afterwards, added: one per batch applied.
     pub map_version: u64,
 }
 
@@ -55,29 +57,36 @@ impl ThroughputRun {
 }
 
 /// `clients` clients, each on its own connection to a server (client `i`
-/// to server `i mod N`), send the region's tiles of one map from their own
-/// starting points for `duration`; counted once every batch is
-/// acknowledged.
+/// to server `i mod N`), send the region's tiles of one of `maps` maps
+/// (client `i` to map `i mod maps`) from their own starting points for
+/// `duration`; counted once every batch is acknowledged.
+#[allow(clippy::too_many_arguments)]
 pub(super) async fn durable_throughput(
     servers: &[ServerUnderTest],
     store: &StoreUnderTest,
     clients: usize,
+    maps: usize,
     duration: Duration,
     size: TileSize,
     region: &[TileKey],
     config: UpdateSenderConfig,
 ) -> Result<ThroughputRun> {
-    let map = format!("bench-throughput-{}x{clients}", servers.len());
+    let maps = maps.max(1);
+    let names: Vec<String> = (0..maps)
+        .map(|m| format!("bench-throughput-{}x{clients}-{m}", servers.len()))
+        .collect();
     let first = servers.first().context("no server to measure")?;
     let admin = MapClient::connect(ClientConfig::new(first.url.clone())).await?;
-    admin.ensure_map(create_map_request(&map)).await?;
+    for map in &names {
+        admin.ensure_map(create_map_request(map)).await?;
+    }
     let region = Arc::new(region.to_vec());
     let barrier = Arc::new(Barrier::new(clients + 1));
     let mut tasks = Vec::with_capacity(clients);
     for i in 0..clients {
         let (url, map, region, barrier) = (
             servers[i % servers.len()].url.clone(),
-            map.clone(),
+            names[i % maps].clone(),
             region.clone(),
             barrier.clone(),
         );
@@ -144,24 +153,27 @@ pub(super) async fn durable_throughput(
         .zip(database_cpu)
         .map(|(after, before)| after - before);
     let bench_cpu_s = own_cpu_seconds()? - bench_cpu;
-    let info = admin.map_info(&map).await?;
+    let mut map_version = 0;
+    for map in &names {
+        map_version += admin.map_info(map).await?.version;
+    }
     let batches: u64 = runs.iter().map(|r| r.batches).sum();
     let applied: u64 = runs.iter().map(|r| r.applied).sum();
     ensure!(
-        applied == batches && info.version == batches,
-        "{batches} batches sent, {applied} acknowledged as applied, map version {}",
-        info.version
+        applied == batches && map_version == batches,
+        "{batches} batches sent, {applied} acknowledged as applied, map versions add to {map_version}"
     );
     Ok(ThroughputRun {
         servers: servers.len(),
         clients,
+        maps,
         cells: runs.iter().map(|r| r.cells).sum(),
         batches,
         seconds,
         server_cpu_s,
         database_cpu_s,
         bench_cpu_s,
-        map_version: info.version,
+        map_version,
     })
 }
 
