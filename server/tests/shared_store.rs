@@ -20,6 +20,27 @@ async fn two_servers() -> (TestServer, TestServer, tempfile::TempDir) {
     (first, second, dir)
 }
 
+/// Watches every tile of map "m" within 1,000 cells of the origin.
+async fn watch_map(
+    client: &mut deog_proto::v1::map_service_client::MapServiceClient<tonic::transport::Channel>,
+    include_cells: bool,
+) -> tonic::Streaming<pb::TileEvent> {
+    client
+        .watch_tiles(pb::WatchTilesRequest {
+            map: "m".into(),
+            region: Some(pb::CellBox {
+                min_x: -1000,
+                min_y: -1000,
+                max_x: 1000,
+                max_y: 1000,
+            }),
+            include_cells,
+        })
+        .await
+        .expect("watch")
+        .into_inner()
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn concurrent_batches_to_the_same_tiles_through_two_servers_all_land() {
     let (first, second, _dir) = two_servers().await;
@@ -95,20 +116,7 @@ async fn watchers_on_one_server_hear_writes_made_through_another() {
     let mut writer = first.client().await;
     create_map(&mut writer, "m", 8).await;
     let mut watcher = second.client().await;
-    let mut tiles = watcher
-        .watch_tiles(pb::WatchTilesRequest {
-            map: "m".into(),
-            region: Some(pb::CellBox {
-                min_x: -1000,
-                min_y: -1000,
-                max_x: 1000,
-                max_y: 1000,
-            }),
-            include_cells: true,
-        })
-        .await
-        .expect("watch")
-        .into_inner();
+    let mut tiles = watch_map(&mut watcher, true).await;
     let mut poses = watcher
         .watch_poses(pb::WatchPosesRequest::default())
         .await
@@ -189,20 +197,7 @@ async fn without_notifications_watchers_hear_other_servers_by_polling() {
     let mut writer = first.client().await;
     create_map(&mut writer, "m", 8).await;
     let mut watcher = second.client().await;
-    let mut tiles = watcher
-        .watch_tiles(pb::WatchTilesRequest {
-            map: "m".into(),
-            region: Some(pb::CellBox {
-                min_x: -1000,
-                min_y: -1000,
-                max_x: 1000,
-                max_y: 1000,
-            }),
-            include_cells: false,
-        })
-        .await
-        .expect("watch")
-        .into_inner();
+    let mut tiles = watch_map(&mut watcher, false).await;
     // Two polls: the first only learns where the map stands.
     tokio::time::sleep(Duration::from_millis(2200)).await;
     let (acks, _) = send_batches(

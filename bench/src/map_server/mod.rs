@@ -109,7 +109,9 @@ impl MapServerOptions {
             "--region-tiles must be at least 1".into()
         })?;
         let store = self.store_choice()?;
-        require(self.maps > 0, "--maps", || "--maps must be at least 1".into())?;
+        require(self.maps > 0, "--maps", || {
+            "--maps must be at least 1".into()
+        })?;
         require(
             !self.servers.is_empty() && self.servers.iter().all(|&n| n > 0),
             "--servers",
