@@ -189,6 +189,7 @@ impl<S: Store> MapServer<S> {
             client_id,
             sequence: batch.sequence,
             deltas,
+            stream_broken: Arc::default(),
         })
     }
 
@@ -398,6 +399,7 @@ impl<S: Store> MapService for MapServer<S> {
         let (out_tx, out_rx) = mpsc::channel(self.stream_buffer);
         let (pending_tx, mut pending_rx) = mpsc::channel::<Pending>(IN_FLIGHT_BATCHES);
         let server = self.clone();
+        let stream_broken = Arc::new(std::sync::atomic::AtomicBool::new(false));
         // Reads batches and hands them to the writer, in order.
         tokio::spawn(async move {
             let mut read = 0u64;
@@ -424,7 +426,10 @@ impl<S: Store> MapService for MapServer<S> {
                 read += 1;
                 let (client, sequence) = (batch.client_id.clone(), batch.sequence);
                 let submitted = match server.check_batch(batch) {
-                    Ok(batch) => server.writer.submit_batch(batch).await,
+                    Ok(mut batch) => {
+                        batch.stream_broken = stream_broken.clone();
+                        server.writer.submit_batch(batch).await
+                    }
                     Err(error) => Err(error),
                 };
                 let pending = match submitted {

@@ -17,6 +17,7 @@ use deog_grid::{CellBox, CellIndex, LogOdds, Tile, TileDelta, TileKey, TileSize}
 use deog_proto::v1::PoseEstimate;
 use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, oneshot, watch};
@@ -39,6 +40,21 @@ pub struct Batch {
     pub sequence: u64,
     /// Dense deltas per tile, in the map's tile size.
     pub deltas: Vec<TileDelta>,
+    /// Shared by the batches of one update stream, set once one of them is
+    /// refused or not committed: the later ones are refused too, so that
+    /// none is applied past a gap its client will fill by sending again
+    /// (the gap's batch would then be out of order for good).
+    pub stream_broken: Arc<AtomicBool>,
+}
+
+impl Batch {
+    fn stream_is_broken(&self) -> bool {
+        self.stream_broken.load(Ordering::Acquire)
+    }
+
+    fn break_stream(&self) {
+        self.stream_broken.store(true, Ordering::Release);
+    }
 }
 
 /// The answer to a batch.
@@ -322,7 +338,8 @@ fn refuse(op: WriteOp, error: impl Fn() -> StoreError) {
         WriteOp::DeleteMap(_, r) | WriteOp::Pose(_, _, r) => {
             let _ = r.send(Err(error()));
         }
-        WriteOp::Apply(_, r) => {
+        WriteOp::Apply(batch, r) => {
+            batch.break_stream();
             let _ = r.send(Err(error()));
         }
         WriteOp::Frames(_, r) => {
@@ -471,8 +488,16 @@ fn respond(op: WriteOp, outcome: Outcome, failure: Option<&GroupFailure>) {
             send(r, value, failure)
         }
         (WriteOp::DeleteMap(_, r) | WriteOp::Pose(_, _, r), _) => send(r, skipped(), failure),
-        (WriteOp::Apply(_, r), Outcome::Ack(value)) => send(r, value, failure),
-        (WriteOp::Apply(_, r), _) => send(r, skipped(), failure),
+        (WriteOp::Apply(batch, r), Outcome::Ack(value)) => {
+            if failure.is_some() || value.is_err() {
+                batch.break_stream();
+            }
+            send(r, value, failure)
+        }
+        (WriteOp::Apply(batch, r), _) => {
+            batch.break_stream();
+            send(r, skipped(), failure)
+        }
         (WriteOp::Frames(_, r), Outcome::Frames(value)) => send(r, value, failure),
         (WriteOp::Frames(_, r), _) => send(r, skipped(), failure),
         (WriteOp::Stop, _) => {}
@@ -619,6 +644,10 @@ impl Wanted {
 struct Group<'t> {
     txn: Box<dyn Transaction + 't>,
     wanted: Wanted,
+    /// Streams one of whose batches failed in this attempt (their flags
+    /// are set only once the group's fate is known: an attempt that met a
+    /// concurrent write is made again).
+    broken_here: Vec<Arc<AtomicBool>>,
     maps: HashMap<String, PendingMap>,
     robots: BTreeMap<String, PendingRobot>,
     poses: Vec<(String, u64, Vec<u8>)>,
@@ -638,6 +667,7 @@ impl<'t> Group<'t> {
         let mut group = Group {
             txn,
             wanted: Wanted::of(ops),
+            broken_here: Vec::new(),
             maps: HashMap::new(),
             robots: BTreeMap::new(),
             poses: Vec::new(),
@@ -720,7 +750,23 @@ impl<'t> Group<'t> {
                 Outcome::Unit(self.check(result))
             }
             WriteOp::Apply(batch, _) => {
-                let result = self.apply_batch(batch);
+                let broken = batch.stream_is_broken()
+                    || self
+                        .broken_here
+                        .iter()
+                        .any(|flag| Arc::ptr_eq(flag, &batch.stream_broken));
+                let result = if broken {
+                    Err(StoreError::Unavailable(format!(
+                        "an earlier batch of this update stream was not applied; send again \
+                         from it (batch {} of client {:?} was not applied)",
+                        batch.sequence, batch.client_id
+                    )))
+                } else {
+                    self.apply_batch(batch)
+                };
+                if result.is_err() {
+                    self.broken_here.push(batch.stream_broken.clone());
+                }
                 Outcome::Ack(self.check(result))
             }
             WriteOp::Frames(frames, _) => {
