@@ -23,7 +23,29 @@ pub fn deog_binary() -> PathBuf {
     BINARY
         .get_or_init(|| {
             let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-            let output = Command::new(cargo)
+            let mut command = Command::new(cargo);
+            // Cargo gives the test process the variables of the crate under
+            // test (CARGO_MANIFEST_DIR, CARGO_PKG_NAME, ...). Build scripts
+            // that watch them (ring's does) would see them change between
+            // this build and the one that built the test, and each would
+            // rebuild half the tree for the other.
+            for (name, _) in std::env::vars_os() {
+                let name = name.to_string_lossy();
+                if name.starts_with("CARGO_PKG_")
+                    || name.starts_with("CARGO_MANIFEST_")
+                    || name.starts_with("CARGO_BIN_")
+                    || [
+                        "CARGO_CRATE_NAME",
+                        "CARGO_PRIMARY_PACKAGE",
+                        "CARGO_TARGET_TMPDIR",
+                        "OUT_DIR",
+                    ]
+                    .contains(&name.as_ref())
+                {
+                    command.env_remove(name.as_ref());
+                }
+            }
+            let output = command
                 .args(["build", "--quiet", "-p", "deog", "--bin", "deog"])
                 .current_dir(env!("CARGO_MANIFEST_DIR"))
                 .output()
