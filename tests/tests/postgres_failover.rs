@@ -164,7 +164,7 @@ async fn acknowledged_batches_survive_a_failover_to_a_synchronous_standby_exactl
     eprintln!("map made after {:?}", test_started.elapsed());
     let stop = Arc::new(AtomicBool::new(false));
     let acked: Vec<Arc<AtomicU64>> = (0..WRITERS).map(|_| Arc::default()).collect();
-    let writers: Vec<_> = (0..WRITERS)
+    let mut writers: Vec<_> = (0..WRITERS)
         .map(|w| {
             let client = clients[w % servers.len()].clone();
             tokio::spawn(write(client, w, acked[w].clone(), stop.clone()))
@@ -219,16 +219,23 @@ async fn acknowledged_batches_survive_a_failover_to_a_synchronous_standby_exactl
         .await
         .map(|_| (promoting_at.elapsed(), killed_at.elapsed()))
         .unwrap_or_else(|| panic!("no write landed within {FAILOVER_LIMIT:?} of the promotion"));
-    let all_landed = time_until(FAILOVER_LIMIT, || advanced(true))
-        .await
-        .map(|_| promoting_at.elapsed())
-        .unwrap_or_else(|| {
-            panic!(
-                "not every writer wrote again within {FAILOVER_LIMIT:?}: {:?} then {:?}",
-                before_failover,
-                snapshot(&acked)
-            )
-        });
+    let all_landed = time_until(FAILOVER_LIMIT, || {
+        advanced(true) || writers.iter().any(|w| w.is_finished())
+    })
+    .await
+    .map(|_| promoting_at.elapsed())
+    .unwrap_or_else(|| {
+        panic!(
+            "not every writer wrote again within {FAILOVER_LIMIT:?}: {:?} then {:?}",
+            before_failover,
+            snapshot(&acked)
+        )
+    });
+    // A writer that ended early failed (its sender gave up): say why.
+    if let Some(at) = writers.iter().position(|w| w.is_finished()) {
+        let ended = writers.remove(at).await;
+        panic!("writer {at} ended during the failover: {ended:?}");
+    }
     for server in &servers {
         wait_for_health(&server.url(), "deog.v1.MapService", ServingStatus::Serving).await;
     }
