@@ -22,13 +22,13 @@ use crate::{ClusterError, ClusterOptions, binaries};
 pub const USER: &str = "deog";
 
 /// How long a start may take before the server counts as not ready.
-const READY_TIMEOUT: Duration = Duration::from_secs(30);
+pub(crate) const READY_TIMEOUT: Duration = Duration::from_secs(30);
 /// How long a fast shutdown may take before the server is killed.
 const STOP_TIMEOUT: Duration = Duration::from_secs(30);
 /// How long killed processes may take to disappear.
 const KILL_TIMEOUT: Duration = Duration::from_secs(10);
 /// Between two readiness probes.
-const POLL: Duration = Duration::from_millis(50);
+pub(crate) const POLL: Duration = Duration::from_millis(50);
 /// Starts that fail because a port or shared memory is still taken.
 const START_ATTEMPTS: u32 = 3;
 /// The server's log, inside the data folder, appended to by every start.
@@ -41,14 +41,14 @@ const LOG_FILE: &str = "deog-postgres.log";
 /// dies first, a watchdog does the same (see the crate documentation).
 #[derive(Debug)]
 pub struct LocalCluster {
-    bin_dir: PathBuf,
-    runner: Runner,
-    options: ClusterOptions,
+    pub(crate) bin_dir: PathBuf,
+    pub(crate) runner: Runner,
+    pub(crate) options: ClusterOptions,
     /// The folder holding the data folder and the sockets; canonical, since
     /// the server's working folder is compared with it.
-    root: PathBuf,
-    data_dir: PathBuf,
-    port: u16,
+    pub(crate) root: PathBuf,
+    pub(crate) data_dir: PathBuf,
+    pub(crate) port: u16,
     /// The running server: the postmaster, or `runuser` above it when root.
     server: Option<Child>,
     watchdog: Watchdog,
@@ -67,6 +67,21 @@ impl LocalCluster {
     /// [`LocalCluster::start`] with the given options.
     pub fn start_with(options: &ClusterOptions) -> Result<Self, ClusterError> {
         let started = Instant::now();
+        let mut cluster = Self::prepare(options)?;
+        cluster.init()?;
+        cluster.launch(options.port)?;
+        tracing::debug!(
+            port = cluster.port,
+            data_dir = %cluster.data_dir.display(),
+            elapsed_ms = started.elapsed().as_millis(),
+            "PostgreSQL cluster started"
+        );
+        Ok(cluster)
+    }
+
+    /// A cluster not yet initialised: its temporary folder (given to the
+    /// server's user) and its watchdog, but no data folder and no server.
+    pub(crate) fn prepare(options: &ClusterOptions) -> Result<Self, ClusterError> {
         let bin_dir = binaries()?;
         let runner = Runner::for_this_process();
         // The server's user must be able to reach the folder, and a root's
@@ -85,7 +100,7 @@ impl LocalCluster {
         runner.hand_over(&root)?;
         let watchdog = Watchdog::spawn(&root, &data_dir)?;
         // From here on, Drop (or the watchdog) cleans up after a failure.
-        let mut cluster = Self {
+        Ok(Self {
             bin_dir,
             runner,
             options: options.clone(),
@@ -95,16 +110,7 @@ impl LocalCluster {
             server: None,
             watchdog,
             _temp: temp,
-        };
-        cluster.init()?;
-        cluster.launch(options.port)?;
-        tracing::debug!(
-            port = cluster.port,
-            data_dir = %cluster.data_dir.display(),
-            elapsed_ms = started.elapsed().as_millis(),
-            "PostgreSQL cluster started"
-        );
-        Ok(cluster)
+        })
     }
 
     /// The TCP port on 127.0.0.1.
@@ -200,6 +206,11 @@ impl LocalCluster {
         self.launch(Some(self.port))
     }
 
+    /// The last lines of the server's log, for error messages.
+    pub(crate) fn log_tail(&self) -> String {
+        tail(&read_from(&self.data_dir.join(LOG_FILE), 0), 20)
+    }
+
     /// Runs `initdb` into the data folder.
     fn init(&self) -> Result<(), ClusterError> {
         let mut command = self.runner.server(&self.bin_dir.join("initdb"));
@@ -215,7 +226,7 @@ impl LocalCluster {
 
     /// Starts the server on `port` (or on a free one) and waits until it is
     /// ready, trying again while a port or shared memory is still taken.
-    fn launch(&mut self, port: Option<u16>) -> Result<(), ClusterError> {
+    pub(crate) fn launch(&mut self, port: Option<u16>) -> Result<(), ClusterError> {
         let mut attempt = 1;
         loop {
             let candidate = match port {

@@ -39,7 +39,8 @@ pub fn deog_binary() -> PathBuf {
                 ]
                 .iter()
                 .any(|prefix| key.starts_with(prefix));
-                if per_crate || key == "CARGO_PRIMARY_PACKAGE" || key == "CARGO_TARGET_TMPDIR" {
+                let single = ["CARGO_PRIMARY_PACKAGE", "CARGO_TARGET_TMPDIR", "OUT_DIR"];
+                if per_crate || single.contains(&key.as_str()) {
                     build.env_remove(key);
                 }
             }
