@@ -1,7 +1,7 @@
 //! Several map servers on one PostgreSQL database, each a real server on
 //! real TCP: batches to the same tiles through different servers all land,
 //! a resend through another server is not applied twice, and watchers on
-//! one server hear what was written through another.
+//! one server (tiles, poses, frames) hear what was written through another.
 
 mod common;
 
@@ -122,6 +122,14 @@ async fn watchers_on_one_server_hear_writes_made_through_another() {
         .await
         .expect("watch poses")
         .into_inner();
+    let mut frames = watcher
+        .subscribe_frames(pb::SubscribeFramesRequest {
+            robot: "r".into(),
+            from_sequence: 0,
+        })
+        .await
+        .expect("subscribe frames")
+        .into_inner();
     // The watch is set up once the second server has heard anything.
     tokio::time::sleep(Duration::from_millis(300)).await;
 
@@ -181,6 +189,37 @@ async fn watchers_on_one_server_hear_writes_made_through_another() {
         .expect("stream")
         .expect("pose");
     assert_eq!((pose.robot.as_str(), pose.frame_sequence), ("r", 9));
+
+    writer
+        .publish_frames(pb::PublishFramesRequest {
+            frames: (1..=3).map(frame).collect(),
+        })
+        .await
+        .expect("frames");
+    for expected in 1..=3 {
+        let frame = tokio::time::timeout(Duration::from_secs(5), frames.message())
+            .await
+            .expect("the second server heard the frame")
+            .expect("stream")
+            .expect("frame");
+        assert_eq!(frame.sequence, expected);
+    }
+}
+
+/// Frame `sequence` of robot "r", on the Scout's rig.
+fn frame(sequence: u64) -> pb::SonarFrame {
+    pb::SonarFrame {
+        robot: "r".into(),
+        sequence,
+        time_s: sequence as f64 * 0.1,
+        odometry: Some(pb::Pose2 {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+        }),
+        ranges: vec![2.0; 16],
+        ..Default::default()
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
