@@ -823,7 +823,9 @@ pub fn expected_range_by_marching(
         let a = heading + j as f64 * step;
         let dir = (a.cos(), a.sin());
         let mut t = 0.0f64;
-        while t <= max_cells.min(nearest) {
+        // A cell entered at `t` may lie nearer than `t` by up to its
+        // diagonal: march on that far past the nearest found so far.
+        while t <= max_cells.min(nearest + std::f64::consts::SQRT_2) {
             let (px, py) = (ox + t * dir.0, oy + t * dir.1);
             let (cx, cy) = (px.floor(), py.floor());
             if view.occupancy(CellIndex::new(cx as i32, cy as i32)) == Occupancy::Occupied {
