@@ -3,6 +3,7 @@
 //! `deog copy`.
 
 use anyhow::{Result, anyhow};
+use deog_harness::redact::url_without_password as without_password;
 use deog_server::store::is_postgres_url;
 use deog_server::{PostgresConfig, PostgresStore, SledConfig, SledStore};
 use std::path::PathBuf;
@@ -63,27 +64,6 @@ impl StoreLocation {
             }
         })
     }
-}
-
-/// `url` with any password replaced by `***`.
-fn without_password(url: &str) -> String {
-    let Some((scheme, rest)) = url.split_once("://") else {
-        return url.to_string();
-    };
-    let (authority, tail) = match rest.find(['/', '?']) {
-        Some(at) => rest.split_at(at),
-        None => (rest, ""),
-    };
-    let Some((credentials, hosts)) = authority.rsplit_once('@') else {
-        return url.to_string();
-    };
-    let user = credentials
-        .split_once(':')
-        .map_or(credentials, |(user, _)| user);
-    if user.len() == credentials.len() {
-        return url.to_string();
-    }
-    format!("{scheme}://{user}:***@{hosts}{tail}")
 }
 
 #[cfg(test)]

@@ -43,8 +43,9 @@ impl Addresses {
     }
 }
 
-/// Map server `index`, on the plan's PostgreSQL store or else a fresh
-/// sled store in `data`.
+/// Map server `index`: on a fresh sled store in `data`, or, given the
+/// plan's PostgreSQL store, with no store flag: the URL (which may hold a
+/// password) goes in `DEOG_STORE` ([`server_env`]), not on the command line.
 pub(crate) fn server(
     plan: &DemoPlan,
     addresses: &Addresses,
@@ -57,12 +58,21 @@ pub(crate) fn server(
         .map(ToString::to_string)
         .unwrap_or_default();
     let store = match &plan.store {
-        Some(url) => [OsString::from("--store"), OsString::from(url)],
-        None => [OsString::from("--data"), data.as_os_str().to_owned()],
+        Some(_) => Vec::new(),
+        None => vec![OsString::from("--data"), data.as_os_str().to_owned()],
     };
     os(&["server", "--listen", &listen])
         .into_iter()
         .chain(store)
+        .collect()
+}
+
+/// The environment of a map server: `DEOG_STORE` on PostgreSQL.
+pub(crate) fn server_env(plan: &DemoPlan) -> Vec<(&'static str, &str)> {
+    plan.store
+        .as_deref()
+        .map(|url| ("DEOG_STORE", url))
+        .into_iter()
         .collect()
 }
 
@@ -248,7 +258,11 @@ mod tests {
         };
         assert_eq!(
             line(&server(&plan, &addresses, 1, Path::new("unused"))),
-            "server --listen 127.0.0.1:5003 --store postgres://deog@db/maps"
+            "server --listen 127.0.0.1:5003"
+        );
+        assert_eq!(
+            server_env(&plan),
+            [("DEOG_STORE", "postgres://deog@db/maps")]
         );
         assert_eq!(
             line(&map(&plan, &plan.robots[0], &addresses)),

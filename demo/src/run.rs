@@ -142,10 +142,11 @@ impl<'a> Demo<'a> {
             out.display()
         );
         for index in 0..plan.servers {
-            children.start(
+            children.start_with_env(
                 &server_name(index),
                 Role::Service,
                 &commands::server(plan, &addresses, index, &server_data(out)),
+                &commands::server_env(plan),
             )?;
         }
         children.start("sim", Role::Service, &commands::sim(plan, &addresses))?;

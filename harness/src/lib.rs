@@ -21,6 +21,7 @@
 //!   stops its children and a long-running subcommand ends.
 
 pub mod proc_stats;
+pub mod redact;
 pub mod run_reads;
 pub mod shutdown;
 pub mod status;

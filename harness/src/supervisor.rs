@@ -71,6 +71,20 @@ impl Supervisor {
     /// `DEOG_*` variables: everything it needs is in `args`, so a setting
     /// meant for the user's own processes cannot leak into the demo.
     pub fn start(&mut self, name: &str, role: Role, args: &[OsString]) -> Result<()> {
+        self.start_with_env(name, role, args, &[])
+    }
+
+    /// As [`Supervisor::start`], with `env` set in the child's environment
+    /// (a secret such as a database URL with its password stays out of the
+    /// argument list, which `ps` shows to everyone); the command line
+    /// kept for reports names them with passwords hidden.
+    pub fn start_with_env(
+        &mut self,
+        name: &str,
+        role: Role,
+        args: &[OsString],
+        env: &[(&str, &str)],
+    ) -> Result<()> {
         let log = self.log_dir.join(format!("{name}.log"));
         let out = File::create(&log).with_context(|| format!("creating {}", log.display()))?;
         let err = out
@@ -91,7 +105,13 @@ impl Supervisor {
         if std::env::var_os("RUST_LOG").is_none() {
             command.env("RUST_LOG", "info");
         }
-        let command_line = std::iter::once("deog".to_string())
+        for (key, value) in env {
+            command.env(key, value);
+        }
+        let command_line = env
+            .iter()
+            .map(|(key, value)| format!("{key}='{}'", crate::redact::url_without_password(value)))
+            .chain(std::iter::once("deog".to_string()))
             .chain(args.iter().map(|a| a.to_string_lossy().into_owned()))
             .collect::<Vec<_>>()
             .join(" ");

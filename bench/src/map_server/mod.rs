@@ -308,7 +308,7 @@ async fn start_servers(
             .into_iter()
             .chain(store.server_args(cache_mb))
             .collect();
-        children.start(&name, Role::Service, &args)?;
+        children.start_with_env(&name, Role::Service, &args, &store.server_env())?;
         let server = ServerUnderTest {
             url: format!("http://{addr}"),
             pid: children

@@ -106,10 +106,21 @@ impl StoreUnderTest {
                 args.push(data.clone().into_os_string());
                 args
             }
-            Self::Postgres { url, .. } => os(&["--store", url]),
+            // The URL, which may hold a password, goes in the
+            // environment ([`StoreUnderTest::server_env`]).
+            Self::Postgres { .. } => Vec::new(),
         };
         args.extend(os(&["--cache-mb", &cache_mb.to_string()]));
         args
+    }
+
+    /// The environment of a server on this store: `DEOG_STORE` on
+    /// PostgreSQL.
+    pub fn server_env(&self) -> Vec<(&'static str, &str)> {
+        self.postgres_url()
+            .map(|url| ("DEOG_STORE", url))
+            .into_iter()
+            .collect()
     }
 
     /// The database's URL, on PostgreSQL.
