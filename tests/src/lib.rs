@@ -60,6 +60,14 @@ pub fn deog_binary() -> PathBuf {
         .clone()
 }
 
+/// A tile's cells, decoded from the wire's little-endian `i16`s.
+pub fn tile_cells(tile: &deog_proto::v1::Tile) -> Vec<i16> {
+    tile.cells
+        .chunks_exact(2)
+        .map(|b| i16::from_le_bytes([b[0], b[1]]))
+        .collect()
+}
+
 /// Runs `deog <args>` to its end with `env` set, the `DEOG_*` variables
 /// of the test's own environment removed (so they cannot change what a
 /// test means) and logs quiet.

@@ -322,11 +322,7 @@ async fn check_exactly_once(client: &MapClient, written: &[Written]) -> Vec<(i32
             (0..WRITERS as i32).contains(&w) && x >= 0 && (x as u32) < written[w as usize].pushed,
             "tile ({x}, {w}) was never pushed"
         );
-        let cells: Vec<i16> = tile
-            .cells
-            .chunks_exact(2)
-            .map(|b| i16::from_le_bytes([b[0], b[1]]))
-            .collect();
+        let cells = deog_tests::tile_cells(tile);
         assert!(
             cells.len() == (SIDE * SIDE) as usize && cells.iter().all(|&c| c == 1),
             "tile ({x}, {w}) was applied {} times",

@@ -140,11 +140,7 @@ async fn acknowledged_batches_survive_kills_and_a_full_disk_exactly_once() {
             (0..WRITERS).contains(&w) && x >= 0 && (x as u32) < pushed[w as usize],
             "tile ({x}, {w}) was never pushed"
         );
-        let cells: Vec<i16> = tile
-            .cells
-            .chunks_exact(2)
-            .map(|b| i16::from_le_bytes([b[0], b[1]]))
-            .collect();
+        let cells = deog_tests::tile_cells(&tile);
         assert!(
             cells.len() == (SIDE * SIDE) as usize && cells.iter().all(|&c| c == 1),
             "tile ({x}, {w}) was applied {} times",

@@ -93,11 +93,7 @@ async fn clients_carry_on_through_the_other_server_and_every_batch_lands_once() 
     assert_eq!(tiles.len(), TILES.len());
     let expected = (CLIENTS as u64 * BATCHES) as i16;
     for tile in &tiles {
-        let cells: Vec<i16> = tile
-            .cells
-            .chunks_exact(2)
-            .map(|b| i16::from_le_bytes([b[0], b[1]]))
-            .collect();
+        let cells = deog_tests::tile_cells(tile);
         assert!(
             cells.iter().all(|&c| c == expected),
             "tile {:?}: {} rather than {expected}",
