@@ -430,7 +430,12 @@ impl<S: Store> MapService for MapServer<S> {
                         batch.stream_broken = stream_broken.clone();
                         server.writer.submit_batch(batch).await
                     }
-                    Err(error) => Err(error),
+                    Err(error) => {
+                        if matches!(error, StoreError::Unavailable(_)) {
+                            server.writer.store_unavailable();
+                        }
+                        Err(error)
+                    }
                 };
                 let pending = match submitted {
                     Ok(ack) => Pending::Ack(client, sequence, ack),

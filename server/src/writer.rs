@@ -86,6 +86,8 @@ enum WriteOp {
     Apply(Batch, Reply<Ack>),
     Frames(Vec<EncodedFrame>, Reply<(u32, u32)>),
     Pose(Arc<PoseEstimate>, Vec<u8>, Reply<()>),
+    /// A read met the store unavailable: look whether it can still write.
+    Probe,
     Stop,
 }
 
@@ -219,6 +221,14 @@ impl WriterHandle {
         self.call(|r| WriteOp::Frames(frames, r)).await
     }
 
+    /// Says that a read found the store unavailable: the writer then looks
+    /// whether it can still write, and if not reports the store failing
+    /// (health `NOT_SERVING`) until it recovers, as after a failed commit.
+    /// Never waits: with the queue full, the writes queued will find out.
+    pub fn store_unavailable(&self) {
+        let _ = self.sender.try_send(WriteOp::Probe);
+    }
+
     /// Stores a pose estimate; [`StoreError::MapNotFound`] if the map it
     /// names does not exist.
     pub async fn publish_pose(&self, pose: PoseEstimate) -> Result<(), StoreError> {
@@ -252,7 +262,22 @@ fn run<S: Store>(
             stopping = true;
             group.truncate(at);
         }
-        if let Some((failure, unconfirmed)) = commit_group(store, group, events) {
+        let probed = group.len();
+        group.retain(|op| !matches!(op, WriteOp::Probe));
+        // A group of writes finds out by committing; probes alone ask.
+        let failed = if group.is_empty() && probed > 0 {
+            store.check_writable().err().map(|error| {
+                let unconfirmed = Unconfirmed {
+                    map_events: Vec::new(),
+                    frame_events: Vec::new(),
+                    pose_events: Vec::new(),
+                };
+                (GroupFailure::of(&error), unconfirmed)
+            })
+        } else {
+            commit_group(store, group, events)
+        };
+        if let Some((failure, unconfirmed)) = failed {
             if !stopping {
                 stopping = recover(store, events, &mut receiver, health, failure, unconfirmed);
             }
@@ -345,7 +370,7 @@ fn refuse(op: WriteOp, error: impl Fn() -> StoreError) {
         WriteOp::Frames(_, r) => {
             let _ = r.send(Err(error()));
         }
-        WriteOp::Stop => {}
+        WriteOp::Probe | WriteOp::Stop => {}
     }
 }
 
@@ -500,7 +525,7 @@ fn respond(op: WriteOp, outcome: Outcome, failure: Option<&GroupFailure>) {
         }
         (WriteOp::Frames(_, r), Outcome::Frames(value)) => send(r, value, failure),
         (WriteOp::Frames(_, r), _) => send(r, skipped(), failure),
-        (WriteOp::Stop, _) => {}
+        (WriteOp::Probe | WriteOp::Stop, _) => {}
     }
 }
 
@@ -634,7 +659,7 @@ impl Wanted {
                             .insert(frame.sequence);
                     }
                 }
-                WriteOp::CreateMap(..) | WriteOp::Pose(..) | WriteOp::Stop => {}
+                WriteOp::CreateMap(..) | WriteOp::Pose(..) | WriteOp::Probe | WriteOp::Stop => {}
             }
         }
         wanted
@@ -792,7 +817,7 @@ impl<'t> Group<'t> {
                 }
                 Outcome::Unit(self.check(result))
             }
-            WriteOp::Stop => Outcome::Skipped,
+            WriteOp::Probe | WriteOp::Stop => Outcome::Skipped,
         }
     }
 

@@ -10,6 +10,7 @@ use deog_proto::v1 as pb;
 use deog_server::{PostgresConfig, ServerConfig};
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
+use tonic_health::pb::health_check_response::ServingStatus;
 
 /// Two servers over one fresh database.
 async fn two_servers() -> (TestServer, TestServer, tempfile::TempDir) {
@@ -299,4 +300,57 @@ async fn reads_past_the_connection_limit_wait_their_turn_and_writes_go_on() {
         .find(|(key, _, _)| key.y == 1)
         .expect("tile (0, 1)");
     assert!(row.2.iter().all(|&c| c == 8), "{:?}", &row.2[..4]);
+}
+
+/// Polls the server's health until it is `status`, for at most 10 s.
+async fn wait_for_status(server: &TestServer, status: ServingStatus) -> bool {
+    for _ in 0..100 {
+        if server.serving_status().await == Some(status as i32) {
+            return true;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    false
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_server_with_nothing_to_write_reports_the_database_gone_and_back() {
+    let mut cluster = tokio::task::block_in_place(deog_pg_cluster::LocalCluster::start)
+        .expect("start PostgreSQL");
+    let url = tokio::task::block_in_place(|| cluster.create_database("maps")).expect("database");
+    let server = TestServer::start_on_database(&url, ServerConfig::default()).await;
+    let mut client = server.client().await;
+    create_map(&mut client, "m", 8).await;
+    let (acks, _) = send_batches(
+        &mut client,
+        vec![batch("m", "c", 1, vec![dense_delta(0, 0, &[1; 64])])],
+    )
+    .await;
+    assert!(acks[0].applied);
+
+    tokio::task::block_in_place(|| cluster.kill()).expect("kill PostgreSQL");
+    let (acks, error) = send_batches(
+        &mut client,
+        vec![batch("m", "c", 2, vec![dense_delta(0, 0, &[1; 64])])],
+    )
+    .await;
+    assert!(acks.is_empty());
+    let error = error.expect("a batch with the database gone is refused");
+    assert_eq!(error.code(), tonic::Code::Unavailable, "{error:?}");
+    assert!(
+        wait_for_status(&server, ServingStatus::NotServing).await,
+        "health still says serving with the database gone"
+    );
+
+    tokio::task::block_in_place(|| cluster.restart()).expect("restart PostgreSQL");
+    assert!(
+        wait_for_status(&server, ServingStatus::Serving).await,
+        "health never came back"
+    );
+    let (acks, error) = send_batches(
+        &mut client,
+        vec![batch("m", "c", 2, vec![dense_delta(0, 0, &[1; 64])])],
+    )
+    .await;
+    assert!(error.is_none() && acks[0].applied, "{error:?}");
 }

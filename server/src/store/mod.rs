@@ -150,6 +150,14 @@ pub trait Store: Send + Sync + 'static {
     /// commit failed, for the errors calls get meanwhile.
     fn recover(&self, failure: &str) -> Result<(), StoreError>;
 
+    /// Whether a write would land now, asked when a read found the store
+    /// unavailable while no write was under way. A store that a failed
+    /// read cannot mean unwritable (sled: reads fail only while it is
+    /// being opened again) answers yes.
+    fn check_writable(&self) -> Result<(), StoreError> {
+        Ok(())
+    }
+
     /// Changes committed through other servers sharing this store, as they
     /// arrive, so that watchers here hear of them; `None` (the default)
     /// for a store no other server writes. Called once, by the server.

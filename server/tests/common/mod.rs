@@ -199,6 +199,32 @@ impl TestServer {
         Self::start_over(store, path, config).await
     }
 
+    /// A server on the PostgreSQL database at `url` (one the test manages
+    /// itself, to stop and start it under the server).
+    pub async fn start_on_database(url: &str, config: ServerConfig) -> Self {
+        let store = SuiteStore {
+            inner: Box::new(
+                PostgresStore::open(&PostgresConfig::new(url)).expect("open PostgreSQL store"),
+            ),
+            flushes: Arc::new(AtomicU64::new(0)),
+        };
+        Self::start_over(store, PathBuf::from(url), config).await
+    }
+
+    /// The map service's health, or `None` if the server does not answer.
+    pub async fn serving_status(&self) -> Option<i32> {
+        let channel = Channel::from_shared(self.url())
+            .ok()?
+            .connect()
+            .await
+            .ok()?;
+        let mut health = tonic_health::pb::health_client::HealthClient::new(channel);
+        let request = tonic_health::pb::HealthCheckRequest {
+            service: deog_server::MAP_SERVICE_NAME.into(),
+        };
+        Some(health.check(request).await.ok()?.into_inner().status)
+    }
+
     async fn start_over(store: SuiteStore, path: PathBuf, config: ServerConfig) -> Self {
         let flushes = store.flushes.clone();
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
@@ -379,6 +405,9 @@ impl Store for SuiteStore {
     }
     fn foreign_changes(&self) -> Option<tokio::sync::mpsc::Receiver<StoreChange>> {
         self.inner.foreign_changes()
+    }
+    fn check_writable(&self) -> Result<(), StoreError> {
+        self.inner.check_writable()
     }
     fn begin(&self) -> Result<Box<dyn Transaction + '_>, StoreError> {
         Ok(Box::new(CountingTransaction {

@@ -414,19 +414,26 @@ impl Store for PostgresStore {
         Some(self.pool.listen(CHANGES_CHANNEL))
     }
 
+    fn check_writable(&self) -> Result<(), StoreError> {
+        self.with(probe)
+    }
+
     fn recover(&self, _failure: &str) -> Result<(), StoreError> {
         // Connections the failure broke are dropped as they are found;
         // recovered once a write lands on a fresh one.
         self.pool.clear();
-        self.with(|conn| {
-            conn.execute(
-                "INSERT INTO deog_probe (id, at) VALUES (1, now()) \
-                 ON CONFLICT (id) DO UPDATE SET at = excluded.at",
-                &[],
-            )?;
-            Ok(())
-        })
+        self.with(probe)
     }
+}
+
+/// A small write, to see that writes land.
+fn probe(conn: &mut Conn) -> Result<(), StoreError> {
+    conn.execute(
+        "INSERT INTO deog_probe (id, at) VALUES (1, now()) \
+         ON CONFLICT (id) DO UPDATE SET at = excluded.at",
+        &[],
+    )?;
+    Ok(())
 }
 
 fn read_map(conn: &mut Conn, name: &str, lock: bool) -> Result<Option<MapRecord>, StoreError> {
