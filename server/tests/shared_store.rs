@@ -354,3 +354,75 @@ async fn a_server_with_nothing_to_write_reports_the_database_gone_and_back() {
     .await;
     assert!(error.is_none() && acks[0].applied, "{error:?}");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn long_reads_come_whole_and_in_order_across_pages() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let server =
+        TestServer::start_postgres_at(dir.path().join("pages"), ServerConfig::default()).await;
+    let mut client = server.client().await;
+    create_map(&mut client, "m", 8).await;
+    // 40 x 30 tiles: several pages of 256 whichever way they are cut.
+    let batches = (0..30)
+        .map(|y| {
+            let tiles = (-20..20).map(|x| dense_delta(x, y, &[1; 64])).collect();
+            batch("m", "c", y as u64 + 1, tiles)
+        })
+        .collect();
+    let (acks, error) = send_batches(&mut client, batches).await;
+    assert!(error.is_none() && acks.len() == 30, "{error:?}");
+    let whole = all_tiles(&mut client, "m").await;
+    let keys: Vec<(i32, i32)> = whole.iter().map(|(k, _, _)| (k.x, k.y)).collect();
+    let mut expected: Vec<(i32, i32)> = (-20..20)
+        .flat_map(|x| (0..30).map(move |y| (x, y)))
+        .collect();
+    expected.sort_unstable();
+    assert_eq!(keys, expected, "every tile once, in key order");
+
+    // A box of tiles x -15..=14, y 3..=27 (cells of 8-cell tiles).
+    let mut stream = client
+        .get_tiles(pb::TileQuery {
+            map: "m".into(),
+            selection: Some(pb::tile_query::Selection::Region(pb::CellBox {
+                min_x: -15 * 8,
+                min_y: 3 * 8,
+                max_x: 14 * 8 + 7,
+                max_y: 27 * 8 + 7,
+            })),
+            newer_than_version: 0,
+        })
+        .await
+        .expect("get tiles")
+        .into_inner();
+    let mut boxed = Vec::new();
+    while let Some(tile) = stream.message().await.expect("tile") {
+        let key = tile.key.expect("key");
+        boxed.push((key.x, key.y));
+    }
+    let expected: Vec<(i32, i32)> = (-15..15)
+        .flat_map(|x| (3..28).map(move |y| (x, y)))
+        .collect();
+    assert_eq!(boxed, expected);
+
+    client
+        .publish_frames(pb::PublishFramesRequest {
+            frames: (1..=700).map(frame).collect(),
+        })
+        .await
+        .expect("frames");
+    let mut read = client
+        .read_frames(pb::ReadFramesRequest {
+            robot: "r".into(),
+            from_sequence: 100,
+            to_sequence: 650,
+            limit: 0,
+        })
+        .await
+        .expect("read frames")
+        .into_inner();
+    let mut sequences = Vec::new();
+    while let Some(frame) = read.message().await.expect("frame") {
+        sequences.push(frame.sequence);
+    }
+    assert_eq!(sequences, (100..=650).collect::<Vec<u64>>());
+}

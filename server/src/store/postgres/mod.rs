@@ -119,9 +119,8 @@ impl PostgresStore {
     }
 
     /// Visits a robot's rows (frames or poses) with sequence in
-    /// `from..=to` a page at a time; `sql` takes the robot, the bounds,
-    /// whether this is the first page, the last sequence seen and the
-    /// page's size.
+    /// `from..=to` a page at a time; `sql` takes the robot, the page's
+    /// first and last sequence (inclusive) and its size.
     fn read_sequenced(
         &self,
         sql: &'static str,
@@ -132,21 +131,20 @@ impl PostgresStore {
         if from > to {
             return Ok(());
         }
-        let (from, to) = (sql_sequence(from), sql_sequence(to));
-        let mut after: Option<i64> = None;
+        let (mut from, to) = (sql_sequence(from), sql_sequence(to));
         loop {
-            let (first, last) = (after.is_none(), after.unwrap_or(from));
-            let rows = self
-                .with(|conn| conn.query(sql, &[&robot, &from, &to, &first, &last, &PAGE_ROWS]))?;
+            let rows = self.with(|conn| conn.query(sql, &[&robot, &from, &to, &PAGE_ROWS]))?;
+            let mut last = None;
             for row in &rows {
                 let sequence: i64 = row.get(0);
                 if !visit(stored_sequence(sequence), row.get(1)) {
                     return Ok(());
                 }
-                after = Some(sequence);
+                last = Some(sequence);
             }
-            if rows.len() < PAGE_ROWS as usize {
-                return Ok(());
+            match last.filter(|_| rows.len() == PAGE_ROWS as usize) {
+                Some(last) if last < to => from = last + 1,
+                _ => return Ok(()),
             }
         }
     }
@@ -248,40 +246,45 @@ impl Store for PostgresStore {
         range: TileRange,
         visit: &mut dyn FnMut(TileKey, StoredTile) -> bool,
     ) -> Result<(), StoreError> {
-        let mut after: Option<TileKey> = None;
+        // Each page starts at a key, inclusive, given as the one lower
+        // bound `(x, y) >= (…)`, so that even a generic plan starts its
+        // index scan there (with a second lower bound, or "first page or
+        // past the last key", it scans from the range's start every page).
+        let mut from = (range.min.x, i32::MIN);
         loop {
-            let (first, last) = match after {
-                None => (true, TileKey::new(0, 0)),
-                Some(key) => (false, key),
-            };
             let rows = self.with(|conn| {
                 conn.query(
                     "SELECT x, y, version, cells FROM tiles WHERE map = $1 \
-                     AND x BETWEEN $2 AND $3 AND y BETWEEN $4 AND $5 \
-                     AND ($6 OR (map, x, y) > ($1, $7, $8)) ORDER BY x, y LIMIT $9",
+                     AND x <= $2 AND y BETWEEN $3 AND $4 AND (x, y) >= ($5, $6) \
+                     ORDER BY x, y LIMIT $7",
                     &[
                         &map.name,
-                        &range.min.x,
                         &range.max.x,
                         &range.min.y,
                         &range.max.y,
-                        &first,
-                        &last.x,
-                        &last.y,
+                        &from.0,
+                        &from.1,
                         &PAGE_ROWS,
                     ],
                 )
             })?;
+            let mut last = None;
             for row in &rows {
                 let key = TileKey::new(row.get(0), row.get(1));
                 if !visit(key, decode_tile(map, row.get(2), row.get(3))?) {
                     return Ok(());
                 }
-                after = Some(key);
+                last = Some(key);
             }
-            if rows.len() < PAGE_ROWS as usize {
+            let Some(last) = last.filter(|_| rows.len() == PAGE_ROWS as usize) else {
                 return Ok(());
-            }
+            };
+            // The key after the last, in (x, y) order.
+            from = match (last.y.checked_add(1), last.x.checked_add(1)) {
+                (Some(y), _) => (last.x, y),
+                (None, Some(x)) => (x, i32::MIN),
+                (None, None) => return Ok(()),
+            };
         }
     }
 
@@ -355,7 +358,7 @@ impl Store for PostgresStore {
     ) -> Result<(), StoreError> {
         self.read_sequenced(
             "SELECT sequence, frame FROM frames WHERE robot = $1 AND sequence BETWEEN $2 AND $3 \
-             AND ($4 OR sequence > $5) ORDER BY sequence LIMIT $6",
+             ORDER BY sequence LIMIT $4",
             robot,
             (from, to),
             visit,
@@ -375,7 +378,7 @@ impl Store for PostgresStore {
     ) -> Result<(), StoreError> {
         self.read_sequenced(
             "SELECT sequence, pose FROM poses WHERE robot = $1 AND sequence BETWEEN $2 AND $3 \
-             AND ($4 OR sequence > $5) ORDER BY sequence LIMIT $6",
+             ORDER BY sequence LIMIT $4",
             robot,
             (from, to),
             visit,
