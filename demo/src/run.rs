@@ -150,6 +150,17 @@ impl<'a> Demo<'a> {
             )?;
         }
         children.start("sim", Role::Service, &commands::sim(plan, &addresses))?;
+        // Every server up before anyone is given them all: a client's
+        // calls are spread over the addresses it has.
+        if addresses.servers.len() > 1 {
+            for addr in &addresses.servers {
+                let url = format!("http://{addr}");
+                connect(&mut children, "map server", || {
+                    MapClient::connect(ClientConfig::new(url.clone()))
+                })
+                .await?;
+            }
+        }
         let server_url = addresses.server_url();
         let map_client = connect(&mut children, "map server", || {
             MapClient::connect(ClientConfig::new(server_url.clone()))

@@ -284,13 +284,14 @@ impl MapClient {
     /// The robots whose frames the server holds, with their sequence
     /// ranges. One attempt, no retry: callers that poll it ask again anyway.
     pub async fn robots(&self) -> Result<Vec<pb::RobotFrames>, ClientError> {
-        Ok(self
-            .raw
-            .clone()
-            .list_robots(pb::ListRobotsRequest {})
-            .await?
-            .into_inner()
-            .robots)
+        let raw = self.raw.clone();
+        Ok(with_retry(&self.config.retry, || {
+            let mut raw = raw.clone();
+            async move { raw.list_robots(pb::ListRobotsRequest {}).await }
+        })
+        .await?
+        .into_inner()
+        .robots)
     }
 
     /// Stores `rig` on the server, so that consumers of this robot's frames
