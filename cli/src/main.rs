@@ -19,6 +19,7 @@ mod sim;
 mod status;
 mod store_location;
 mod teleport;
+mod view;
 mod wander;
 
 use std::io::IsTerminal;
@@ -85,6 +86,10 @@ enum Command {
     /// the robots' frames and the localizers' estimates, with rates over
     /// an interval (--watch: redrawn until ctrl-c).
     Status(status::StatusArgs),
+    /// Serves a live web page of the running system: the map as it grows,
+    /// each robot's true pose, frame and path, each localizer's estimate
+    /// with its covariance, and kidnaps as they happen.
+    View(view::ViewArgs),
     /// Prints the shell completion script for bash, zsh or fish (and
     /// elvish, powershell).
     Completions(completions::CompletionsArgs),
@@ -132,6 +137,7 @@ fn run(command: Command) -> Result<()> {
         Command::Eval(args) => eval::run(args),
         Command::Bench(args) => bench::run(args),
         Command::Status(args) => status::run(args),
+        Command::View(args) => view::run(args),
         Command::Completions(args) => completions::print_completions(args, Cli::command()),
         Command::Man(args) => completions::write_man_pages(args, Cli::command()),
     }

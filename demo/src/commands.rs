@@ -103,6 +103,22 @@ pub(crate) fn sim(plan: &DemoPlan, addresses: &Addresses) -> Vec<OsString> {
     .collect()
 }
 
+/// The live view of the shared map, the robots and their estimates,
+/// serving its page on `listen`.
+pub(crate) fn view(addresses: &Addresses, listen: SocketAddr) -> Vec<OsString> {
+    os(&[
+        "view",
+        "--listen",
+        &listen.to_string(),
+        "--map",
+        MAP,
+        "--server",
+        &addresses.server_url(),
+        "--sim",
+        &addresses.sim_url(),
+    ])
+}
+
 /// A wanderer that spawns `robot` and drives it for the plan's duration.
 pub(crate) fn wander(
     plan: &DemoPlan,

@@ -57,6 +57,13 @@ pub struct DemoOptions {
     /// are printed).
     #[arg(long)]
     pub keep: bool,
+    /// Where the live view (`deog view`) serves its page; when that port is
+    /// taken, a free one (the address is printed).
+    #[arg(long, value_name = "ADDR", default_value = "127.0.0.1:8080")]
+    pub view: std::net::SocketAddr,
+    /// Start no live view.
+    #[arg(long)]
+    pub no_view: bool,
     /// The localizers correct with every frame, however far behind their
     /// robots they fall (by default one that falls behind skips to the
     /// newest frame within a second): for a machine too slow for the

@@ -47,6 +47,8 @@ pub(crate) struct DemoPlan {
     pub keep: bool,
     /// Whether the localizers correct with every frame.
     pub every_frame: bool,
+    /// Where the live view is asked to serve; `None` for no view.
+    pub view: Option<std::net::SocketAddr>,
     /// The PostgreSQL database the servers share; `None` for a sled store
     /// in the output folder.
     pub store: Option<String>,
@@ -98,6 +100,7 @@ impl DemoPlan {
             out: options.out.clone(),
             keep: options.keep,
             every_frame: options.every_frame,
+            view: (!options.no_view).then_some(options.view),
             store: options.store.clone(),
             servers: options.servers.max(1) as usize,
         })

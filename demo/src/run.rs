@@ -86,8 +86,22 @@ async fn demo(plan: &DemoPlan) -> Result<()> {
             pids.join(", "),
             pids.join(" "),
         );
+        if let Some(pid) = demo.children.pid("view") {
+            demo.children.keep("view");
+            println!("the live view keeps running too (process {pid}); stop it with: kill {pid}");
+        }
     }
     Ok(())
+}
+
+/// The address the view is asked for, or a free one when another
+/// process holds it (a second demo, a view left running).
+fn view_address(asked: std::net::SocketAddr) -> Result<std::net::SocketAddr> {
+    match std::net::TcpListener::bind(asked) {
+        Ok(_) => Ok(asked),
+        Err(_) if asked.port() != 0 => free_loopback_addr(),
+        Err(error) => Err(error).with_context(|| format!("--view {asked}")),
+    }
 }
 
 /// The name of map server `index` among the demo's processes.
@@ -174,6 +188,11 @@ impl<'a> Demo<'a> {
             SimClient::connect(ClientConfig::new(sim_url.clone()))
         })
         .await?;
+        if let Some(asked) = plan.view {
+            let listen = view_address(asked)?;
+            children.start("view", Role::Service, &commands::view(&addresses, listen))?;
+            println!("deog demo: watch it live at http://{listen}/");
+        }
         for robot in &plan.robots {
             children.start(
                 &format!("wander-{}", robot.name),
