@@ -11,6 +11,9 @@
 //!   executable, each in its own process group with its own log, watched
 //!   for failure and stopped on any exit; [`connect`] waits for a child's
 //!   service.
+//! - [`browser`]: [`browser::Browser`], a headless Chromium driven
+//!   through ChromeDriver (open a page, run a script, screenshot), for the
+//!   view's test and benchmark.
 //! - [`proc_stats`]: a process's memory and CPU time from `/proc`.
 //! - [`run_reads`]: a map, the robots' start poses, and a robot's true
 //!   poses and estimates read from the map server, as the evaluation takes
@@ -20,6 +23,7 @@
 //! - [`shutdown`]: [`shutdown_signal`], ctrl-c or SIGTERM, on which a run
 //!   stops its children and a long-running subcommand ends.
 
+pub mod browser;
 pub mod proc_stats;
 pub mod redact;
 pub mod run_reads;

@@ -341,6 +341,46 @@ impl Drop for ServerProcess {
     }
 }
 
+/// A `deog` process a test runs beside its servers (a wanderer, a
+/// cartographer, the view), its logs quiet; killed when dropped.
+#[derive(Debug)]
+pub struct RunningDeog(Child);
+
+impl RunningDeog {
+    /// Starts `deog <args>`, the test's own `DEOG_*` variables removed.
+    pub fn spawn(args: &[&str]) -> Self {
+        let mut command = Command::new(deog_binary());
+        command
+            .args(args)
+            .env("RUST_LOG", "warn")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null());
+        for (key, _) in std::env::vars() {
+            if key.starts_with("DEOG_") {
+                command.env_remove(key);
+            }
+        }
+        Self(command.spawn().expect("start deog"))
+    }
+
+    /// Whether it is still running.
+    pub fn is_running(&mut self) -> bool {
+        matches!(self.0.try_wait(), Ok(None))
+    }
+
+    /// Its process id.
+    pub fn pid(&self) -> u32 {
+        self.0.id()
+    }
+}
+
+impl Drop for RunningDeog {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 /// A small tmpfs mounted at a fresh temporary directory, to fill and empty
 /// under a running server; unmounted when dropped.
 #[derive(Debug)]
