@@ -48,6 +48,10 @@
 //!   cells, the servers' wire requests, rig, map, world, data and log
 //!   files) fed seeded mutated bytes for a fixed time: execs, crashes and
 //!   hangs, crashing inputs saved.
+//! - [`view`]: `deog bench view`, the live view under load in a real
+//!   headless Chromium: frames per second idle (the baseline) and with
+//!   robots driving, tile latency from acknowledgement to page, the view
+//!   process's memory and CPU.
 //! - [`option_error`]: [`OptionError`], an option out of its range or
 //!   options that do not go together.
 
@@ -63,5 +67,6 @@ pub mod option_error;
 mod python_script;
 pub mod real;
 pub mod sonar_mapping;
+pub mod view;
 
 pub use option_error::OptionError;

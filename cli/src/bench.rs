@@ -54,6 +54,10 @@ enum BenchTarget {
     /// bytes for a fixed time per target: execs, crashes, hangs. Fails if
     /// any input panicked; those inputs are saved.
     Fuzz(FuzzOptions),
+    /// The live view under load in a headless Chromium: the page's frames
+    /// per second idle and with robots driving, how soon a tile reaches
+    /// the page after its acknowledgement, the view's memory and CPU.
+    View(deog_bench::view::ViewBenchOptions),
 }
 
 /// Runs `deog bench`.
@@ -67,5 +71,6 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchTarget::Real(options) => deog_bench::real::run(options),
         BenchTarget::SonarMapping(options) => deog_bench::sonar_mapping::run(options),
         BenchTarget::Fuzz(options) => deog_bench::fuzz::run(options),
+        BenchTarget::View(options) => deog_bench::view::run(options),
     }
 }
