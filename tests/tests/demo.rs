@@ -12,9 +12,13 @@ use serde_json::Value;
 fn a_short_demo_localizes_every_robot_and_maps_the_room() {
     let out = tempfile::tempdir().expect("temp dir");
     let started = Instant::now();
+    // A port of its own: other tests' demos may run at the same time.
+    let view = deog_tests::free_loopback_addr().to_string();
     let output = Command::new(deog_binary())
         .args([
             "demo",
+            "--view",
+            &view,
             "--robots",
             "2",
             "--duration",
@@ -40,6 +44,12 @@ fn a_short_demo_localizes_every_robot_and_maps_the_room() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(output.status.success(), "demo failed:\n{stdout}\n{stderr}");
     let elapsed = started.elapsed().as_secs_f64();
+    assert!(
+        stdout.contains(&format!("watch it live at http://{view}/")),
+        "{stdout}"
+    );
+    let view_log = std::fs::read_to_string(out.path().join("logs/view.log")).unwrap_or_default();
+    assert!(!view_log.contains("ERROR"), "the view's log:\n{view_log}");
 
     let text = std::fs::read_to_string(out.path().join("report.json")).expect("report.json");
     let report: Value = serde_json::from_str(&text).expect("report.json is JSON");
@@ -124,6 +134,7 @@ fn a_demo_on_two_servers_sharing_postgresql_maps_and_localizes() {
     let output = Command::new(deog_binary())
         .args([
             "demo",
+            "--no-view",
             "--store",
             &url,
             "--servers",

@@ -199,11 +199,16 @@ function showRobots() {
     tr.innerHTML =
       `<td><span class="dot" style="background:${colorOf(robot.name)}"></span>${escapeHtml(robot.name)}</td>` +
       `<td class="state-${state}">${state === 'none' ? '—' : state}</td>` +
-      `<td>${error ? `${(error.m * 100).toFixed(1)} cm ${error.deg.toFixed(1)}°` : '—'}</td>` +
+      `<td class="${error && error.m > 0.5 ? 'error-far' : ''}">${error ? errorText(error) : '—'}</td>` +
       `<td>${e ? e.particles.toLocaleString() : '—'}</td>`;
     rows.push(tr);
   }
   robotRows.replaceChildren(...rows);
+}
+
+function errorText(error) {
+  const distance = error.m < 1 ? `${(error.m * 100).toFixed(1)} cm` : `${error.m.toFixed(2)} m`;
+  return `${distance} ${error.deg.toFixed(1)}°`;
 }
 
 function escapeHtml(text) {
