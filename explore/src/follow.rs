@@ -1,0 +1,279 @@
+//! Driving along a path: pure pursuit towards a point a look-ahead
+//! distance along it, turning in place when that point is well off the
+//! heading, slowing as the robot's own ranges see something ahead and
+//! stopping short of it, whatever the map says (walls it has not got yet
+//! included).
+
+use deog_grid::{Pose2, normalize_angle};
+
+use crate::error::ExploreError;
+
+/// How the follower drives.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FollowParams {
+    /// Forward speed in the open, m/s.
+    pub cruise_speed: f64,
+    /// Fastest turn, rad/s.
+    pub max_turn_rate: f64,
+    /// How far along the path the steering point lies, metres.
+    pub lookahead_m: f64,
+    /// The goal is reached within this distance, metres.
+    pub goal_tolerance_m: f64,
+    /// Past this heading error, radians, the robot turns in place.
+    pub turn_in_place_rad: f64,
+    /// Clearance ahead below which the robot stops, metres.
+    pub stop_distance_m: f64,
+    /// Clearance ahead below which it slows, metres.
+    pub slow_distance_m: f64,
+}
+
+impl Default for FollowParams {
+    fn default() -> Self {
+        Self {
+            cruise_speed: 0.5,
+            max_turn_rate: 1.0,
+            lookahead_m: 0.6,
+            goal_tolerance_m: 0.3,
+            turn_in_place_rad: 1.0,
+            stop_distance_m: 0.45,
+            slow_distance_m: 1.0,
+        }
+    }
+}
+
+impl FollowParams {
+    /// Checks every figure.
+    pub fn validate(&self) -> Result<(), ExploreError> {
+        let positive = [
+            ("cruise_speed", self.cruise_speed),
+            ("max_turn_rate", self.max_turn_rate),
+            ("lookahead_m", self.lookahead_m),
+            ("goal_tolerance_m", self.goal_tolerance_m),
+            ("turn_in_place_rad", self.turn_in_place_rad),
+            ("stop_distance_m", self.stop_distance_m),
+        ];
+        for (name, value) in positive {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(ExploreError::Invalid {
+                    name,
+                    reason: format!("must be positive, got {value}"),
+                });
+            }
+        }
+        if !(self.slow_distance_m.is_finite() && self.slow_distance_m > self.stop_distance_m) {
+            return Err(ExploreError::Invalid {
+                name: "slow_distance_m",
+                reason: format!(
+                    "must be past stop_distance_m ({}), got {}",
+                    self.stop_distance_m, self.slow_distance_m
+                ),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// What the robot's own ranges see, metres from its body's edge: ahead
+/// (within a narrow cone of its heading), and to the left and right.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Clearance {
+    /// Ahead.
+    pub front: f64,
+    /// Left.
+    pub left: f64,
+    /// Right.
+    pub right: f64,
+}
+
+/// The follower's word for the next moment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FollowCommand {
+    /// Drive: forward m/s, turn rad/s.
+    Drive {
+        /// m/s.
+        linear: f64,
+        /// rad/s, counter-clockwise.
+        angular: f64,
+    },
+    /// The goal is reached.
+    Arrived,
+    /// Something is in the way ahead: the path must be planned again.
+    Blocked,
+}
+
+/// Follows one path.
+#[derive(Debug, Clone)]
+pub struct PathFollower {
+    path: Vec<(f64, f64)>,
+    progress: usize,
+    params: FollowParams,
+}
+
+impl PathFollower {
+    /// A follower of `path` (world points, the goal last).
+    pub fn new(path: Vec<(f64, f64)>, params: FollowParams) -> Result<Self, ExploreError> {
+        params.validate()?;
+        if path.is_empty() {
+            return Err(ExploreError::Invalid {
+                name: "path",
+                reason: "has no point".into(),
+            });
+        }
+        Ok(Self {
+            path,
+            progress: 0,
+            params,
+        })
+    }
+
+    /// The path's last point.
+    pub fn goal(&self) -> (f64, f64) {
+        *self.path.last().expect("a path has a point")
+    }
+
+    /// The points not yet passed.
+    pub fn remaining(&self) -> &[(f64, f64)] {
+        &self.path[self.progress..]
+    }
+
+    /// The command at `pose` with `clearance` around it.
+    pub fn command(&mut self, pose: Pose2, clearance: Clearance) -> FollowCommand {
+        let p = self.params;
+        let (gx, gy) = self.goal();
+        if (gx - pose.x).hypot(gy - pose.y) <= p.goal_tolerance_m {
+            return FollowCommand::Arrived;
+        }
+        // Pass the points already within reach; never go back along the path.
+        while self.progress + 1 < self.path.len() {
+            let (x, y) = self.path[self.progress];
+            if (x - pose.x).hypot(y - pose.y) < p.lookahead_m {
+                self.progress += 1;
+            } else {
+                break;
+            }
+        }
+        let (tx, ty) = self.path[self.progress];
+        let heading_error = normalize_angle((ty - pose.y).atan2(tx - pose.x) - pose.theta);
+        let turn = (2.0 * heading_error).clamp(-p.max_turn_rate, p.max_turn_rate);
+        if heading_error.abs() > p.turn_in_place_rad {
+            return FollowCommand::Drive {
+                linear: 0.0,
+                angular: turn,
+            };
+        }
+        if clearance.front < p.stop_distance_m {
+            return FollowCommand::Blocked;
+        }
+        let room = ((clearance.front - p.stop_distance_m)
+            / (p.slow_distance_m - p.stop_distance_m))
+            .clamp(0.25, 1.0);
+        let linear = p.cruise_speed * room * heading_error.cos().max(0.0);
+        // Pure pursuit: the arc through the steering point.
+        let distance = (tx - pose.x).hypot(ty - pose.y).max(1e-6);
+        let curvature = 2.0 * heading_error.sin() / distance;
+        let angular = (linear * curvature).clamp(-p.max_turn_rate, p.max_turn_rate);
+        FollowCommand::Drive { linear, angular }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const OPEN: Clearance = Clearance {
+        front: 10.0,
+        left: 10.0,
+        right: 10.0,
+    };
+
+    fn drive(
+        follower: &mut PathFollower,
+        mut pose: Pose2,
+        clearance: Clearance,
+        steps: usize,
+    ) -> (Pose2, FollowCommand) {
+        let dt = 0.05;
+        let mut last = FollowCommand::Blocked;
+        for _ in 0..steps {
+            last = follower.command(pose, clearance);
+            match last {
+                FollowCommand::Drive { linear, angular } => {
+                    pose.theta += angular * dt;
+                    pose.x += linear * pose.theta.cos() * dt;
+                    pose.y += linear * pose.theta.sin() * dt;
+                }
+                _ => return (pose, last),
+            }
+        }
+        (pose, last)
+    }
+
+    #[test]
+    fn a_robot_follows_an_l_shaped_path_to_its_goal() {
+        let path = (0..=20)
+            .map(|i| (f64::from(i) * 0.1, 0.0))
+            .chain((1..=20).map(|i| (2.0, f64::from(i) * 0.1)))
+            .collect();
+        let mut follower = PathFollower::new(path, FollowParams::default()).unwrap();
+        let (pose, last) = drive(
+            &mut follower,
+            Pose2 {
+                x: 0.0,
+                y: 0.0,
+                theta: 0.0,
+            },
+            OPEN,
+            2_000,
+        );
+        assert_eq!(last, FollowCommand::Arrived, "{pose:?}");
+        assert!((pose.x - 2.0).hypot(pose.y - 2.0) <= 0.3);
+    }
+
+    #[test]
+    fn a_goal_behind_is_turned_to_in_place() {
+        let mut follower = PathFollower::new(vec![(-3.0, 0.0)], FollowParams::default()).unwrap();
+        match follower.command(
+            Pose2 {
+                x: 0.0,
+                y: 0.0,
+                theta: 0.0,
+            },
+            OPEN,
+        ) {
+            FollowCommand::Drive { linear, angular } => {
+                assert_eq!(linear, 0.0);
+                assert!(angular.abs() > 0.5);
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn something_close_ahead_stops_the_robot_and_nearer_slows_it() {
+        let mut follower = PathFollower::new(vec![(5.0, 0.0)], FollowParams::default()).unwrap();
+        let at = Pose2 {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+        };
+        let blocked = Clearance { front: 0.3, ..OPEN };
+        assert_eq!(follower.command(at, blocked), FollowCommand::Blocked);
+        let speed = |c: Clearance, f: &mut PathFollower| match f.command(at, c) {
+            FollowCommand::Drive { linear, .. } => linear,
+            other => panic!("{other:?}"),
+        };
+        let near = speed(Clearance { front: 0.6, ..OPEN }, &mut follower);
+        let far = speed(OPEN, &mut follower);
+        assert!(near < far && near > 0.0, "{near} {far}");
+    }
+
+    #[test]
+    fn bad_parameters_and_empty_paths_are_refused() {
+        assert!(PathFollower::new(Vec::new(), FollowParams::default()).is_err());
+        let params = FollowParams {
+            slow_distance_m: 0.1,
+            ..FollowParams::default()
+        };
+        assert!(PathFollower::new(vec![(1.0, 1.0)], params).is_err());
+    }
+}

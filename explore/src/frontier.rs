@@ -1,0 +1,121 @@
+//! Frontiers (Yamauchi, 1997): known-free cells beside unknown ones, the
+//! edge of what has been seen, clustered into the stretches a robot would
+//! drive to.
+
+use std::collections::VecDeque;
+
+use deog_grid::Occupancy;
+
+use crate::window::OccupancyWindow;
+
+/// One stretch of frontier.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frontier {
+    /// Its cells, as indices of the window.
+    pub cells: Vec<usize>,
+    /// Its length, metres (cells times the resolution).
+    pub size_m: f64,
+    /// The mean of its cells' centres, metres.
+    pub centroid: (f64, f64),
+}
+
+/// Whether the cell at `index` is a frontier cell: free, with an unknown
+/// 4-neighbour (the window's edge counts as unknown).
+pub fn is_frontier_cell(window: &OccupancyWindow, index: usize) -> bool {
+    if window.at(index) != Occupancy::Free {
+        return false;
+    }
+    let (width, height) = (window.width(), window.height());
+    let (x, y) = (index % width, index / width);
+    let unknown = |nx: usize, ny: usize| window.at(ny * width + nx) == Occupancy::Unknown;
+    x == 0
+        || y == 0
+        || x + 1 == width
+        || y + 1 == height
+        || unknown(x - 1, y)
+        || unknown(x + 1, y)
+        || unknown(x, y - 1)
+        || unknown(x, y + 1)
+}
+
+/// The window's frontiers of at least `min_size_m`, 8-connected cells
+/// clustered, largest first.
+pub fn find_frontiers(window: &OccupancyWindow, min_size_m: f64) -> Vec<Frontier> {
+    let metres = window.resolution().metres();
+    let mut seen = vec![false; window.len()];
+    let mut frontiers = Vec::new();
+    for start in 0..window.len() {
+        if seen[start] || !is_frontier_cell(window, start) {
+            continue;
+        }
+        let mut cells = Vec::new();
+        let mut queue = VecDeque::from([start]);
+        seen[start] = true;
+        while let Some(index) = queue.pop_front() {
+            cells.push(index);
+            for (next, _) in window.neighbours(index) {
+                if !seen[next] && is_frontier_cell(window, next) {
+                    seen[next] = true;
+                    queue.push_back(next);
+                }
+            }
+        }
+        let size_m = cells.len() as f64 * metres;
+        if size_m < min_size_m {
+            continue;
+        }
+        let (sx, sy) = cells.iter().fold((0.0, 0.0), |(sx, sy), &index| {
+            let (x, y) = window.centre_of(window.cell_at(index));
+            (sx + x, sy + y)
+        });
+        let n = cells.len() as f64;
+        frontiers.push(Frontier {
+            cells,
+            size_m,
+            centroid: (sx / n, sy / n),
+        });
+    }
+    frontiers.sort_by(|a, b| b.size_m.total_cmp(&a.size_m));
+    frontiers
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use deog_grid::{CellIndex, Resolution};
+
+    #[test]
+    fn a_room_open_on_two_sides_has_two_frontiers() {
+        // A room walled above and below, open (unknown) left and right.
+        let rows = [
+            "##########",
+            "?........?",
+            "?........?",
+            "?........?",
+            "##########",
+        ];
+        let resolution = Resolution::new(0.1).unwrap();
+        let window = OccupancyWindow::from_rows(&rows, CellIndex::new(0, 0), resolution);
+        let frontiers = find_frontiers(&window, 0.0);
+        assert_eq!(frontiers.len(), 2, "{frontiers:?}");
+        for frontier in &frontiers {
+            assert_eq!(frontier.cells.len(), 3);
+            assert!((frontier.size_m - 0.3).abs() < 1e-9);
+            assert!((frontier.centroid.1 - 0.25).abs() < 1e-9);
+        }
+        let xs: Vec<f64> = frontiers.iter().map(|f| f.centroid.0).collect();
+        assert!(
+            xs.iter().any(|x| (x - 0.15).abs() < 1e-9)
+                && xs.iter().any(|x| (x - 0.85).abs() < 1e-9)
+        );
+        // Smaller than asked: none.
+        assert!(find_frontiers(&window, 0.5).is_empty());
+    }
+
+    #[test]
+    fn a_closed_room_has_no_frontier() {
+        let rows = ["#####", "#...#", "#...#", "#####"];
+        let window = OccupancyWindow::from_rows(&rows, CellIndex::new(0, 0), Resolution::DEFAULT);
+        assert!(find_frontiers(&window, 0.0).is_empty());
+    }
+}

@@ -1,0 +1,236 @@
+//! Which frontier to drive to: information gain (the frontier's length)
+//! against travel cost, discounted near goals other robots have taken
+//! (Burgard, Moors, Stachniss and Schneider, 2005), never one blacklisted
+//! after it could not be reached.
+
+use deog_grid::CellIndex;
+
+use crate::frontier::Frontier;
+use crate::travel::TravelCosts;
+use crate::window::OccupancyWindow;
+
+/// How goals are scored.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GoalParams {
+    /// Metres of travel one metre of frontier is worth.
+    pub gain_weight: f64,
+    /// Goals of other robots within this distance, metres, take from a
+    /// frontier's worth.
+    pub claim_radius_m: f64,
+    /// How much a claimed frontier's gain is cut (0: not at all, 1: all),
+    /// falling off linearly to nothing at the claim radius.
+    pub claim_discount: f64,
+    /// A blacklisted place bars frontier cells within this distance, metres.
+    pub blacklist_radius_m: f64,
+}
+
+impl Default for GoalParams {
+    fn default() -> Self {
+        Self {
+            gain_weight: 3.0,
+            claim_radius_m: 4.0,
+            claim_discount: 0.9,
+            blacklist_radius_m: 0.6,
+        }
+    }
+}
+
+/// A chosen goal.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Goal {
+    /// The frontier cell driven to.
+    pub cell: CellIndex,
+    /// Its centre, metres.
+    pub x: f64,
+    /// See `x`.
+    pub y: f64,
+    /// The length of its frontier, metres.
+    pub frontier_m: f64,
+    /// The travel cost to it, weighted metres.
+    pub travel_m: f64,
+    /// Its score: gain less travel.
+    pub score: f64,
+}
+
+/// Places not to drive to, each until a time.
+#[derive(Debug, Clone, Default)]
+pub struct Blacklist {
+    entries: Vec<(f64, f64, f64)>,
+}
+
+impl Blacklist {
+    /// Bars the place (x, y) until `until_s`.
+    pub fn add(&mut self, x: f64, y: f64, until_s: f64) {
+        self.entries.push((x, y, until_s));
+    }
+
+    /// Forgets entries that ran out by `now_s`.
+    pub fn expire(&mut self, now_s: f64) {
+        self.entries.retain(|&(_, _, until)| until > now_s);
+    }
+
+    /// Whether (x, y) lies within `radius` of a barred place.
+    pub fn bars(&self, x: f64, y: f64, radius: f64) -> bool {
+        self.entries
+            .iter()
+            .any(|&(bx, by, _)| (bx - x).hypot(by - y) <= radius)
+    }
+
+    /// Places barred now.
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// Whether nothing is barred.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+}
+
+/// The best goal among `frontiers`, or `None` when no frontier can be
+/// reached. Each frontier is driven to at its cheapest reachable cell not
+/// barred; `claims` are other robots' goals.
+pub fn choose_goal(
+    window: &OccupancyWindow,
+    frontiers: &[Frontier],
+    costs: &TravelCosts,
+    claims: &[(f64, f64)],
+    blacklist: &Blacklist,
+    params: &GoalParams,
+) -> Option<Goal> {
+    let mut best: Option<Goal> = None;
+    for frontier in frontiers {
+        let Some((index, travel_m)) = frontier
+            .cells
+            .iter()
+            .filter(|&&index| costs.reaches(index))
+            .filter(|&&index| {
+                let (x, y) = window.centre_of(window.cell_at(index));
+                !blacklist.bars(x, y, params.blacklist_radius_m)
+            })
+            .map(|&index| (index, costs.cost_m(index)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+        else {
+            continue;
+        };
+        let cell = window.cell_at(index);
+        let (x, y) = window.centre_of(cell);
+        let claimed = claims
+            .iter()
+            .map(|&(cx, cy)| {
+                let near = (cx - x)
+                    .hypot(cy - y)
+                    .min((cx - frontier.centroid.0).hypot(cy - frontier.centroid.1));
+                (1.0 - near / params.claim_radius_m).clamp(0.0, 1.0)
+            })
+            .fold(0.0, f64::max);
+        let gain = params.gain_weight * frontier.size_m * (1.0 - params.claim_discount * claimed);
+        let score = gain - travel_m;
+        if best.as_ref().is_none_or(|b| score > b.score) {
+            best = Some(Goal {
+                cell,
+                x,
+                y,
+                frontier_m: frontier.size_m,
+                travel_m,
+                score,
+            });
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::costmap::{CostParams, Costmap};
+    use crate::frontier::find_frontiers;
+    use deog_grid::Resolution;
+
+    fn corridor() -> OccupancyWindow {
+        // A corridor open at both ends; the robot near the left end.
+        let rows = [
+            "##############################",
+            "?............................?",
+            "?............................?",
+            "?............................?",
+            "##############################",
+        ];
+        OccupancyWindow::from_rows(&rows, CellIndex::new(0, 0), Resolution::new(0.1).unwrap())
+    }
+
+    /// The corridor's frontiers are short: their gain must be worth its
+    /// length for the claims to matter.
+    fn params() -> GoalParams {
+        GoalParams {
+            gain_weight: 10.0,
+            claim_radius_m: 1.0,
+            ..GoalParams::default()
+        }
+    }
+
+    fn setup() -> (OccupancyWindow, Vec<Frontier>, TravelCosts) {
+        let window = corridor();
+        let params = CostParams {
+            lethal_radius_m: 0.05,
+            inflation_m: 0.1,
+            ..CostParams::default()
+        };
+        let costmap = Costmap::inflate(&window, params);
+        let costs = TravelCosts::from(&window, &costmap, CellIndex::new(4, 2)).unwrap();
+        let frontiers = find_frontiers(&window, 0.0);
+        (window, frontiers, costs)
+    }
+
+    #[test]
+    fn the_nearer_of_two_equal_frontiers_wins() {
+        let (window, frontiers, costs) = setup();
+        let goal = choose_goal(
+            &window,
+            &frontiers,
+            &costs,
+            &[],
+            &Blacklist::default(),
+            &params(),
+        )
+        .unwrap();
+        assert_eq!(goal.cell.x, 1, "{goal:?}");
+    }
+
+    #[test]
+    fn a_frontier_another_robot_claimed_gives_way_to_a_farther_one() {
+        let (window, frontiers, costs) = setup();
+        let claims = [(0.15, 0.25)];
+        let goal = choose_goal(
+            &window,
+            &frontiers,
+            &costs,
+            &claims,
+            &Blacklist::default(),
+            &params(),
+        )
+        .unwrap();
+        assert_eq!(goal.cell.x, 28, "{goal:?}");
+    }
+
+    #[test]
+    fn blacklisted_frontiers_are_skipped_until_they_expire() {
+        let (window, frontiers, costs) = setup();
+        let mut blacklist = Blacklist::default();
+        blacklist.add(0.15, 0.25, 10.0);
+        let params = params();
+        let goal = choose_goal(&window, &frontiers, &costs, &[], &blacklist, &params).unwrap();
+        assert_eq!(goal.cell.x, 28);
+        blacklist.expire(10.0);
+        assert!(blacklist.is_empty());
+        let goal = choose_goal(&window, &frontiers, &costs, &[], &blacklist, &params).unwrap();
+        assert_eq!(goal.cell.x, 1);
+        // Everything barred: no goal.
+        blacklist.add(0.15, 0.25, 20.0);
+        blacklist.add(2.85, 0.25, 20.0);
+        assert_eq!(
+            choose_goal(&window, &frontiers, &costs, &[], &blacklist, &params),
+            None
+        );
+    }
+}

@@ -1,0 +1,35 @@
+//! Frontier exploration on an occupancy grid, pure: no I/O, no async. The
+//! edge (`deog explore`) reads the shared map, runs these steps, and
+//! drives the robot.
+//!
+//! # Layout
+//! - [`window`]: [`OccupancyWindow`], a rectangle of the map's cells as
+//!   free, occupied or unknown, copied once from any `OccupancyView`.
+//! - [`costmap`]: [`Costmap`], each cell's clearance from walls, lethal
+//!   within the robot's radius, dearer within the inflation distance,
+//!   unknown cells at a premium.
+//! - [`travel`]: [`TravelCosts`], Dijkstra from the robot over the
+//!   costmap: the cost to every cell at once and the path to any.
+//! - [`frontier`]: [`find_frontiers`], free cells beside unknown ones,
+//!   clustered.
+//! - [`goal`]: [`choose_goal`], gain against travel, discounted near other
+//!   robots' goals, never a blacklisted place.
+//! - [`follow`]: [`PathFollower`], pure pursuit along a path, slowing and
+//!   stopping for what the robot's own ranges see ahead.
+//! - [`error`]: [`ExploreError`], what the steps refuse.
+
+pub mod costmap;
+pub mod error;
+pub mod follow;
+pub mod frontier;
+pub mod goal;
+pub mod travel;
+pub mod window;
+
+pub use costmap::{CostParams, Costmap};
+pub use error::ExploreError;
+pub use follow::{Clearance, FollowCommand, FollowParams, PathFollower};
+pub use frontier::{Frontier, find_frontiers};
+pub use goal::{Blacklist, Goal, GoalParams, choose_goal};
+pub use travel::TravelCosts;
+pub use window::OccupancyWindow;
