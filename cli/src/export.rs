@@ -8,6 +8,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use deog_grid::TileMap;
+use deog_harness::Progress;
 use deog_mapfile::{to_png, write_map};
 use deog_mapping::export_map;
 use deog_robot_client::{ClientError, MapClient};
@@ -80,9 +81,14 @@ async fn fetch(args: &ExportArgs) -> Result<TileMap> {
             args.connection.server
         )
     }
+    let progress = Progress::new("exporting tiles", "tiles", 0);
     let (_, map) = client
-        .download(&args.map)
+        .download_with_progress(&args.map, &mut |read, total| {
+            progress.set_total(total);
+            progress.set_done(read);
+        })
         .await
         .with_context(|| format!("reading the tiles of map {:?}", args.map))?;
+    progress.finish();
     Ok(map)
 }
