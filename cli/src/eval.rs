@@ -234,6 +234,7 @@ fn run_localize(args: EvalLocalizeArgs) -> Result<()> {
                 truth: &robot.truth,
                 estimates: &robot.estimates,
                 kidnaps: &report.kidnaps,
+                convergence: report.convergence,
             })
             .collect();
         let raster = evaluation::render_plot(&PlotInput {

@@ -1,10 +1,13 @@
-//! Writing a [`MapImage`]: map_server's PGM + YAML pair, and PNG.
+//! Writing a [`MapImage`]: map_server's PGM + YAML pair, and PNG: the
+//! map's pixels as they are, or as a picture with a scale bar.
 
 use std::path::{Path, PathBuf};
 
+use crate::canvas::{Corner, GrayCanvas};
 use crate::error::MapFileError;
-use crate::map_image::MapImage;
+use crate::map_image::{Cell, MapImage};
 use crate::pgm::encode_pgm;
+use crate::scale_bar::{BarStyle, draw_scale_bar};
 use crate::yaml::{check_order, check_resolution, check_threshold};
 
 /// Writes `<dir>/<stem>.pgm` (binary P5) and `<dir>/<stem>.yaml` in
@@ -79,6 +82,67 @@ pub fn to_png(path: impl AsRef<Path>, map: &MapImage) -> Result<(), MapFileError
     check_size(map, &file)?;
     let bytes = png_bytes(map).map_err(|e| MapFileError::io(&file, std::io::Error::other(e)))?;
     write_file(path, &bytes)
+}
+
+/// The map as a picture for people, an 8-bit grayscale PNG: its pixels
+/// with a scale bar (a round length in metres, see [`crate::scale_bar`])
+/// in the corner holding the fewest known cells. A map too small for a
+/// readable bar is encoded as it is. The PGM stays the map's data: only
+/// this picture carries the bar.
+pub fn encode_png_with_scale_bar(map: &MapImage) -> Result<Vec<u8>, MapFileError> {
+    check_size(map, "<png>")?;
+    let picture = with_scale_bar(map);
+    png_bytes(&picture).map_err(|e| MapFileError::io("<png>", std::io::Error::other(e)))
+}
+
+/// Writes `map` to `path` as [`encode_png_with_scale_bar`] encodes it.
+pub fn to_png_with_scale_bar(path: impl AsRef<Path>, map: &MapImage) -> Result<(), MapFileError> {
+    let path = path.as_ref();
+    let file = path.display().to_string();
+    check_size(map, &file)?;
+    let picture = with_scale_bar(map);
+    let bytes =
+        png_bytes(&picture).map_err(|e| MapFileError::io(&file, std::io::Error::other(e)))?;
+    write_file(path, &bytes)
+}
+
+/// A copy of `map` (of a checked size) with the scale bar drawn in.
+fn with_scale_bar(map: &MapImage) -> MapImage {
+    let mut picture = map.clone();
+    let (width, height) = (map.width, map.height);
+    let mut canvas = GrayCanvas {
+        width,
+        height,
+        pixels: &mut picture.pixels,
+    };
+    let style = BarStyle {
+        ink: [0, 0, 0],
+        backing: [255, 255, 255],
+        scale: if width >= 600 { 2 } else { 1 },
+        margin: 6,
+    };
+    // A known cell is busy; the image's rows run from the top, the map's
+    // from the bottom.
+    let busy = |col: i64, row: i64| {
+        let (Ok(col), Ok(row)) = (u32::try_from(col), u32::try_from(row)) else {
+            return false;
+        };
+        row < height && map.occupancy(col, height - 1 - row) != Cell::Unknown
+    };
+    draw_scale_bar(
+        &mut canvas,
+        1.0 / map.resolution,
+        &style,
+        &[
+            Corner::BottomLeft,
+            Corner::BottomRight,
+            Corner::TopLeft,
+            Corner::TopRight,
+        ],
+        &[],
+        busy,
+    );
+    picture
 }
 
 fn png_bytes(map: &MapImage) -> Result<Vec<u8>, png::EncodingError> {
@@ -258,6 +322,58 @@ mod tests {
             let e = write_map(dir.path(), stem, &tiny()).expect_err("stem");
             assert!(e.to_string().starts_with("stem: must be a plain file name"));
         }
+    }
+
+    fn decode_gray(bytes: &[u8]) -> (u32, u32, Vec<u8>) {
+        let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+        let mut reader = decoder.read_info().expect("info");
+        let mut buf = vec![0; reader.output_buffer_size().expect("size")];
+        let info = reader.next_frame(&mut buf).expect("frame");
+        assert_eq!(info.color_type, png::ColorType::Grayscale);
+        buf.truncate(info.buffer_size());
+        (info.width, info.height, buf)
+    }
+
+    #[test]
+    fn the_picture_carries_a_scale_bar_of_its_metres_over_the_resolution() {
+        // 300 x 200 free cells of 5 cm: at most 75 px of bar, so 2 m, 40 px.
+        let map = MapImage {
+            width: 300,
+            height: 200,
+            resolution: 0.05,
+            pixels: vec![254; 300 * 200],
+            ..tiny()
+        };
+        let (width, height, pixels) = decode_gray(&encode_png_with_scale_bar(&map).expect("png"));
+        assert_eq!((width, height), (300, 200));
+        let black_in_row = |row: usize| {
+            pixels[row * 300..(row + 1) * 300]
+                .iter()
+                .filter(|&&p| p == 0)
+                .count()
+        };
+        let longest = (0..200).map(black_in_row).max().expect("rows");
+        assert_eq!(longest as f64, (2.0f64 / 0.05).round());
+        // In the bottom left corner, and the rest of the map untouched.
+        let bar_row = (0..200).find(|&r| black_in_row(r) == longest).expect("bar");
+        assert!(bar_row > 150, "{bar_row}");
+        assert_eq!(pixels[bar_row * 300 + 250], 254);
+        assert_eq!(pixels[10 * 300 + 150], 254);
+        // The map's own PNG and PGM stay the cells alone.
+        let (_, _, plain) = decode_gray(&encode_png(&map).expect("png"));
+        assert!(plain.iter().all(|&p| p == 254));
+    }
+
+    #[test]
+    fn a_map_too_small_for_a_bar_is_pictured_as_it_is() {
+        let (_, _, pixels) = decode_gray(&encode_png_with_scale_bar(&tiny()).expect("png"));
+        assert_eq!(pixels, tiny().pixels);
+        let mut bad = tiny();
+        bad.pixels.pop();
+        assert!(matches!(
+            encode_png_with_scale_bar(&bad),
+            Err(MapFileError::SizeMismatch { .. })
+        ));
     }
 
     #[test]
