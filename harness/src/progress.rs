@@ -19,12 +19,13 @@
 //! writer) clear the bars first and draw them again after, so a log line
 //! never lands in the middle of a bar.
 
+use std::fmt;
 use std::io::{IsTerminal, Write};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
-use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
 
 /// How often a log line reports progress when stderr is not a terminal.
 pub const LOG_EVERY: Duration = Duration::from_secs(5);
@@ -193,32 +194,37 @@ impl Progress {
     }
 
     fn shown(&self) {
-        let done = self.done();
         match &self.inner.display {
-            Display::Bar(bar) => bar.set_position(done),
-            Display::Log(state) => {
-                let now = Instant::now();
-                // A poisoned lock only means another thread panicked while
-                // logging: keep going without the line.
-                let Ok(mut state) = state.lock() else { return };
-                if now.duration_since(state.0) < LOG_EVERY {
-                    return;
+            Display::Bar(bar) => bar.set_position(self.done()),
+            Display::Log(_) => {
+                if let Some(line) = self.due_line(Instant::now()) {
+                    tracing::info!("{line}");
                 }
-                *state = (now, true);
-                drop(state);
-                tracing::info!(
-                    "{}",
-                    log_line(
-                        &self.inner.what,
-                        &self.inner.unit,
-                        done,
-                        self.inner.total.load(Ordering::Relaxed),
-                        now.duration_since(self.inner.started)
-                    )
-                );
             }
             Display::Hidden => {}
         }
+    }
+
+    /// Where log lines report the work: the line to write at `now`, if
+    /// [`LOG_EVERY`] has passed since the last one (or the start).
+    fn due_line(&self, now: Instant) -> Option<String> {
+        let Display::Log(state) = &self.inner.display else {
+            return None;
+        };
+        // A poisoned lock only means another thread panicked while
+        // logging: go on without the line.
+        let mut state = state.lock().ok()?;
+        if now.saturating_duration_since(state.0) < LOG_EVERY {
+            return None;
+        }
+        *state = (now, true);
+        Some(log_line(
+            &self.inner.what,
+            &self.inner.unit,
+            self.done(),
+            self.inner.total.load(Ordering::Relaxed),
+            now.saturating_duration_since(self.inner.started),
+        ))
     }
 }
 
@@ -233,16 +239,27 @@ impl Drop for Inner {
 
 fn bar_style(total: u64, unit: &str) -> ProgressStyle {
     let template = if total == 0 {
-        format!("{{spinner}} {{msg}}: {{human_pos}} {unit}, {{per_sec}}, {{elapsed}}")
+        format!("{{spinner}} {{msg}}: {{human_pos}} {unit}, {{rate}}, {{elapsed}}")
     } else {
         format!(
-            "{{msg}} [{{wide_bar}}] {{human_pos}}/{{human_len}} {unit}, {{per_sec}}, {{eta}} left"
+            "{{msg}} [{{wide_bar}}] {{human_pos}}/{{human_len}} {unit}, {{rate}}, {{left}} left"
         )
     };
+    let rate_unit = unit.to_owned();
     // The templates above are fixed and valid; a bad one would only lose
     // the layout, so fall back to the default rather than fail the work.
     ProgressStyle::with_template(&template)
         .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .with_key(
+            "rate",
+            move |state: &ProgressState, out: &mut dyn fmt::Write| {
+                // A write into the bar's own buffer cannot fail.
+                let _ = out.write_str(&format_rate(state.per_sec(), &rate_unit));
+            },
+        )
+        .with_key("left", |state: &ProgressState, out: &mut dyn fmt::Write| {
+            let _ = out.write_str(&format_duration(state.eta()));
+        })
         .progress_chars("=> ")
 }
 
@@ -430,6 +447,29 @@ mod tests {
             line,
             "exporting tiles: done, 600 tiles in 1 min 15 s, 8.0 tiles/s"
         );
+    }
+
+    #[test]
+    fn off_a_terminal_a_line_is_due_every_few_seconds() {
+        let progress = Progress::with_mode("copying tiles", "tiles", 400, ProgressMode::Log);
+        let start = progress.inner.started;
+        progress.inner.done.store(100, Ordering::Relaxed);
+        assert_eq!(progress.due_line(start + Duration::from_secs(1)), None);
+        let first = start + LOG_EVERY;
+        assert_eq!(
+            progress.due_line(first).as_deref(),
+            Some("copying tiles: 100/400 tiles (25%), 20 tiles/s, 15 s left")
+        );
+        // Not again until another interval has passed.
+        assert_eq!(progress.due_line(first + Duration::from_secs(2)), None);
+        progress.inner.done.store(400, Ordering::Relaxed);
+        assert_eq!(
+            progress.due_line(first + LOG_EVERY).as_deref(),
+            Some("copying tiles: 400/400 tiles (100%), 40 tiles/s, 0 s left")
+        );
+        // A bar or nothing writes no line.
+        let hidden = Progress::with_mode("x", "items", 1, ProgressMode::Hidden);
+        assert_eq!(hidden.due_line(Instant::now() + LOG_EVERY), None);
     }
 
     #[test]

@@ -3,11 +3,11 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::canvas::{Corner, GrayCanvas};
+use crate::canvas::{GrayCanvas, Rect};
 use crate::error::MapFileError;
-use crate::map_image::{Cell, MapImage};
+use crate::map_image::MapImage;
 use crate::pgm::encode_pgm;
-use crate::scale_bar::{BarStyle, draw_scale_bar};
+use crate::scale_bar::{BarStyle, MOST_WIDTH_FRACTION, ScaleBar, box_size, draw_bar};
 use crate::yaml::{check_order, check_resolution, check_threshold};
 
 /// Writes `<dir>/<stem>.pgm` (binary P5) and `<dir>/<stem>.yaml` in
@@ -85,10 +85,10 @@ pub fn to_png(path: impl AsRef<Path>, map: &MapImage) -> Result<(), MapFileError
 }
 
 /// The map as a picture for people, an 8-bit grayscale PNG: its pixels
-/// with a scale bar (a round length in metres, see [`crate::scale_bar`])
-/// in the corner holding the fewest known cells. A map too small for a
-/// readable bar is encoded as it is. The PGM stays the map's data: only
-/// this picture carries the bar.
+/// as they are, over a white strip holding a scale bar (a round length in
+/// metres, see [`crate::scale_bar`]), so the bar hides no cell. A map too
+/// narrow for a readable bar is encoded as it is. The PGM stays the map's
+/// data: only this picture carries the bar.
 pub fn encode_png_with_scale_bar(map: &MapImage) -> Result<Vec<u8>, MapFileError> {
     check_size(map, "<png>")?;
     let picture = with_scale_bar(map);
@@ -106,42 +106,40 @@ pub fn to_png_with_scale_bar(path: impl AsRef<Path>, map: &MapImage) -> Result<(
     write_file(path, &bytes)
 }
 
-/// A copy of `map` (of a checked size) with the scale bar drawn in.
+/// A copy of `map` (of a checked size) with the strip and its bar below.
 fn with_scale_bar(map: &MapImage) -> MapImage {
-    let mut picture = map.clone();
-    let (width, height) = (map.width, map.height);
-    let mut canvas = GrayCanvas {
-        width,
-        height,
-        pixels: &mut picture.pixels,
-    };
     let style = BarStyle {
         ink: [0, 0, 0],
         backing: [255, 255, 255],
-        scale: if width >= 600 { 2 } else { 1 },
-        margin: 6,
+        scale: if map.width >= 600 { 2 } else { 1 },
+        margin: 4,
     };
-    // A known cell is busy; the image's rows run from the top, the map's
-    // from the bottom.
-    let busy = |col: i64, row: i64| {
-        let (Ok(col), Ok(row)) = (u32::try_from(col), u32::try_from(row)) else {
-            return false;
-        };
-        row < height && map.occupancy(col, height - 1 - row) != Cell::Unknown
+    let most = (f64::from(map.width) * MOST_WIDTH_FRACTION).floor() as u32;
+    let Some(bar) = ScaleBar::choose(1.0 / map.resolution, most) else {
+        return map.clone();
     };
-    draw_scale_bar(
-        &mut canvas,
-        1.0 / map.resolution,
-        &style,
-        &[
-            Corner::BottomLeft,
-            Corner::BottomRight,
-            Corner::TopLeft,
-            Corner::TopRight,
-        ],
-        &[],
-        busy,
-    );
+    let (width, height) = box_size(&bar, &style);
+    if u64::from(width) + 2 * u64::from(style.margin) > u64::from(map.width) {
+        return map.clone();
+    }
+    let strip = height + 2 * style.margin;
+    let mut picture = map.clone();
+    picture.height += strip;
+    picture
+        .pixels
+        .resize(map.width as usize * picture.height as usize, 255);
+    let mut canvas = GrayCanvas {
+        width: picture.width,
+        height: picture.height,
+        pixels: &mut picture.pixels,
+    };
+    let rect = Rect {
+        col: i64::from(style.margin),
+        row: i64::from(map.height + style.margin),
+        width,
+        height,
+    };
+    draw_bar(&mut canvas, rect, &bar, &style);
     picture
 }
 
@@ -336,32 +334,43 @@ mod tests {
 
     #[test]
     fn the_picture_carries_a_scale_bar_of_its_metres_over_the_resolution() {
-        // 300 x 200 free cells of 5 cm: at most 75 px of bar, so 2 m, 40 px.
+        // 300 x 200 cells of 5 cm, a wall along the bottom row: at most
+        // 75 px of bar, so 2 m, 40 px.
+        let mut pixels = vec![254; 300 * 200];
+        pixels[199 * 300..].fill(0);
         let map = MapImage {
             width: 300,
             height: 200,
             resolution: 0.05,
-            pixels: vec![254; 300 * 200],
+            pixels,
             ..tiny()
         };
-        let (width, height, pixels) = decode_gray(&encode_png_with_scale_bar(&map).expect("png"));
-        assert_eq!((width, height), (300, 200));
+        let (width, height, picture) = decode_gray(&encode_png_with_scale_bar(&map).expect("png"));
+        assert_eq!(width, 300);
+        // The map's rows first, every cell as it is; the strip below.
+        assert!(height > 200 + 15, "{height}");
+        assert_eq!(&picture[..300 * 200], &map.pixels[..]);
         let black_in_row = |row: usize| {
-            pixels[row * 300..(row + 1) * 300]
+            picture[row * 300..(row + 1) * 300]
                 .iter()
                 .filter(|&&p| p == 0)
                 .count()
         };
-        let longest = (0..200).map(black_in_row).max().expect("rows");
+        let longest = (200..height as usize)
+            .map(black_in_row)
+            .max()
+            .expect("rows");
         assert_eq!(longest as f64, (2.0f64 / 0.05).round());
-        // In the bottom left corner, and the rest of the map untouched.
-        let bar_row = (0..200).find(|&r| black_in_row(r) == longest).expect("bar");
-        assert!(bar_row > 150, "{bar_row}");
-        assert_eq!(pixels[bar_row * 300 + 250], 254);
-        assert_eq!(pixels[10 * 300 + 150], 254);
-        // The map's own PNG and PGM stay the cells alone.
-        let (_, _, plain) = decode_gray(&encode_png(&map).expect("png"));
-        assert!(plain.iter().all(|&p| p == 254));
+        // Unbroken.
+        let bar_row = (200..height as usize)
+            .find(|&r| black_in_row(r) == longest)
+            .expect("bar");
+        let row = &picture[bar_row * 300..(bar_row + 1) * 300];
+        let first = row.iter().position(|&p| p == 0).expect("ink");
+        assert!(row[first..first + longest].iter().all(|&p| p == 0));
+        // The map's own PNG stays the cells alone.
+        let (_, plain_height, plain) = decode_gray(&encode_png(&map).expect("png"));
+        assert_eq!((plain_height, &plain), (200, &map.pixels));
     }
 
     #[test]
