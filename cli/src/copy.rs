@@ -4,8 +4,9 @@
 use crate::store_location::StoreLocation;
 use anyhow::{Result, bail};
 use clap::Args;
+use deog_harness::Progress;
 use deog_server::Store;
-use deog_server::store::copy_store;
+use deog_server::store::{CopyProgress, copy_store};
 
 /// Options of `deog copy`.
 #[derive(Debug, Args)]
@@ -54,14 +55,18 @@ pub fn run(args: CopyArgs) -> Result<()> {
     }
     let source = open(&from, "--from")?;
     let destination = open(&to, "--to")?;
+    let progress = Progress::new("copying tiles and frames", "items", 0);
     let report = copy_store(
         source.as_ref(),
         destination.as_ref(),
         &args.maps,
-        &mut |line| {
-            tracing::info!("{line}");
+        &mut |step| match step {
+            CopyProgress::Total(total) => progress.set_total(total),
+            CopyProgress::Advanced(items) => progress.inc(items),
+            CopyProgress::Step(line) => tracing::info!("{line}"),
         },
     )?;
+    progress.finish();
     for map in &report.maps {
         println!(
             "map {}: {} tiles, version {}, checksum {:016x}: the same in both stores ({} tiles written)",

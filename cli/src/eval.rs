@@ -16,6 +16,7 @@ use deog_evaluation::localization::{
 use deog_evaluation::map_quality::{
     DEFAULT_ROBOT_RADIUS_M, QualityInput, map_quality, verdict_png,
 };
+use deog_harness::Progress;
 use deog_harness::run_reads::{read_map, read_robot, robot_starts};
 use deog_robot_client::MapClient;
 use deog_world::load_world_spec;
@@ -190,9 +191,12 @@ fn run_localize(args: EvalLocalizeArgs) -> Result<()> {
         let client =
             MapClient::connect(args.timeout.apply(args.connection.client_config()?)?).await?;
         let mut robots = Vec::with_capacity(args.robots.len());
+        let progress = Progress::new("reading robots", "robots", args.robots.len() as u64);
         for name in &args.robots {
             robots.push(read_robot(&client, name, args.map.as_deref(), from, to).await?);
+            progress.inc(1);
         }
+        progress.finish();
         let map = match (&args.plot, &args.map) {
             (Some(_), Some(name)) => Some(read_map(&client, name).await?),
             _ => None,
@@ -230,6 +234,7 @@ fn run_localize(args: EvalLocalizeArgs) -> Result<()> {
                 truth: &robot.truth,
                 estimates: &robot.estimates,
                 kidnaps: &report.kidnaps,
+                convergence: report.convergence,
             })
             .collect();
         let raster = evaluation::render_plot(&PlotInput {

@@ -8,7 +8,8 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use deog_grid::TileMap;
-use deog_mapfile::{to_png, write_map};
+use deog_harness::Progress;
+use deog_mapfile::{to_png_with_scale_bar, write_map};
 use deog_mapping::export_map;
 use deog_robot_client::{ClientError, MapClient};
 
@@ -49,7 +50,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
         .with_context(|| format!("creating {}", args.out.display()))?;
     let yaml = write_map(&args.out, &stem, &export.image)?;
     let png = args.out.join(format!("{stem}.png"));
-    to_png(&png, &export.image)?;
+    to_png_with_scale_bar(&png, &export.image)?;
     let (image, counts) = (&export.image, &export.counts);
     println!(
         "map {}: {} x {} pixels of {} m, origin ({}, {}): {} cells occupied, {} free, {} unknown ({} observed but uncertain); wrote {} with its .pgm and .png",
@@ -80,9 +81,14 @@ async fn fetch(args: &ExportArgs) -> Result<TileMap> {
             args.connection.server
         )
     }
+    let progress = Progress::new("exporting tiles", "tiles", 0);
     let (_, map) = client
-        .download(&args.map)
+        .download_with_progress(&args.map, &mut |read, total| {
+            progress.set_total(total);
+            progress.set_done(read);
+        })
         .await
         .with_context(|| format!("reading the tiles of map {:?}", args.map))?;
+    progress.finish();
     Ok(map)
 }

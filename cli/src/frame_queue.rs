@@ -6,6 +6,7 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
+use deog_harness::progress::{Progress, ProgressMode};
 use deog_proto::v1 as pb;
 use deog_robot_client::MapClient;
 
@@ -14,6 +15,8 @@ const QUEUE_CAPACITY: usize = 1024;
 
 /// Frames read ahead from a `SubscribeFrames` stream.
 pub(crate) struct FrameQueue {
+    /// What the server held of the robot's frames when following began.
+    held: Option<pb::RobotFrames>,
     frames: tokio::sync::mpsc::Receiver<pb::SonarFrame>,
     reader: Option<tokio::task::JoinHandle<Result<()>>>,
     idle: Option<Duration>,
@@ -41,7 +44,7 @@ impl FrameQueue {
         } else {
             format!("sequence {from}")
         };
-        match held {
+        match &held {
             Some(r) => tracing::info!(
                 "waiting for frames of robot {robot} from {start} (the server holds {} of them, {}..={})",
                 r.frame_count,
@@ -56,7 +59,42 @@ impl FrameQueue {
             .subscribe_frames(robot, from)
             .await
             .with_context(|| format!("following the frames of robot {robot}"))?;
-        Ok(Self::spawn(stream, robot.to_string(), idle_exit_s))
+        let mut queue = Self::spawn(stream, robot.to_string(), idle_exit_s);
+        queue.held = held;
+        Ok(queue)
+    }
+
+    /// The progress of a replay of stored frames from `from` to `to` (0:
+    /// the last stored), counted by sequence: shown when the follower ends
+    /// by itself (`to` or `idle_exit_s` set), hidden when it follows live
+    /// frames until stopped.
+    pub(crate) fn replay_progress(
+        &self,
+        what: &str,
+        from: u64,
+        to: u64,
+        idle_exit_s: f64,
+    ) -> ReplayProgress {
+        let (first, last) = self
+            .held
+            .as_ref()
+            .map_or((0, 0), |r| (r.first_sequence, r.last_sequence));
+        let first = from.max(first).max(1);
+        let end = match (to, last) {
+            (0, last) => last,
+            (to, 0) => to,
+            (to, last) => to.min(last),
+        };
+        let total = if end >= first { end - first + 1 } else { 0 };
+        let mode = if to > 0 || idle_exit_s > 0.0 {
+            ProgressMode::for_stderr()
+        } else {
+            ProgressMode::Hidden
+        };
+        ReplayProgress {
+            progress: Progress::with_mode(what, "frames", total, mode),
+            first,
+        }
     }
 
     /// Starts reading `stream` of `robot`'s frames.
@@ -83,6 +121,7 @@ impl FrameQueue {
             Ok(())
         });
         Self {
+            held: None,
             frames,
             reader: Some(reader),
             idle: (idle_exit_s > 0.0).then(|| Duration::from_secs_f64(idle_exit_s)),
@@ -132,6 +171,26 @@ impl FrameQueue {
             quiet = if frames.len() == before { quiet + 1 } else { 0 };
         }
         frames
+    }
+}
+
+/// A replay's progress, by frame sequence.
+pub(crate) struct ReplayProgress {
+    progress: Progress,
+    /// The first sequence of the replay.
+    first: u64,
+}
+
+impl ReplayProgress {
+    /// Frames up to `sequence` are done.
+    pub(crate) fn reached(&self, sequence: u64) {
+        self.progress
+            .set_done((sequence + 1).saturating_sub(self.first));
+    }
+
+    /// The replay is over.
+    pub(crate) fn finish(&self) {
+        self.progress.finish();
     }
 }
 

@@ -33,6 +33,10 @@ use tracing_subscriber::EnvFilter;
 #[derive(Debug, Parser)]
 #[command(version, about)]
 struct Cli {
+    /// Show no progress bars or progress log lines for long work (import,
+    /// export, copy, replays, benchmarks).
+    #[arg(long, short, global = true)]
+    quiet: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -102,11 +106,13 @@ fn main() -> std::process::ExitCode {
         .with_env_filter(
             EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
         )
-        .with_writer(std::io::stderr)
+        .with_writer(deog_harness::progress::stderr_writer)
         // Colour only on a terminal: logs written to files stay plain text.
         .with_ansi(std::io::stderr().is_terminal())
         .init();
-    match run(Cli::parse().command) {
+    let cli = Cli::parse();
+    deog_harness::progress::set_quiet(cli.quiet);
+    match run(cli.command) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(error) => {
             // The chain of causes on one line, without a backtrace: this is

@@ -14,7 +14,7 @@ use deog_evaluation::map_quality::{
 };
 use deog_grid::TileMap;
 use deog_harness::run_reads::{read_map, read_robot, robot_starts};
-use deog_mapfile::{to_png, write_map};
+use deog_mapfile::{to_png_with_scale_bar, write_map};
 use deog_mapping::export_map;
 use deog_robot_client::MapClient;
 
@@ -110,6 +110,7 @@ async fn judge_robot(
             truth: &samples.truth,
             estimates: &samples.estimates,
             kidnaps: &report.kidnaps,
+            convergence: report.convergence,
         }],
     })
     .with_context(|| format!("drawing the paths of {name}"))?;
@@ -122,7 +123,7 @@ async fn judge_robot(
 fn write_map_files(map: &TileMap, out: &Path) -> Result<(String, String)> {
     let export = export_map(map).context("exporting the map")?;
     write_map(out, "map", &export.image)?;
-    to_png(out.join("map.png"), &export.image)?;
+    to_png_with_scale_bar(out.join("map.png"), &export.image)?;
     Ok(("map.yaml".to_string(), "map.png".to_string()))
 }
 

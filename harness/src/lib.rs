@@ -20,17 +20,22 @@
 //!   them.
 //! - [`status`]: what a running system is doing, from two samples of
 //!   the map server: the rows and table `deog status` prints.
+//! - [`progress`]: [`Progress`], long work shown as a bar with its rate
+//!   and time left on a terminal, as log lines every few seconds
+//!   elsewhere, as nothing under `--quiet`.
 //! - [`shutdown`]: [`shutdown_signal`], ctrl-c or SIGTERM, on which a run
 //!   stops its children and a long-running subcommand ends.
 
 pub mod browser;
 pub mod proc_stats;
+pub mod progress;
 pub mod redact;
 pub mod run_reads;
 pub mod shutdown;
 pub mod status;
 pub mod supervisor;
 
+pub use progress::Progress;
 pub use shutdown::shutdown_signal;
 pub use supervisor::{
     Role, Supervisor, connect, free_loopback_addr, log_tail, os, prepare_run_folder,

@@ -5,16 +5,24 @@
 use anyhow::{Context, Result};
 use deog_evaluation::localization::{EstimateSample, TruthSample};
 use deog_grid::TileMap;
+
+use crate::Progress;
 use deog_robot_client::MapClient;
 use deog_robot_client::convert::pose_from_wire;
 use deog_world::Point2;
 
-/// Every stored tile of map `name`, as a tile map with the map's settings.
+/// Every stored tile of map `name`, as a tile map with the map's settings,
+/// its progress shown.
 pub async fn read_map(client: &MapClient, name: &str) -> Result<TileMap> {
+    let progress = Progress::new(format!("reading map {name}"), "tiles", 0);
     let (_, map) = client
-        .download(name)
+        .download_with_progress(name, &mut |read, total| {
+            progress.set_total(total);
+            progress.set_done(read);
+        })
         .await
         .with_context(|| format!("reading map {name}"))?;
+    progress.finish();
     Ok(map)
 }
 

@@ -1,10 +1,13 @@
-//! Writing a [`MapImage`]: map_server's PGM + YAML pair, and PNG.
+//! Writing a [`MapImage`]: map_server's PGM + YAML pair, and PNG: the
+//! map's pixels as they are, or as a picture with a scale bar.
 
 use std::path::{Path, PathBuf};
 
+use crate::canvas::{GrayCanvas, Rect};
 use crate::error::MapFileError;
 use crate::map_image::MapImage;
 use crate::pgm::encode_pgm;
+use crate::scale_bar::{BarStyle, MOST_WIDTH_FRACTION, ScaleBar, box_size, draw_bar};
 use crate::yaml::{check_order, check_resolution, check_threshold};
 
 /// Writes `<dir>/<stem>.pgm` (binary P5) and `<dir>/<stem>.yaml` in
@@ -79,6 +82,65 @@ pub fn to_png(path: impl AsRef<Path>, map: &MapImage) -> Result<(), MapFileError
     check_size(map, &file)?;
     let bytes = png_bytes(map).map_err(|e| MapFileError::io(&file, std::io::Error::other(e)))?;
     write_file(path, &bytes)
+}
+
+/// The map as a picture for people, an 8-bit grayscale PNG: its pixels
+/// as they are, over a white strip holding a scale bar (a round length in
+/// metres, see [`crate::scale_bar`]), so the bar hides no cell. A map too
+/// narrow for a readable bar is encoded as it is. The PGM stays the map's
+/// data: only this picture carries the bar.
+pub fn encode_png_with_scale_bar(map: &MapImage) -> Result<Vec<u8>, MapFileError> {
+    check_size(map, "<png>")?;
+    let picture = with_scale_bar(map);
+    png_bytes(&picture).map_err(|e| MapFileError::io("<png>", std::io::Error::other(e)))
+}
+
+/// Writes `map` to `path` as [`encode_png_with_scale_bar`] encodes it.
+pub fn to_png_with_scale_bar(path: impl AsRef<Path>, map: &MapImage) -> Result<(), MapFileError> {
+    let path = path.as_ref();
+    let file = path.display().to_string();
+    check_size(map, &file)?;
+    let picture = with_scale_bar(map);
+    let bytes =
+        png_bytes(&picture).map_err(|e| MapFileError::io(&file, std::io::Error::other(e)))?;
+    write_file(path, &bytes)
+}
+
+/// A copy of `map` (of a checked size) with the strip and its bar below.
+fn with_scale_bar(map: &MapImage) -> MapImage {
+    let style = BarStyle {
+        ink: [0, 0, 0],
+        backing: [255, 255, 255],
+        scale: if map.width >= 600 { 2 } else { 1 },
+        margin: 4,
+    };
+    let most = (f64::from(map.width) * MOST_WIDTH_FRACTION).floor() as u32;
+    let Some(bar) = ScaleBar::choose(1.0 / map.resolution, most) else {
+        return map.clone();
+    };
+    let (width, height) = box_size(&bar, &style);
+    if u64::from(width) + 2 * u64::from(style.margin) > u64::from(map.width) {
+        return map.clone();
+    }
+    let strip = height + 2 * style.margin;
+    let mut picture = map.clone();
+    picture.height += strip;
+    picture
+        .pixels
+        .resize(map.width as usize * picture.height as usize, 255);
+    let mut canvas = GrayCanvas {
+        width: picture.width,
+        height: picture.height,
+        pixels: &mut picture.pixels,
+    };
+    let rect = Rect {
+        col: i64::from(style.margin),
+        row: i64::from(map.height + style.margin),
+        width,
+        height,
+    };
+    draw_bar(&mut canvas, rect, &bar, &style);
+    picture
 }
 
 fn png_bytes(map: &MapImage) -> Result<Vec<u8>, png::EncodingError> {
@@ -258,6 +320,69 @@ mod tests {
             let e = write_map(dir.path(), stem, &tiny()).expect_err("stem");
             assert!(e.to_string().starts_with("stem: must be a plain file name"));
         }
+    }
+
+    fn decode_gray(bytes: &[u8]) -> (u32, u32, Vec<u8>) {
+        let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+        let mut reader = decoder.read_info().expect("info");
+        let mut buf = vec![0; reader.output_buffer_size().expect("size")];
+        let info = reader.next_frame(&mut buf).expect("frame");
+        assert_eq!(info.color_type, png::ColorType::Grayscale);
+        buf.truncate(info.buffer_size());
+        (info.width, info.height, buf)
+    }
+
+    #[test]
+    fn the_picture_carries_a_scale_bar_of_its_metres_over_the_resolution() {
+        // 300 x 200 cells of 5 cm, a wall along the bottom row: at most
+        // 75 px of bar, so 2 m, 40 px.
+        let mut pixels = vec![254; 300 * 200];
+        pixels[199 * 300..].fill(0);
+        let map = MapImage {
+            width: 300,
+            height: 200,
+            resolution: 0.05,
+            pixels,
+            ..tiny()
+        };
+        let (width, height, picture) = decode_gray(&encode_png_with_scale_bar(&map).expect("png"));
+        assert_eq!(width, 300);
+        // The map's rows first, every cell as it is; the strip below.
+        assert!(height > 200 + 15, "{height}");
+        assert_eq!(&picture[..300 * 200], &map.pixels[..]);
+        let black_in_row = |row: usize| {
+            picture[row * 300..(row + 1) * 300]
+                .iter()
+                .filter(|&&p| p == 0)
+                .count()
+        };
+        let longest = (200..height as usize)
+            .map(black_in_row)
+            .max()
+            .expect("rows");
+        assert_eq!(longest as f64, (2.0f64 / 0.05).round());
+        // Unbroken.
+        let bar_row = (200..height as usize)
+            .find(|&r| black_in_row(r) == longest)
+            .expect("bar");
+        let row = &picture[bar_row * 300..(bar_row + 1) * 300];
+        let first = row.iter().position(|&p| p == 0).expect("ink");
+        assert!(row[first..first + longest].iter().all(|&p| p == 0));
+        // The map's own PNG stays the cells alone.
+        let (_, plain_height, plain) = decode_gray(&encode_png(&map).expect("png"));
+        assert_eq!((plain_height, &plain), (200, &map.pixels));
+    }
+
+    #[test]
+    fn a_map_too_small_for_a_bar_is_pictured_as_it_is() {
+        let (_, _, pixels) = decode_gray(&encode_png_with_scale_bar(&tiny()).expect("png"));
+        assert_eq!(pixels, tiny().pixels);
+        let mut bad = tiny();
+        bad.pixels.pop();
+        assert!(matches!(
+            encode_png_with_scale_bar(&bad),
+            Err(MapFileError::SizeMismatch { .. })
+        ));
     }
 
     #[test]

@@ -5,12 +5,15 @@ use crate::convert::{cell_box_from_wire, cell_box_to_wire, decode_tile, tile_key
 use crate::error::ClientError;
 use crate::tile_cache::TileCache;
 use crate::updates::{UpdateSender, UpdateSenderConfig};
-use deog_grid::{CellBox, ClampLimits, Resolution, Tile, TileKey, TileMap, TileSize};
+use deog_grid::{CellBox, CellIndex, ClampLimits, Resolution, Tile, TileKey, TileMap, TileSize};
 use deog_proto::rig::{frame_rig_name, rig_from_wire, rig_to_wire};
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_client::MapServiceClient;
 use deog_rig::Rig;
 use tokio_stream::StreamExt;
+
+/// Tiles read per request by [`MapClient::download_with_progress`], about.
+pub const DOWNLOAD_BAND_TILES: u64 = 256;
 
 /// A connection to the map server; cheap to clone.
 #[derive(Debug, Clone)]
@@ -92,6 +95,54 @@ impl MapClient {
         cache.refresh(self, region).await?;
         for (key, _, tile) in cache.into_tiles() {
             map.insert(key, tile)?;
+        }
+        Ok((info, map))
+    }
+
+    /// As [`MapClient::download`], read in bands of tile rows of about
+    /// [`DOWNLOAD_BAND_TILES`] tiles each, telling `progress` after each band
+    /// the tiles read so far and the tiles the map held when the download
+    /// began. Each tile is a copy as of the moment its band was read.
+    pub async fn download_with_progress(
+        &self,
+        name: &str,
+        progress: &mut (dyn FnMut(u64, u64) + Send),
+    ) -> Result<(pb::MapInfo, TileMap), ClientError> {
+        let info = self.map_info(name).await?;
+        let resolution = Resolution::new(info.resolution_m)?;
+        let tile_size = TileSize::new(info.tile_size)?;
+        let limits = ClampLimits::from_probabilities(
+            info.clamp_min_probability,
+            info.clamp_max_probability,
+        )?;
+        let mut map = TileMap::new(resolution, tile_size, limits);
+        let Some(region) = info.bounds_cells else {
+            progress(0, 0);
+            return Ok((info, map));
+        };
+        let region = cell_box_from_wire("bounds_cells", region)?;
+        let (min, max) = tile_size.tiles_covering(&region);
+        let columns = (i64::from(max.x) - i64::from(min.x) + 1).max(1) as u64;
+        let rows_per_band = (DOWNLOAD_BAND_TILES / columns).max(1) as i64;
+        let cells = i64::from(tile_size.cells());
+        let mut read = 0u64;
+        let mut row = i64::from(min.y);
+        while row <= i64::from(max.y) {
+            let last_row = (row + rows_per_band - 1).min(i64::from(max.y));
+            // Tile rows times the tile's cells stay within the region's
+            // own i32 range once clamped to it.
+            let low = (row * cells).max(i64::from(region.min.y));
+            let high = ((last_row + 1) * cells - 1).min(i64::from(region.max.y));
+            let band = CellBox {
+                min: CellIndex::new(region.min.x, low as i32),
+                max: CellIndex::new(region.max.x, high as i32),
+            };
+            for (key, _, tile) in self.tiles_in_region(name, tile_size, band).await? {
+                map.insert(key, tile)?;
+                read += 1;
+            }
+            progress(read, info.tile_count);
+            row = last_row + 1;
         }
         Ok((info, map))
     }

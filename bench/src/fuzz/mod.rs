@@ -25,6 +25,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
+use deog_harness::Progress;
 use serde::Serialize;
 
 use crate::option_error::{require, require_folder_of};
@@ -126,18 +127,23 @@ pub fn run(options: FuzzOptions) -> Result<()> {
         hang_after: Duration::from_secs_f64(options.hang_seconds),
     };
     let mut runs = Vec::new();
-    for target in options.selected()? {
-        eprintln!(
+    let targets = options.selected()?;
+    let progress = Progress::new("fuzzing", "targets", targets.len() as u64);
+    for target in targets {
+        deog_harness::eprintln_above_bars!(
             "fuzzing {} for {} s",
-            target.name, options.seconds_per_target
+            target.name,
+            options.seconds_per_target
         );
         runs.push(fuzz(target, &budget, options.seed, &options.crashes)?);
+        progress.inc(1);
     }
-    print!("{}", table(&runs));
+    progress.finish();
+    deog_harness::print_above_bars!("{}", table(&runs));
     if let Some(path) = &options.json {
         std::fs::write(path, json(&options, &runs)?)
             .with_context(|| format!("writing {}", path.display()))?;
-        eprintln!("figures written to {}", path.display());
+        deog_harness::eprintln_above_bars!("figures written to {}", path.display());
     }
     let crashed: Vec<_> = runs
         .iter()

@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use deog_grid::{ClampLimits, RayModelParams, Resolution, SonarModelParams, TileMap, TileSize};
+use deog_harness::Progress;
 use deog_mapping::{Cartographer, FrameInput, PoseChoice};
 
 use super::laser_log::LaserLog;
@@ -53,6 +54,11 @@ pub(super) fn map_log(
     mapped_range: f64,
     passes: u32,
 ) -> Result<DeogRun> {
+    let progress = Progress::new(
+        "deog mapping scans",
+        "scans",
+        log.scans.len() as u64 * u64::from(passes),
+    );
     let tile_size = TileSize::DEFAULT;
     let mut cartographer = Cartographer::for_rig(
         &log.rig,
@@ -97,9 +103,11 @@ pub(super) fn map_log(
             run.apply_s += (applied - integrated).as_secs_f64();
             run.scans += 1;
             run.cell_updates += cells as u64;
+            progress.inc(1);
         }
         run.pass_seconds
             .push(run.integrate_s - integrate_before + run.apply_s - apply_before);
     }
+    progress.finish();
     Ok(run)
 }

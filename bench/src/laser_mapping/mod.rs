@@ -150,7 +150,7 @@ pub fn run(options: LaserMappingOptions) -> Result<()> {
         clamp_max: clamp.1,
     };
 
-    eprintln!(
+    deog_harness::eprintln_above_bars!(
         "deog: {} scans x {} pass(es) ...",
         log.scans.len(),
         options.passes
@@ -164,7 +164,7 @@ pub fn run(options: LaserMappingOptions) -> Result<()> {
         let script = OctomapScript::new(options.python.as_os_str(), work.path())?;
         match script.probe() {
             Ok(versions) => {
-                eprintln!(
+                deog_harness::eprintln_above_bars!(
                     "OctoMap: octomap-python {} on Python {} (numpy {}), {} scans x {} pass(es) ...",
                     versions.octomap,
                     versions.python,
@@ -193,7 +193,9 @@ pub fn run(options: LaserMappingOptions) -> Result<()> {
                 bail!("--octomap: OctoMap's side cannot run: {reason}")
             }
             Err(reason) => {
-                eprintln!("OctoMap: not run: {reason}; reporting deog alone");
+                deog_harness::eprintln_above_bars!(
+                    "OctoMap: not run: {reason}; reporting deog alone"
+                );
                 Err(reason)
             }
         }
@@ -208,11 +210,11 @@ pub fn run(options: LaserMappingOptions) -> Result<()> {
         octomap,
         agreement,
     };
-    print!("{}", figures.table());
+    deog_harness::print_above_bars!("{}", figures.table());
     if let Some(path) = &options.json {
         std::fs::write(path, figures.json()?)
             .with_context(|| format!("writing {}", path.display()))?;
-        eprintln!("figures written to {}", path.display());
+        deog_harness::eprintln_above_bars!("figures written to {}", path.display());
     }
     Ok(())
 }

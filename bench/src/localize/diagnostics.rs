@@ -44,7 +44,7 @@ pub(super) fn print_beams(
         };
         line.push_str(&format!(" {measured}/{expected}"));
     }
-    println!("{line}");
+    deog_harness::println_above_bars!("{line}");
     Ok(())
 }
 

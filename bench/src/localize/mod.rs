@@ -36,6 +36,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::Args;
 use deog_evaluation::runs::summarize;
+use deog_harness::Progress;
 use deog_localizer::beam_model::BeamModelParams;
 use deog_localizer::filter::FilterSettings;
 use deog_localizer::range_table::ConeGeometry;
@@ -304,6 +305,11 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
         converge_limit_s: CONVERGE_LIMIT_S,
         worlds: Vec::new(),
     };
+    let progress = Progress::new(
+        "localization runs",
+        "runs",
+        options.worlds.len() as u64 * options.runs,
+    );
     for world_name in &options.worlds {
         let started = Instant::now();
         let world = load_world_spec(world_name)?;
@@ -322,7 +328,7 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
             options.map_minutes,
             options.surface_depth,
         )?;
-        println!(
+        deog_harness::println_above_bars!(
             "{world_name}: map built in {:.1} s ({} tiles)",
             started.elapsed().as_secs_f64(),
             map.tile_count()
@@ -341,8 +347,9 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
                 &options,
             )?;
             map = held;
+            progress.inc(1);
             if options.verbose {
-                println!(
+                deog_harness::println_above_bars!(
                     "  seed {seed}: converge {} s, recover {} s, mean error {:.3} m {:.2}°, {} samples, {:.1} s",
                     fmt_opt(figures.converge_s),
                     fmt_opt(figures.recover_s),
@@ -356,7 +363,7 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
             particles.push(extras.most_particles_settled);
         }
         let summary = summarize(&all, CONVERGE_LIMIT_S);
-        println!(
+        deog_harness::println_above_bars!(
             "{world_name}: converged within 60 s {}/{} ({:.0} %), recovered within 60 s {}/{} ({:.0} %), mean error after convergence {:.3} m, {:.2}°; {:.1} s",
             summary.converged,
             summary.runs,
@@ -373,7 +380,7 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
             .filter(|r| r.converge_s.is_some_and(|s| s <= SETTLE_TARGET_S))
             .count();
         let most = particles.iter().flatten().max();
-        println!(
+        deog_harness::println_above_bars!(
             "{world_name}: settled within {SETTLE_TARGET_S:.0} s {settled_15}/{} ({:.0} %); most particles from 10 s after settling to the kidnap {}",
             all.len(),
             100.0 * settled_15 as f64 / all.len().max(1) as f64,
@@ -393,8 +400,9 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
                 .with_context(|| format!("writing {}", path.display()))?;
         }
     }
+    progress.finish();
     if let Some(path) = &options.json {
-        eprintln!("figures written to {}", path.display());
+        deog_harness::eprintln_above_bars!("figures written to {}", path.display());
     }
     Ok(())
 }

@@ -130,9 +130,13 @@ pub(super) fn run_once(
             }
             mirror_sums.3 += 1;
             if sim.time_s() + period >= options.seconds || state.sequence % 100 == 0 {
-                println!(
+                deog_harness::println_above_bars!(
                     "    t {:6.1}  Σ log-likelihood true {:9.1}  image {:9.1}  frames favouring the truth {}/{}",
-                    state.time_s, mirror_sums.0, mirror_sums.1, mirror_sums.2, mirror_sums.3
+                    state.time_s,
+                    mirror_sums.0,
+                    mirror_sums.1,
+                    mirror_sums.2,
+                    mirror_sums.3
                 );
             }
         }
@@ -171,7 +175,7 @@ pub(super) fn run_once(
                     }
                     None => String::new(),
                 };
-                println!(
+                deog_harness::println_above_bars!(
                     "    t {:6.1}  true ({:5.2}, {:5.2}, {:6.1}°)  estimate ({:5.2}, {:5.2}, {:6.1}°)  particles {:5}  weight {:.2}  converged {}  lost {:.2}  near the truth {near} weighing {near_weight:.1e}{image}  injected {injected_since_trace}",
                     state.time_s,
                     t.x,

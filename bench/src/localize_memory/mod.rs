@@ -150,17 +150,20 @@ pub fn run(options: LocalizeMemoryOptions) -> Result<()> {
             // The logs say why: keep them.
             if let Some(dir) = temporary {
                 let kept = dir.keep();
-                eprintln!("the work folder is kept for its logs: {}", kept.display());
+                deog_harness::eprintln_above_bars!(
+                    "the work folder is kept for its logs: {}",
+                    kept.display()
+                );
             }
             return Err(error);
         }
     };
-    print!("{}", figures.table());
+    deog_harness::print_above_bars!("{}", figures.table());
     if figures.gave_up.is_some()
         && let Some(dir) = temporary
     {
         let kept = dir.keep();
-        eprintln!(
+        deog_harness::eprintln_above_bars!(
             "the work folder is kept for the localizer's log and the server's data: {}",
             kept.display()
         );
@@ -168,7 +171,7 @@ pub fn run(options: LocalizeMemoryOptions) -> Result<()> {
     if let Some(path) = &options.out_json {
         std::fs::write(path, figures.json()?)
             .with_context(|| format!("writing {}", path.display()))?;
-        eprintln!("figures written to {}", path.display());
+        deog_harness::eprintln_above_bars!("figures written to {}", path.display());
     }
     Ok(())
 }

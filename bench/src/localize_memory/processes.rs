@@ -42,7 +42,7 @@ pub(super) fn write_city(
     let city = city(plan.side_px, options.seed)?;
     let yaml = write_map(work, "city", &city.image).context("writing the city's map files")?;
     let (start, blocks) = (city.start, city.blocks);
-    eprintln!(
+    deog_harness::eprintln_above_bars!(
         "city: {:.1} m a side, {} blocks, {} tiles ({:.0} MiB in the localizer, {:.0} times the {} MiB cache); start ({:.2}, {:.2}); work folder {}",
         f64::from(plan.side_px) * RESOLUTION_M,
         blocks,
@@ -108,7 +108,7 @@ pub(super) async fn start(
     })
     .await?;
 
-    eprintln!("importing the city into map {MAP} ...");
+    deog_harness::eprintln_above_bars!("importing the city into map {MAP} ...");
     children.start(
         "import",
         Role::Task,
@@ -141,7 +141,7 @@ pub(super) async fn start(
         info.tile_count,
         plan.tiles
     );
-    eprintln!(
+    deog_harness::eprintln_above_bars!(
         "imported: {} tiles, {} cells, in {:.1} s",
         info.tile_count,
         info.cell_count,

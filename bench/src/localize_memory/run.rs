@@ -10,8 +10,8 @@ use anyhow::{Context, Result, bail, ensure};
 use deog_evaluation::localization::{self as evaluation, EvalInput, EvalParams};
 use deog_evaluation::tracking::track;
 use deog_grid::Pose2;
-use deog_harness::log_tail;
 use deog_harness::run_reads::read_robot;
+use deog_harness::{Progress, log_tail};
 
 use super::figures::{LocalizerMemoryFigures, mib};
 use super::log::{LogFollower, line_cache_mb, logged_cache_max, parse_summary};
@@ -159,6 +159,11 @@ async fn watch(
     let mut gave_up: Option<String> = None;
     let mut estimate_seen_at = Instant::now();
     let drive_limit = Duration::from_secs_f64(options.duration / options.speed * 3.0 + 120.0);
+    let progress = Progress::new(
+        "localizing while driving",
+        "simulated s",
+        options.duration.ceil() as u64,
+    );
     while !(children.all_done("wander") && children.all_done("localize")) {
         tokio::select! {
             () = &mut *shutdown => bail!("interrupted: every process was stopped"),
@@ -211,21 +216,22 @@ async fn watch(
         if let Some(why) = &gave_up {
             // What it did until now is the result; the supervisor stops
             // it with the others.
-            eprintln!("giving up on the localizer: {why}");
+            deog_harness::eprintln_above_bars!("giving up on the localizer: {why}");
             break;
         }
         if localizing && !matches!(baseline, Baseline::Taken { .. }) {
             baseline = baseline.step(client, start, pid).await?;
         }
+        let time_s = sim
+            .robots()
+            .await
+            .ok()
+            .and_then(|robots| robots.iter().map(|r| r.time_s).reduce(f64::max))
+            .unwrap_or(0.0);
+        progress.set_done(time_s as u64);
         if last_progress.elapsed() >= PROGRESS_EVERY {
             last_progress = Instant::now();
-            let time_s = sim
-                .robots()
-                .await
-                .ok()
-                .and_then(|robots| robots.iter().map(|r| r.time_s).reduce(f64::max))
-                .unwrap_or(0.0);
-            eprintln!(
+            deog_harness::eprintln_above_bars!(
                 "{time_s:5.0}/{:.0} s | localizer RSS {:.1} MiB (peak {:.1}) | frame {last}, estimated {estimated}",
                 options.duration,
                 mib(memory.last_rss_kb),
@@ -233,6 +239,7 @@ async fn watch(
             );
         }
     }
+    progress.finish();
     if gave_up.is_none() {
         children.check()?;
     }

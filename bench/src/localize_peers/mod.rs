@@ -44,6 +44,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use deog_grid::Pose2;
+use deog_harness::Progress;
 use deog_localizer::filter::FilterSettings;
 use deog_localizer::range_table::ConeGeometry;
 use deog_localizer::sensors::SensorChoice;
@@ -237,7 +238,7 @@ pub fn run(options: LocalizePeersOptions) -> Result<()> {
             Ok(versions) => Some((script, versions)),
             Err(reason) if options.amcl => bail!("--amcl: amcl's side cannot run: {reason}"),
             Err(reason) => {
-                eprintln!("amcl: not run: {reason}; reporting deog alone");
+                deog_harness::eprintln_above_bars!("amcl: not run: {reason}; reporting deog alone");
                 None
             }
         }
@@ -256,6 +257,9 @@ pub fn run(options: LocalizePeersOptions) -> Result<()> {
         amcl_settings: None,
         worlds: Vec::new(),
     };
+    // Each world's map, its recording, each of deog's runs and amcl's
+    // script; the runs are counted once the first world's are known.
+    let progress = Progress::new("localizer runs", "steps", 0);
     for world_name in &options.worlds {
         let started = Instant::now();
         let world = load_world_spec(world_name)?;
@@ -269,7 +273,7 @@ pub fn run(options: LocalizePeersOptions) -> Result<()> {
             ConeGeometry::default().surface_depth,
         )?;
         let export = deog_mapping::export_map(&tiles)?;
-        println!(
+        deog_harness::println_above_bars!(
             "{world_name}: map built in {:.1} s ({} tiles; grid {} x {}: {} occupied, {} free, {} unknown)",
             started.elapsed().as_secs_f64(),
             map.tile_count(),
@@ -282,11 +286,16 @@ pub fn run(options: LocalizePeersOptions) -> Result<()> {
         let frames = recording::record_frames(world, &config, options.seed, options.frames)?;
         let truth: Vec<(f64, Pose2)> = frames.iter().map(|f| (f.time_s, f.true_pose)).collect();
         let seconds = truth.last().map_or(0.0, |l| l.0) - truth[0].0;
-        println!(
+        deog_harness::println_above_bars!(
             "{world_name}: {} frames recorded ({seconds:.1} simulated s)",
             frames.len()
         );
         let specs = run_specs(&options, frames[0].true_pose, &export.image);
+        if progress.done() == 0 {
+            let per_world = 1 + specs.len() as u64 + u64::from(script.is_some());
+            progress.set_total(per_world * options.worlds.len() as u64);
+        }
+        progress.inc(1);
 
         // The map builds its range tables on first use and keeps them: a
         // few frames from the uniform prior (every free tile) build them
@@ -300,7 +309,7 @@ pub fn run(options: LocalizePeersOptions) -> Result<()> {
                 deog_side::run_deog(&rig, map, &mut tiles, &frames[..2], uniform, options.seed)?;
             map = held;
             let cpu = thread_cpu_s()? - start;
-            println!(
+            deog_harness::println_above_bars!(
                 "{world_name}: range tables of all {} tiles (with two global updates) in {cpu:.2} s CPU",
                 map.tile_count()
             );
@@ -312,7 +321,8 @@ pub fn run(options: LocalizePeersOptions) -> Result<()> {
             let (run, held) =
                 deog_side::run_deog(&rig, map, &mut tiles, &frames, spec, options.seed)?;
             map = held;
-            println!(
+            progress.inc(1);
+            deog_harness::println_above_bars!(
                 "  deog {}: {} updates, {:.2} s CPU, {:.1} s",
                 spec.name,
                 run.updates,
@@ -347,7 +357,8 @@ pub fn run(options: LocalizePeersOptions) -> Result<()> {
                 .with_context(|| format!("writing {}", runs_file.display()))?;
             let t0 = Instant::now();
             let script_report = script.run(&frames_file, &grid_file, &runs_file, frames.len())?;
-            println!(
+            progress.inc(1);
+            deog_harness::println_above_bars!(
                 "  amcl: {} runs in {:.1} s",
                 settings.runs.len(),
                 t0.elapsed().as_secs_f64()
@@ -376,7 +387,7 @@ pub fn run(options: LocalizePeersOptions) -> Result<()> {
                     SideFigures::new(&run, n_beams, judge::judge(&truth, &run.estimates))
                 }),
             };
-            println!(
+            deog_harness::println_above_bars!(
                 "{world_name}, {} (deog {}..{} particles{}):",
                 row.name,
                 row.min_particles,
@@ -388,7 +399,7 @@ pub fn run(options: LocalizePeersOptions) -> Result<()> {
                     None => "; amcl cannot start from this prior".into(),
                 }
             );
-            print!("{}", report::table(&row));
+            deog_harness::print_above_bars!("{}", report::table(&row));
             rows.push(row);
         }
         report.worlds.push(WorldFigures {
@@ -404,10 +415,11 @@ pub fn run(options: LocalizePeersOptions) -> Result<()> {
             runs: rows,
         });
     }
+    progress.finish();
     if let Some(path) = &options.json {
         std::fs::write(path, report.json()?)
             .with_context(|| format!("writing {}", path.display()))?;
-        println!("figures written to {}", path.display());
+        deog_harness::println_above_bars!("figures written to {}", path.display());
     }
     Ok(())
 }

@@ -39,7 +39,9 @@ use std::time::Duration;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use deog_grid::{TileKey, TileSize};
-use deog_harness::{Role, Supervisor, connect, free_loopback_addr, log_tail, os, proc_stats};
+use deog_harness::{
+    Progress, Role, Supervisor, connect, free_loopback_addr, log_tail, os, proc_stats,
+};
 use deog_robot_client::{ClientConfig, MapClient, UpdateSenderConfig};
 
 use figures::MapServerFigures;
@@ -174,28 +176,38 @@ pub fn run(options: MapServerOptions) -> Result<()> {
 
     let work = tempfile::tempdir().context("creating a temporary directory")?;
     if choice == StoreChoice::PrivatePostgres {
-        eprintln!("starting a private PostgreSQL (fsync and synchronous_commit on) ...");
+        deog_harness::eprintln_above_bars!(
+            "starting a private PostgreSQL (fsync and synchronous_commit on) ..."
+        );
     }
     let store = StoreUnderTest::open(&choice, work.path())?;
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     runtime.block_on(store.check_fresh())?;
 
+    // The baseline, each (servers, clients) throughput run and the memory
+    // test, each timed apart.
+    let progress = Progress::new(
+        "map server measurements",
+        "steps",
+        1 + (options.servers.len() * options.clients.len()) as u64 + u64::from(options.cells > 0),
+    );
     let baseline = match store.postgres_url() {
         None => {
-            eprintln!(
+            deog_harness::eprintln_above_bars!(
                 "thesis baseline: Fig. 7.1 mapper on sled for {} s ...",
                 options.duration_s
             );
             baseline::thesis_baseline(duration, size, &region)?
         }
         Some(url) => {
-            eprintln!(
+            deog_harness::eprintln_above_bars!(
                 "thesis baseline: Fig. 7.1 mapper on PostgreSQL for {} s ...",
                 options.duration_s
             );
             baseline_postgres::thesis_baseline(url, duration, size, &region)?
         }
     };
+    progress.inc(1);
 
     let result = runtime.block_on(async {
         // Started in their own process groups, the servers do not see a
@@ -204,10 +216,11 @@ pub fn run(options: MapServerOptions) -> Result<()> {
         let mut shutdown = std::pin::pin!(deog_harness::shutdown_signal());
         tokio::select! {
             () = &mut shutdown => bail!("interrupted: the map servers were stopped"),
-            measured = measure(&options, &store, work.path(), size, &region, sender_config) => measured,
+            measured = measure(&options, &store, work.path(), size, &region, sender_config, &progress) => measured,
         }
     });
     let (throughput, memory) = result?;
+    progress.finish();
     drop(store);
 
     let figures = MapServerFigures {
@@ -217,11 +230,11 @@ pub fn run(options: MapServerOptions) -> Result<()> {
         throughput,
         memory,
     };
-    print!("{}", figures.table());
+    deog_harness::print_above_bars!("{}", figures.table());
     if let Some(path) = &options.out {
         std::fs::write(path, figures.json()?)
             .with_context(|| format!("writing {}", path.display()))?;
-        eprintln!("figures written to {}", path.display());
+        deog_harness::eprintln_above_bars!("figures written to {}", path.display());
     }
     Ok(())
 }
@@ -237,6 +250,7 @@ async fn measure(
     size: TileSize,
     region: &[TileKey],
     sender_config: UpdateSenderConfig,
+    progress: &Progress,
 ) -> Result<(Vec<throughput::ThroughputRun>, Option<memory::MemoryRun>)> {
     let duration = Duration::from_secs(options.duration_s);
     let mut runs = Vec::new();
@@ -248,7 +262,7 @@ async fn measure(
         let measured = async {
             let servers = start_servers(&mut children, store, count, options.cache_mb).await?;
             for &clients in &options.clients {
-                eprintln!(
+                deog_harness::eprintln_above_bars!(
                     "durable throughput: {count} server(s), {clients} client(s) for {} s ...",
                     options.duration_s
                 );
@@ -264,9 +278,10 @@ async fn measure(
                 )
                 .await?;
                 runs.push(run);
+                progress.inc(1);
             }
             if index + 1 == options.servers.len() && options.cells > 0 {
-                eprintln!(
+                deog_harness::eprintln_above_bars!(
                     "memory: growing a map to {} cells through 4 clients of the first server ...",
                     options.cells
                 );
@@ -274,6 +289,7 @@ async fn measure(
                     memory::memory_growth(&servers[0], store, options.cells, size, sender_config)
                         .await?,
                 );
+                progress.inc(1);
             }
             anyhow::Ok(())
         }
@@ -281,8 +297,11 @@ async fn measure(
         if measured.is_err() {
             for i in 1..=count {
                 let log = logs.join(format!("server-{i}.log"));
-                eprintln!("last lines of server {i}'s log ({}):", log.display());
-                eprint!("{}", log_tail(&log, 20));
+                deog_harness::eprintln_above_bars!(
+                    "last lines of server {i}'s log ({}):",
+                    log.display()
+                );
+                deog_harness::eprint_above_bars!("{}", log_tail(&log, 20));
             }
         }
         // Stops this set before the next starts.
@@ -319,7 +338,7 @@ async fn start_servers(
             MapClient::connect(ClientConfig::new(server.url.clone()))
         })
         .await?;
-        eprintln!("map server {i}: pid {}, {}", server.pid, server.url);
+        deog_harness::eprintln_above_bars!("map server {i}: pid {}, {}", server.pid, server.url);
         servers.push(server);
     }
     Ok(servers)

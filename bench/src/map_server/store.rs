@@ -221,7 +221,7 @@ pub(super) async fn connect(url: &str) -> Result<tokio_postgres::Client> {
         .context("connecting to PostgreSQL")?;
     tokio::spawn(async move {
         if let Err(error) = connection.await {
-            eprintln!("bench's PostgreSQL connection: {error}");
+            deog_harness::eprintln_above_bars!("bench's PostgreSQL connection: {error}");
         }
     });
     Ok(client)

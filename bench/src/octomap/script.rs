@@ -184,7 +184,7 @@ mod tests {
         let work = tempfile::tempdir().expect("a temporary directory");
         let script = OctomapScript::new("python3", work.path()).expect("the script");
         if let Err(reason) = script.probe() {
-            eprintln!("skipped: OctoMap's side cannot run here: {reason}");
+            deog_harness::eprintln_above_bars!("skipped: OctoMap's side cannot run here: {reason}");
             return;
         }
         let scan = |origin: [f64; 2], points: Vec<[f64; 2]>| ScanCloud { origin, points };

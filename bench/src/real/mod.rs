@@ -323,11 +323,11 @@ pub fn run(options: RealOptions) -> Result<()> {
     let figures = runtime
         .block_on(run::bench(&options))
         .with_context(|| format!("the run's logs are in {}", logs(&options.out).display()))?;
-    print!("{}", figures.table());
+    deog_harness::print_above_bars!("{}", figures.table());
     if let Some(path) = &options.json {
         std::fs::write(path, figures.json()?)
             .with_context(|| format!("writing {}", path.display()))?;
-        eprintln!("figures written to {}", path.display());
+        deog_harness::eprintln_above_bars!("figures written to {}", path.display());
     }
     Ok(())
 }

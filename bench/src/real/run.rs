@@ -7,8 +7,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, ensure};
 use deog_grid::{LogOdds, Occupancy, OccupancyThresholds, Pose2, TileMap};
-use deog_harness::os;
 use deog_harness::run_reads::{read_map, read_robot};
+use deog_harness::{Progress, os};
 use deog_robot_client::convert::pose_from_wire;
 
 use super::processes::Processes;
@@ -28,7 +28,7 @@ pub(super) async fn bench(options: &RealOptions) -> Result<RealFigures> {
     let mut processes = Processes::start(&options.out, &logs(&options.out)).await?;
     let robot = options.robot.as_str();
 
-    eprintln!(
+    deog_harness::eprintln_above_bars!(
         "importing {} as robot {robot} (run folder {}) ...",
         options.log.display(),
         options.out.display()
@@ -52,8 +52,17 @@ pub(super) async fn bench(options: &RealOptions) -> Result<RealFigures> {
     };
     let window = options.window();
     let starts = pick_starts(options.seed, options.starts, scans, window)?;
+    // Scans gone through by the child processes: the map's, tracking's
+    // and each global start's window, counted as each step ends.
+    let progress = Progress::new(
+        "real-log recipe",
+        "scans",
+        2 * scans + starts.len() as u64 * (window + 1),
+    );
 
-    eprintln!("mapping scans 1 to {scans} at their reference poses into map {MAP} ...");
+    deog_harness::eprintln_above_bars!(
+        "mapping scans 1 to {scans} at their reference poses into map {MAP} ..."
+    );
     let map_time = processes
         .step(
             "map",
@@ -80,6 +89,7 @@ pub(super) async fn bench(options: &RealOptions) -> Result<RealFigures> {
             &mut shutdown,
         )
         .await?;
+    progress.inc(scans);
     let info = processes
         .client
         .map_info(MAP)
@@ -93,7 +103,7 @@ pub(super) async fn bench(options: &RealOptions) -> Result<RealFigures> {
         occupied_cells: occupied_cells(&map),
         seconds: map_time.as_secs_f64(),
     };
-    eprintln!(
+    deog_harness::eprintln_above_bars!(
         "map {MAP}: {} tiles, {} cells observed, {} occupied, in {:.1} s",
         map_figures.tiles,
         map_figures.observed_cells,
@@ -102,9 +112,11 @@ pub(super) async fn bench(options: &RealOptions) -> Result<RealFigures> {
     );
 
     let initial_pose = first_reference_pose(&processes, robot).await?;
-    eprintln!(
+    deog_harness::eprintln_above_bars!(
         "tracking scans 1 to {scans} from ({:.3}, {:.3}, {:.3}) ...",
-        initial_pose.x, initial_pose.y, initial_pose.theta
+        initial_pose.x,
+        initial_pose.y,
+        initial_pose.theta
     );
     let mut tracking_args = localize_args(options, 1, scans, options.seed);
     tracking_args.extend([
@@ -118,6 +130,7 @@ pub(super) async fn bench(options: &RealOptions) -> Result<RealFigures> {
     let tracking_time = processes
         .step("localize-tracking", &tracking_args, &mut shutdown)
         .await?;
+    progress.inc(scans);
     let samples = read_robot(&processes.client, robot, Some(MAP), 1, scans).await?;
     let tracking = judge::tracking(robot, &samples.truth, &samples.estimates)?;
     let tracking = TrackingFigures {
@@ -126,7 +139,7 @@ pub(super) async fn bench(options: &RealOptions) -> Result<RealFigures> {
         tracking,
         seconds: tracking_time.as_secs_f64(),
     };
-    eprintln!(
+    deog_harness::eprintln_above_bars!(
         "tracking: RMS {:.3} m, mean |heading error| {:.2}°, {} of {} within the bounds, {:.3} s a frame",
         tracking.tracking.rms_m,
         tracking.tracking.mean_abs_heading_rad.to_degrees(),
@@ -159,14 +172,16 @@ pub(super) async fn bench(options: &RealOptions) -> Result<RealFigures> {
             verdict,
             seconds: time.as_secs_f64(),
         };
-        eprintln!(
+        deog_harness::eprintln_above_bars!(
             "global start {}/{} at scan {scan}: {}",
             i + 1,
             starts.len(),
             start.summary()
         );
         global.push(start);
+        progress.inc(window + 1);
     }
+    progress.finish();
 
     let commands = processes
         .children

@@ -67,6 +67,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use deog_evaluation::map_quality::{QualityInput, map_quality, verdict_png};
 use deog_grid::{ClampLimits, Pose2, Resolution, TileMap, TileSize};
+use deog_harness::Progress;
 use deog_mapping::{
     Cartographer, FrameInput, MapViewSettings, PoseChoice, SonarMethod, mapping_sonar_model,
     specular_sonar_mapping,
@@ -310,9 +311,11 @@ pub fn run(options: SonarMappingOptions) -> Result<()> {
         match OctomapSide::new(&options.python, res)? {
             Ok(side) => {
                 let r = side.record();
-                eprintln!(
+                deog_harness::eprintln_above_bars!(
                     "octomap: octomap-python {} on Python {} (numpy {})",
-                    r.octomap, r.python, r.numpy
+                    r.octomap,
+                    r.python,
+                    r.numpy
                 );
                 Some(side)
             }
@@ -324,7 +327,9 @@ pub fn run(options: SonarMappingOptions) -> Result<()> {
                 if methods.is_empty() {
                     bail!("the octomap method cannot run, and no other was chosen: {reason}");
                 }
-                eprintln!("octomap: not run: {reason}; reporting deog's methods alone");
+                deog_harness::eprintln_above_bars!(
+                    "octomap: not run: {reason}; reporting deog's methods alone"
+                );
                 octomap_skipped = Some(reason);
                 None
             }
@@ -334,11 +339,18 @@ pub fn run(options: SonarMappingOptions) -> Result<()> {
     };
     let rig = deog_rig::scout();
     let mut figures = Vec::new();
+    // Per world: its recording, then one map per method.
+    let progress = Progress::new(
+        "sonar mapping",
+        "steps",
+        (worlds.len() * (1 + methods.len())) as u64,
+    );
     for (name, robots) in worlds {
         let world = load_world_spec(&name).with_context(|| format!("world {name}"))?;
         let began = Instant::now();
         let (frames, seeds) = record(&world, robots, &options)?;
-        eprintln!(
+        progress.inc(1);
+        deog_harness::eprintln_above_bars!(
             "{name}: {robots} robot(s), {} frames recorded in {:.1} s",
             frames.len(),
             began.elapsed().as_secs_f64()
@@ -395,11 +407,13 @@ pub fn run(options: SonarMappingOptions) -> Result<()> {
             if built.octomap.is_some() {
                 world_figures.octomap = built.octomap;
             }
+            progress.inc(1);
         }
         figures.push(world_figures);
     }
+    progress.finish();
     let octomap_record = octomap.as_ref().map(OctomapSide::record);
-    print!("{}", table(&figures, octomap_record.as_ref()));
+    deog_harness::print_above_bars!("{}", table(&figures, octomap_record.as_ref()));
     if let Some(path) = &options.json {
         let report = Report {
             options: OptionsRecord {
@@ -415,7 +429,7 @@ pub fn run(options: SonarMappingOptions) -> Result<()> {
         };
         let text = serde_json::to_string_pretty(&report).context("encoding the figures")?;
         std::fs::write(path, text + "\n").with_context(|| format!("writing {}", path.display()))?;
-        eprintln!("figures written to {}", path.display());
+        deog_harness::eprintln_above_bars!("figures written to {}", path.display());
     }
     Ok(())
 }
@@ -716,7 +730,9 @@ mod tests {
         match OctomapSide::new(Path::new("python3"), Resolution::DEFAULT).expect("the script") {
             Ok(side) => Some(side),
             Err(reason) => {
-                eprintln!("skipped OctoMap's part: it cannot run here: {reason}");
+                deog_harness::eprintln_above_bars!(
+                    "skipped OctoMap's part: it cannot run here: {reason}"
+                );
                 None
             }
         }

@@ -4,6 +4,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result, bail};
 use deog_grid::{ClampLimits, Resolution, TileSize};
+use deog_harness::Progress;
 use deog_mapfile::MapImage;
 use deog_mapping::{ImportTarget, image_origin_cell, import_map};
 use deog_proto::v1 as pb;
@@ -67,13 +68,16 @@ pub fn import(args: &ImportArgs, name: &str, file: &Path) -> Result<()> {
             .updates(name, &client_id, UpdateSenderConfig::default())
             .await
             .with_context(|| format!("opening an update stream to map {name:?}"))?;
+        let progress = Progress::new("importing tiles", "tiles", import.deltas.len() as u64);
         for delta in &import.deltas {
             sender.push(delta.clone()).await?;
+            progress.inc(1);
         }
         let acks = sender
             .close()
             .await
             .with_context(|| format!("writing the cells of {file} to map {name:?}"))?;
+        progress.finish();
         anyhow::Ok((import, acks))
     })?;
     println!(

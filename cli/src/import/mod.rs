@@ -11,6 +11,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use clap::{ArgGroup, Args, ValueEnum};
+use deog_harness::Progress;
 use deog_proto::v1 as pb;
 use deog_robot_client::MapClient;
 use deog_simulator::data_file::DataUnits;
@@ -102,10 +103,11 @@ pub fn run(args: ImportArgs) -> Result<()> {
     }
 }
 
-/// Stores `frames` on the server in requests of a bounded size; returns
-/// (stored, duplicates).
+/// Stores `frames` on the server in requests of a bounded size, showing
+/// the progress; returns (stored, duplicates).
 async fn publish_all(client: &MapClient, frames: &[pb::SonarFrame]) -> Result<(u64, u64)> {
     let (mut stored, mut duplicates) = (0u64, 0u64);
+    let progress = Progress::new("importing frames", "frames", frames.len() as u64);
     for chunk in frames.chunks(FRAMES_PER_REQUEST) {
         let (s, d) = client
             .publish_frames(chunk.to_vec())
@@ -113,7 +115,9 @@ async fn publish_all(client: &MapClient, frames: &[pb::SonarFrame]) -> Result<(u
             .context("storing the frames")?;
         stored += u64::from(s);
         duplicates += u64::from(d);
+        progress.inc(chunk.len() as u64);
     }
+    progress.finish();
     Ok((stored, duplicates))
 }
 

@@ -298,6 +298,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         args.from,
         args.idle_exit,
     ))?;
+    let progress = queue.replay_progress("localizing frames", args.from, args.to, args.idle_exit);
     let mut shutdown = Box::pin(deog_harness::shutdown_signal());
     let first = runtime.block_on(async {
         tokio::select! {
@@ -505,11 +506,13 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
                 .with_context(|| format!("publishing the estimate of frame {}", frame.sequence))?;
             log_estimate(&frame, &estimate, processed, localizer.map().bytes());
         }
+        progress.reached(frame.sequence);
         if args.to > 0 && frame.sequence >= args.to {
             break;
         }
     }
     drop(changes);
+    progress.finish();
     let map = localizer.map();
     println!(
         "{} on {}: {processed} frames, {corrections} sensor updates, {} frames skipped to keep up, {} range tables built, cache {:.1} MiB",

@@ -305,6 +305,7 @@ pub fn run(args: MapArgs) -> Result<()> {
             None => None,
         };
         let mut queue = FrameQueue::follow(&client, &args.robot, start, args.idle_exit).await?;
+        let progress = queue.replay_progress("mapping frames", start, args.to, args.idle_exit);
         let mut estimates = (args.pose == MapPoseSource::Estimate).then(|| {
             let map = args.estimate_map.as_deref().unwrap_or(&args.map);
             tracing::info!(robot = %args.robot, estimates_on = map, "mapping from the localizer's converged estimates");
@@ -402,6 +403,7 @@ pub fn run(args: MapArgs) -> Result<()> {
             }
             if last > 0 {
                 send(&mut sender, last, &mut ack_log).await?;
+                progress.reached(last);
             }
             worked_until = Instant::now();
             if stop {
@@ -410,6 +412,7 @@ pub fn run(args: MapArgs) -> Result<()> {
         }
         let closing = Instant::now();
         let state = sender.close().await?;
+        progress.finish();
         let seconds = began.map_or(0.0, |t| {
             (worked_until - t + closing.elapsed()).as_secs_f64()
         });

@@ -11,7 +11,8 @@
 //! - `report`: the report as a markdown table ([`LocalizationReport::table`])
 //!   and as JSON ([`LocalizationRecord`], [`LocalizationReport::to_json`],
 //!   [`reports_to_json`]);
-//! - [`plot`]: the true path against the estimated one, as a PNG.
+//! - [`plot`]: the true path against the estimated one, as a PNG;
+//!   `plot_path` (which estimates are joined), `plot_legend` (the legend).
 //!
 //! # Inputs
 //! - **Truth** ([`TruthSample`]): the frames that carry a true pose,
@@ -117,6 +118,8 @@ use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
 mod evaluate;
 mod input;
 pub mod plot;
+mod plot_legend;
+mod plot_path;
 mod report;
 pub(crate) use report::pretty;
 
@@ -124,6 +127,7 @@ pub use crate::error::EvaluationError;
 pub use evaluate::{AxisStats, ErrorStats, Kidnap, LocalizationReport, Settling, evaluate};
 pub use input::{EstimateSample, EvalInput, EvalParams, TruthSample};
 pub use plot::{PlotInput, Raster, RobotPath, render_plot};
+pub use plot_path::JUMP_BREAK_M;
 pub use report::{
     BoundsRecord, KidnapRecord, LocalizationRecord, PoseRecord, XyRecord, reports_to_json,
 };
@@ -147,5 +151,7 @@ pub const DEFAULT_MAX_SPEED_MPS: f64 = 1.0;
 /// Scout's limit.
 pub const DEFAULT_MAX_TURN_RATE_RAD_S: f64 = FRAC_PI_2;
 
+#[cfg(test)]
+mod plot_tests;
 #[cfg(test)]
 mod tests;

@@ -1,8 +1,16 @@
 //! The thesis's plots (its Figs. 7.5, 7.7, 7.9 to 7.11): the true path in
 //! red against the estimated path in green, each kidnap marked with a blue
-//! cross at the true pose before and after the jump; drawn over the map
-//! (never observed: grey, free: white, occupied: black, by the map's
-//! thresholds) or on white.
+//! cross at the true pose before and after the jump and each recovery (the
+//! first converged estimate after a kidnap) with an orange ring; drawn
+//! over the map (never observed: grey, free: white, occupied: black, by
+//! the map's thresholds) or on white, with a legend and a scale bar.
+//!
+//! # What is joined
+//! Estimates before convergence (the filter still searching) are faint
+//! green points, never joined: a line between two of them would cross the
+//! map where no estimate ever was. Only consecutive converged estimates
+//! are joined, and the line breaks at a kidnap and at a jump (see
+//! `plot_path`).
 //!
 //! # Framing
 //! The drawing covers the box holding every true and estimated position
@@ -11,11 +19,23 @@
 //! whichever is more. The image's longer side is [`MAX_SIDE_PX`] pixels,
 //! its shorter side in proportion (rounded, at least 1 pixel), and +y
 //! points up. The true path is not drawn across a kidnap jump (the robot
-//! did not drive it); the estimated path joins consecutive estimates.
+//! did not drive it).
+//!
+//! # Legend and scale bar
+//! The legend (true path, estimate, estimate before convergence, kidnap,
+//! recovery) and the scale bar (a round length, 1, 2 or 5 times a power of
+//! ten metres, exactly that long at the plot's scale) each sit on a white
+//! box in the corner that hides the fewest drawn pixels; a plot too small
+//! for one leaves it out. Their text is dark blue-grey, never the walls'
+//! black.
 
 use deog_grid::{CellIndex, Occupancy, OccupancyView, Pose2, TileMap};
+use deog_mapfile::scale_bar::{BarStyle, draw_scale_bar};
+use deog_mapfile::{Canvas, Corner, Rect};
 
-use super::{EstimateSample, EvaluationError, Kidnap, TruthSample};
+use super::plot_legend::draw_legend;
+use super::plot_path::split_path;
+use super::{EstimateSample, EvaluationError, Kidnap, Settling, TruthSample};
 
 /// Pixels along the image's longer side.
 pub const MAX_SIDE_PX: u32 = 1000;
@@ -28,8 +48,18 @@ pub const MARGIN_FRACTION: f64 = 0.05;
 pub const TRUTH_RGB: [u8; 3] = [220, 0, 0];
 /// The estimated path's colour.
 pub const ESTIMATE_RGB: [u8; 3] = [0, 170, 0];
+/// Estimates before convergence: a faint green.
+pub const BEFORE_CONVERGENCE_RGB: [u8; 3] = [110, 200, 110];
 /// The kidnap crosses' colour.
 pub const KIDNAP_RGB: [u8; 3] = [0, 0, 255];
+/// The recovery rings' colour.
+pub const RECOVERY_RGB: [u8; 3] = [255, 140, 0];
+/// The legend's and the scale bar's text and the bar itself.
+pub const TEXT_RGB: [u8; 3] = [40, 40, 70];
+/// Behind the legend and the scale bar.
+pub const LEGEND_BACKING_RGB: [u8; 3] = [255, 255, 255];
+/// The legend's edge.
+pub const LEGEND_EDGE_RGB: [u8; 3] = [150, 150, 150];
 /// Background without a map, and free cells.
 pub const FREE_RGB: [u8; 3] = [255, 255, 255];
 /// Occupied cells.
@@ -39,6 +69,10 @@ pub const UNKNOWN_RGB: [u8; 3] = [205, 205, 205];
 
 /// Half the length of a kidnap cross's arm, pixels.
 const CROSS_HALF_PX: i64 = 9;
+/// Radius of a recovery ring, pixels.
+const RING_RADIUS_PX: f64 = 9.0;
+/// Pixels between the legend or the scale bar and the plot's edge.
+const BOX_MARGIN_PX: u32 = 8;
 
 /// One robot's paths.
 #[derive(Debug, Clone, Copy)]
@@ -47,8 +81,11 @@ pub struct RobotPath<'a> {
     pub truth: &'a [TruthSample],
     /// The localizer's estimates, in sequence order.
     pub estimates: &'a [EstimateSample],
-    /// The kidnaps found in the true poses.
+    /// The kidnaps found in the true poses, with their recoveries.
     pub kidnaps: &'a [Kidnap],
+    /// The estimate's first settling (the report's convergence); with the
+    /// kidnaps' recoveries it says which estimates are converged.
+    pub convergence: Option<Settling>,
 }
 
 /// What to draw.
@@ -150,13 +187,47 @@ impl Raster {
     /// A diagonal cross centred on a world point.
     fn cross(&mut self, x: f64, y: f64, rgb: [u8; 3]) {
         let (col, row) = self.position(x, y);
-        let (c, r) = (col.floor() as i64, row.floor() as i64);
-        for d in -CROSS_HALF_PX..=CROSS_HALF_PX {
+        self.cross_at(col.floor() as i64, row.floor() as i64, CROSS_HALF_PX, rgb);
+    }
+
+    /// A diagonal cross centred on pixel `(c, r)`, arms `half` long.
+    pub(crate) fn cross_at(&mut self, c: i64, r: i64, half: i64, rgb: [u8; 3]) {
+        for d in -half..=half {
             for thick in 0..2 {
                 self.set(c + d + thick, r + d, rgb);
                 self.set(c + d + thick, r - d, rgb);
             }
         }
+    }
+
+    /// A ring about 2 pixels thick of `radius` pixels centred on pixel
+    /// `(c, r)`.
+    pub(crate) fn ring_at(&mut self, c: i64, r: i64, radius: f64, rgb: [u8; 3]) {
+        let reach = radius.ceil() as i64 + 1;
+        for dr in -reach..=reach {
+            for dc in -reach..=reach {
+                let distance = (dc as f64).hypot(dr as f64);
+                if (distance - radius).abs() < 1.0 {
+                    self.set(c + dc, r + dr, rgb);
+                }
+            }
+        }
+    }
+}
+
+impl Canvas for Raster {
+    fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    fn colour(&self, col: i64, row: i64) -> Option<[u8; 3]> {
+        let col = u32::try_from(col).ok()?;
+        let row = u32::try_from(row).ok()?;
+        self.pixel(col, row)
+    }
+
+    fn paint(&mut self, col: i64, row: i64, rgb: [u8; 3]) {
+        self.set(col, row, rgb);
     }
 }
 
@@ -251,6 +322,17 @@ pub fn render_plot(input: &PlotInput<'_>) -> Result<Raster, EvaluationError> {
     if let Some(map) = input.map {
         draw_map(&mut raster, map);
     }
+    let parts: Vec<_> = input.robots.iter().map(split_path).collect();
+    // Faint points first, so every line and mark lies over them.
+    for part in &parts {
+        for e in &part.before_convergence {
+            let (col, row) = raster.position(e.pose.x, e.pose.y);
+            // A point a little larger than a line's dots, as it stands
+            // alone.
+            raster.dot(col, row, BEFORE_CONVERGENCE_RGB);
+            raster.dot(col - 1.0, row - 1.0, BEFORE_CONVERGENCE_RGB);
+        }
+    }
     for robot in input.robots {
         for pair in robot.truth.windows(2) {
             let (a, b) = (&pair[0], &pair[1]);
@@ -264,14 +346,16 @@ pub fn render_plot(input: &PlotInput<'_>) -> Result<Raster, EvaluationError> {
             raster.dot(col, row, TRUTH_RGB);
         }
     }
-    for robot in input.robots {
-        for pair in robot.estimates.windows(2) {
-            let (a, b) = (&pair[0].pose, &pair[1].pose);
-            raster.line((a.x, a.y), (b.x, b.y), ESTIMATE_RGB);
-        }
-        if let [only] = robot.estimates {
-            let (col, row) = raster.position(only.pose.x, only.pose.y);
-            raster.dot(col, row, ESTIMATE_RGB);
+    for part in &parts {
+        for run in &part.runs {
+            for pair in run.windows(2) {
+                let (a, b) = (&pair[0].pose, &pair[1].pose);
+                raster.line((a.x, a.y), (b.x, b.y), ESTIMATE_RGB);
+            }
+            if let [only] = run.as_slice() {
+                let (col, row) = raster.position(only.pose.x, only.pose.y);
+                raster.dot(col, row, ESTIMATE_RGB);
+            }
         }
     }
     for robot in input.robots {
@@ -280,7 +364,57 @@ pub fn render_plot(input: &PlotInput<'_>) -> Result<Raster, EvaluationError> {
             raster.cross(k.to.x, k.to.y, KIDNAP_RGB);
         }
     }
+    for part in &parts {
+        for e in &part.recoveries {
+            let (col, row) = raster.position(e.pose.x, e.pose.y);
+            raster.ring_at(
+                col.floor() as i64,
+                row.floor() as i64,
+                RING_RADIUS_PX,
+                RECOVERY_RGB,
+            );
+        }
+    }
+    draw_legend_and_scale_bar(&mut raster);
     Ok(raster)
+}
+
+/// The legend, then the scale bar, each in the quietest corner left; the
+/// font twice as large on plots big enough for it.
+fn draw_legend_and_scale_bar(raster: &mut Raster) {
+    let scale = if raster.width >= 800 && raster.height >= 300 {
+        2
+    } else {
+        1
+    };
+    // Paths, marks and walls are busy; the background is not.
+    let busy = |raster: &Raster, col: i64, row: i64| {
+        raster
+            .colour(col, row)
+            .is_some_and(|rgb| rgb != FREE_RGB && rgb != UNKNOWN_RGB)
+    };
+    let legend = draw_legend(raster, scale, BOX_MARGIN_PX, busy);
+    let taken: Vec<Rect> = legend.into_iter().collect();
+    let style = BarStyle {
+        ink: TEXT_RGB,
+        backing: LEGEND_BACKING_RGB,
+        scale,
+        margin: BOX_MARGIN_PX,
+    };
+    let view = raster.clone();
+    draw_scale_bar(
+        raster,
+        view.px_per_m,
+        &style,
+        &[
+            Corner::BottomLeft,
+            Corner::BottomRight,
+            Corner::TopLeft,
+            Corner::TopRight,
+        ],
+        &taken,
+        |col, row| busy(&view, col, row),
+    );
 }
 
 /// The box of `map`'s observed cells; `None` when none is.

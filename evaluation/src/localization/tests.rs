@@ -479,6 +479,7 @@ fn plot_of(truth: &[TruthSample], estimates: &[EstimateSample], map: Option<&Til
         truth,
         estimates,
         kidnaps: &report.kidnaps,
+        convergence: report.convergence,
     }];
     render_plot(&PlotInput {
         map,
@@ -489,15 +490,16 @@ fn plot_of(truth: &[TruthSample], estimates: &[EstimateSample], map: Option<&Til
 
 #[test]
 fn plot_frames_the_paths_and_colours_them() {
-    // Truth from x = 0.1 to 2.0 along y = 0; estimates 0.3 m above. The
-    // box is 1.9 m by 0.3 m, plus 0.5 m each side: 2.9 m by 1.3 m.
+    // Truth from x = 0.1 to 2.0 along y = 0; estimates 0.2 m above, so
+    // within the bounds and joined. The box is 1.9 m by 0.2 m, plus 0.5 m
+    // each side: 2.9 m by 1.2 m.
     let truth: Vec<TruthSample> = (1..=20)
         .map(|s| TruthSample::new(s, 0.1 * s as f64, Pose2::new(0.1 * s as f64, 0.0, 0.0)))
         .collect();
-    let estimates = offset(&truth, |_| (0.0, 0.3, 0.0));
+    let estimates = offset(&truth, |_| (0.0, 0.2, 0.0));
     let raster = plot_of(&truth, &estimates, None);
     assert_eq!(raster.width, MAX_SIDE_PX);
-    assert_eq!(raster.height, (1000.0f64 * 1.3 / 2.9).round() as u32);
+    assert_eq!(raster.height, (1000.0f64 * 1.2 / 2.9).round() as u32);
     assert_eq!(
         raster.rgb.len(),
         3 * (raster.width * raster.height) as usize
@@ -507,8 +509,8 @@ fn plot_frames_the_paths_and_colours_them() {
         raster.pixel(col, row).expect("pixel")
     };
     assert_eq!(at(1.0, 0.0), TRUTH_RGB);
-    assert_eq!(at(1.0, 0.3), ESTIMATE_RGB);
-    assert_eq!(at(1.0, 0.15), FREE_RGB);
+    assert_eq!(at(1.05, 0.2), ESTIMATE_RGB);
+    assert_eq!(at(1.0, 0.1), FREE_RGB);
     assert_eq!(raster.pixel(0, 0), Some(FREE_RGB));
     assert_eq!(raster.pixel_of(-0.5, 0.0), None);
 
@@ -567,7 +569,7 @@ fn plot_draws_the_map_under_the_paths() {
     assert_eq!(at(2.55, 1.05), OCCUPIED_RGB);
     assert_eq!(at(1.5, 0.05), FREE_RGB);
     assert_eq!(at(1.5, 0.5), UNKNOWN_RGB);
-    assert_eq!(at(-0.3, -0.3), UNKNOWN_RGB);
+    assert_eq!(at(-0.3, 0.5), UNKNOWN_RGB);
     assert_eq!(at(0.55, 0.0), ESTIMATE_RGB);
 }
 

@@ -46,6 +46,18 @@ pub struct CopyReport {
     pub rigs: u64,
 }
 
+/// What a copy tells its caller as it goes, so the caller can show it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CopyProgress<'a> {
+    /// The items to go through in all: the tiles of the maps copied and
+    /// the frames of every robot, as the source's records count them.
+    Total(u64),
+    /// This many more items gone through (written, or found already there).
+    Advanced(u64),
+    /// A step finished, in words.
+    Step(&'a str),
+}
+
 /// Why a copy stopped.
 #[derive(Debug, thiserror::Error)]
 pub enum CopyError {
@@ -108,12 +120,13 @@ const EVERYWHERE: TileRange = TileRange {
 
 /// Copies `maps` (every map when empty), and every robot's frames and
 /// poses and every rig, from `source` into `destination`, then checks each
-/// map; `progress` hears a line per step.
+/// map; `progress` hears the items to go through, each chunk gone through
+/// and a line per step.
 pub fn copy_store<A: Store + ?Sized, B: Store + ?Sized>(
     source: &A,
     destination: &B,
     maps: &[String],
-    progress: &mut dyn FnMut(&str),
+    progress: &mut dyn FnMut(CopyProgress<'_>),
 ) -> Result<CopyReport, CopyError> {
     let mut report = CopyReport::default();
     let records = at(|| "listing the source's maps".into(), source.maps())?;
@@ -130,20 +143,24 @@ pub fn copy_store<A: Store + ?Sized, B: Store + ?Sized>(
             })
             .collect::<Result<_, _>>()?
     };
+    let robots = at(|| "listing the source's robots".into(), source.robots())?;
+    let tiles: u64 = wanted.iter().map(|r| r.tile_count).sum();
+    let frames: u64 = robots.iter().map(|(_, s)| s.frame_count).sum();
+    progress(CopyProgress::Total(tiles + frames));
     copy_rigs(source, destination, &mut report)?;
     for record in wanted {
-        let copied = copy_map(source, destination, &record)?;
-        progress(&format!(
+        let copied = copy_map(source, destination, &record, progress)?;
+        progress(CopyProgress::Step(&format!(
             "map {}: {} tiles ({} written), version {}, checksum {:016x}",
             copied.name, copied.tiles, copied.tiles_written, copied.version, copied.checksum
-        ));
+        )));
         report.maps.push(copied);
     }
-    copy_frames_and_poses(source, destination, &mut report)?;
-    progress(&format!(
+    copy_frames_and_poses(source, destination, &robots, &mut report, progress)?;
+    progress(CopyProgress::Step(&format!(
         "{} robots: {} frames written, {} pose estimates, {} rigs",
         report.robots, report.frames_written, report.poses, report.rigs
-    ));
+    )));
     at(|| "flushing the destination".into(), destination.flush())?;
     Ok(report)
 }
@@ -177,6 +194,7 @@ fn copy_map<A: Store + ?Sized, B: Store + ?Sized>(
     source: &A,
     destination: &B,
     record: &MapRecord,
+    progress: &mut dyn FnMut(CopyProgress<'_>),
 ) -> Result<MapCopied, CopyError> {
     let name = &record.name;
     let existing = at(
@@ -202,7 +220,12 @@ fn copy_map<A: Store + ?Sized, B: Store + ?Sized>(
     let mut tiles = Vec::new();
     let mut written = 0u64;
     let mut failure = None;
+    let mut seen = 0u64;
     let mut visit = |key: TileKey, tile: StoredTile| {
+        seen += 1;
+        if seen % CHUNK as u64 == 0 {
+            progress(CopyProgress::Advanced(CHUNK as u64));
+        }
         let held = match destination.tile(&target, key) {
             Ok(held) => held,
             Err(error) => {
@@ -237,6 +260,7 @@ fn copy_map<A: Store + ?Sized, B: Store + ?Sized>(
             error,
         });
     }
+    progress(CopyProgress::Advanced(seen % CHUNK as u64));
     written += tiles.len() as u64;
     let cursors = at(
         || format!("reading map {name}'s cursors"),
@@ -296,17 +320,20 @@ fn summarise<S: Store + ?Sized>(store: &S, record: &MapRecord) -> Result<(u64, u
 fn copy_frames_and_poses<A: Store + ?Sized, B: Store + ?Sized>(
     source: &A,
     destination: &B,
+    robots: &[(String, RobotSummary)],
     report: &mut CopyReport,
+    progress: &mut dyn FnMut(CopyProgress<'_>),
 ) -> Result<(), CopyError> {
-    for (robot, _) in at(|| "listing the source's robots".into(), source.robots())? {
+    for (robot, _) in robots {
         report.robots += 1;
         let mut summary = at(
             || format!("reading robot {robot} at the destination"),
-            destination.robot(&robot),
+            destination.robot(robot),
         )?
         .unwrap_or_default();
         let mut frames: Vec<(u64, Vec<u8>)> = Vec::new();
         let mut failure = None;
+        let mut seen = 0u64;
         let flush = |frames: &mut Vec<(u64, Vec<u8>)>, summary: RobotSummary| {
             destination.write_frames(vec![FrameWrite {
                 robot: robot.clone(),
@@ -316,8 +343,12 @@ fn copy_frames_and_poses<A: Store + ?Sized, B: Store + ?Sized>(
         };
         at(
             || format!("reading robot {robot}'s frames"),
-            source.read_frames(&robot, 0, u64::MAX, &mut |sequence, bytes| {
-                match destination.has_frame(&robot, sequence) {
+            source.read_frames(robot, 0, u64::MAX, &mut |sequence, bytes| {
+                seen += 1;
+                if seen % CHUNK as u64 == 0 {
+                    progress(CopyProgress::Advanced(CHUNK as u64));
+                }
+                match destination.has_frame(robot, sequence) {
                     Ok(true) => return true,
                     Ok(false) => {}
                     Err(error) => {
@@ -337,6 +368,7 @@ fn copy_frames_and_poses<A: Store + ?Sized, B: Store + ?Sized>(
                 true
             }),
         )?;
+        progress(CopyProgress::Advanced(seen % CHUNK as u64));
         if let Some(error) = failure {
             return Err(CopyError::Store {
                 what: format!("copying robot {robot}'s frames"),
@@ -352,7 +384,7 @@ fn copy_frames_and_poses<A: Store + ?Sized, B: Store + ?Sized>(
         let mut poses = Vec::new();
         at(
             || format!("reading robot {robot}'s pose estimates"),
-            source.read_poses(&robot, 0, u64::MAX, &mut |sequence, bytes| {
+            source.read_poses(robot, 0, u64::MAX, &mut |sequence, bytes| {
                 poses.push((robot.clone(), sequence, bytes.to_vec()));
                 true
             }),

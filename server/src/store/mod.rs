@@ -15,7 +15,7 @@ mod sled_store;
 mod transaction;
 
 pub use change::{StoreChange, decode_changes, encode_changes};
-pub use copy::{CopyError, CopyReport, MapCopied, copy_store};
+pub use copy::{CopyError, CopyProgress, CopyReport, MapCopied, copy_store};
 pub use cursor::{ClientCursor, RECENT_SEQUENCES, SequenceCheck};
 pub use postgres::{PostgresConfig, PostgresStore, is_postgres_url};
 pub use record::{MapRecord, MapSettings, RobotSummary, StoredTile};
