@@ -22,6 +22,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use deog_grid::{TileDelta, TileKey, TileSize};
 use deog_harness::browser::Browser;
+use deog_harness::progress::Progress;
 use deog_harness::{Role, Supervisor, connect, free_loopback_addr, os, proc_stats};
 use deog_robot_client::{ClientConfig, MapClient, UpdateSenderConfig};
 use serde::Serialize;
@@ -29,6 +30,8 @@ use serde_json::{Value, json};
 
 /// The map the cartographers build.
 const MAP: &str = "bench";
+/// Seconds the idle page is measured over.
+const IDLE_S: f64 = 5.0;
 
 /// Options of `deog bench view`.
 #[derive(Debug, Clone, Args)]
@@ -198,7 +201,14 @@ async fn measure(options: &ViewBenchOptions, width: u32, height: u32) -> Result<
 
     let browser = Browser::start(width, height)?;
     browser.goto(&format!("http://{view_addr}/"))?;
-    let idle = rendering_over(&browser, Duration::from_secs(5)).await?;
+    let progress = Progress::new(
+        "view bench",
+        "s",
+        (IDLE_S + options.warmup_s + options.seconds).ceil() as u64,
+    );
+    let begun = Instant::now();
+    let idle = rendering_over(&browser, Duration::from_secs_f64(IDLE_S)).await?;
+    progress.set_done(begun.elapsed().as_secs());
 
     for i in 1..=options.robots {
         let robot = format!("scout-{i}");
@@ -234,7 +244,13 @@ async fn measure(options: &ViewBenchOptions, width: u32, height: u32) -> Result<
             ]),
         )?;
     }
-    pause(&mut children, Duration::from_secs_f64(options.warmup_s)).await?;
+    pause(
+        &mut children,
+        Duration::from_secs_f64(options.warmup_s),
+        &progress,
+        begun,
+    )
+    .await?;
 
     let cpu_before = proc_stats::cpu_seconds(view_pid)?;
     let started = Instant::now();
@@ -246,8 +262,10 @@ async fn measure(options: &ViewBenchOptions, width: u32, height: u32) -> Result<
     while started.elapsed().as_secs_f64() < options.seconds {
         children.check()?;
         rss_max_kb = rss_max_kb.max(proc_stats::status_kb(view_pid, "VmRSS")?);
+        progress.set_done(begun.elapsed().as_secs());
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
+    progress.finish();
     let elapsed = started.elapsed().as_secs_f64();
     let view_cpu_percent = 100.0 * (proc_stats::cpu_seconds(view_pid)? - cpu_before) / elapsed;
     let stats = page_stats(&browser)?;
@@ -301,10 +319,16 @@ async fn wait_listening(children: &mut Supervisor, addr: SocketAddr) -> Result<(
     Ok(())
 }
 
-async fn pause(children: &mut Supervisor, time: Duration) -> Result<()> {
+async fn pause(
+    children: &mut Supervisor,
+    time: Duration,
+    progress: &Progress,
+    begun: Instant,
+) -> Result<()> {
     let until = Instant::now() + time;
     while Instant::now() < until {
         children.check()?;
+        progress.set_done(begun.elapsed().as_secs());
         tokio::time::sleep(Duration::from_millis(200)).await;
     }
     Ok(())
@@ -336,6 +360,7 @@ async fn probe_tiles(client: &MapClient, browser: &Browser, probes: u32) -> Resu
         .updates(MAP, "bench-view-probe", UpdateSenderConfig::default())
         .await?;
     let mut latencies = Vec::new();
+    let progress = Progress::new("probe tiles", "tiles", u64::from(probes));
     for i in 0..probes {
         let key = TileKey::new(-40 - i as i32, -40);
         sender
@@ -348,6 +373,7 @@ async fn probe_tiles(client: &MapClient, browser: &Browser, probes: u32) -> Resu
         loop {
             if let Some(seen) = browser.eval(&script, json!([]))?.as_f64() {
                 latencies.push((seen - acked).max(0.0));
+                progress.inc(1);
                 break;
             }
             if Instant::now() > deadline {
@@ -356,6 +382,7 @@ async fn probe_tiles(client: &MapClient, browser: &Browser, probes: u32) -> Resu
             tokio::time::sleep(Duration::from_millis(2)).await;
         }
     }
+    progress.finish();
     Ok(latencies)
 }
 
