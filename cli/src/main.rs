@@ -6,6 +6,7 @@ mod connection;
 mod copy;
 mod demo;
 mod eval;
+mod explore;
 mod export;
 mod frame_queue;
 mod frames;
@@ -57,6 +58,10 @@ enum Command {
     /// Drives one simulated robot about at random and publishes its frames
     /// to the map server.
     Wander(wander::WanderArgs),
+    /// Drives one simulated robot to the frontiers of the shared map (the
+    /// edge of what has been seen) as it grows, publishing its frames;
+    /// stops by itself once no reachable frontier is left.
+    Explore(explore::ExploreArgs),
     /// Lists the robots whose frames the map server holds, or prints one
     /// robot's frames (--follow: as they arrive).
     Frames(frames::FramesArgs),
@@ -143,6 +148,7 @@ fn run(command: Command) -> Result<()> {
         Command::Eval(args) => eval::run(args),
         Command::Bench(args) => bench::run(args),
         Command::Status(args) => status::run(args),
+        Command::Explore(args) => explore::run(args),
         Command::View(args) => view::run(args),
         Command::Completions(args) => completions::print_completions(args, Cli::command()),
         Command::Man(args) => completions::write_man_pages(args, Cli::command()),

@@ -246,7 +246,7 @@ pub fn run(args: WanderArgs) -> Result<()> {
 
 /// The rig the simulator's robots carry; the Scout's from a simulator too
 /// old to say.
-async fn sim_rig(sim: &SimClient) -> Result<Rig> {
+pub(crate) async fn sim_rig(sim: &SimClient) -> Result<Rig> {
     let world = sim
         .world()
         .await
@@ -259,14 +259,14 @@ async fn sim_rig(sim: &SimClient) -> Result<Rig> {
     }
 }
 
-type StateReader = (
+pub(crate) type StateReader = (
     mpsc::Receiver<pb::RobotState>,
     tokio::task::JoinHandle<Result<()>>,
 );
 
 /// Reads the simulator's state stream into a queue as fast as it comes, so
 /// the driving loop can take everything that arrived at once.
-fn spawn_state_reader(mut stream: tonic::Streaming<pb::RobotState>) -> StateReader {
+pub(crate) fn spawn_state_reader(mut stream: tonic::Streaming<pb::RobotState>) -> StateReader {
     let (tx, rx) = mpsc::channel(4096);
     let task = tokio::spawn(async move {
         while let Some(state) = stream
@@ -283,14 +283,14 @@ fn spawn_state_reader(mut stream: tonic::Streaming<pb::RobotState>) -> StateRead
     (rx, task)
 }
 
-type Publisher = (
+pub(crate) type Publisher = (
     mpsc::Sender<pb::SonarFrame>,
     tokio::task::JoinHandle<Result<u64>>,
 );
 
 /// Publishes frames in batches of whatever has queued up, so the driving
 /// loop never waits on the map server's disk.
-fn spawn_publisher(map: MapClient) -> Publisher {
+pub(crate) fn spawn_publisher(map: MapClient) -> Publisher {
     let (tx, mut rx) = mpsc::channel::<pb::SonarFrame>(4096);
     let task = tokio::spawn(async move {
         let mut published = 0u64;

@@ -1,0 +1,514 @@
+//! `deog explore`: drives one simulated robot to the frontiers of the
+//! shared map (known-free cells beside unknown ones) as the map grows, and
+//! publishes its frames as `deog wander` does, so a cartographer maps
+//! them. Stops by itself, saying so, once no reachable frontier is left.
+//!
+//! Each plan reads the map's changed tiles from the server, inflates it by
+//! the robot's radius, prices every cell from the robot at once and picks
+//! the frontier whose length is worth most against the way there; a pure
+//! pursuit follows the path, and the robot's own ranges slow and stop it
+//! short of anything ahead, mapped or not. A goal that cannot be reached
+//! or is not neared for a while is barred for a minute.
+
+use std::time::Duration;
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use deog_explore::{
+    Blacklist, Clearance, CostParams, Costmap, FollowCommand, FollowParams, Goal, GoalParams,
+    OccupancyWindow, PathFollower, TravelCosts, choose_goal, find_frontiers,
+};
+use deog_grid::{
+    CellBox, CellIndex, Occupancy, OccupancyThresholds, OccupancyView, Pose2, Resolution, TileSize,
+    normalize_angle,
+};
+use deog_proto::names::check_robot_name;
+use deog_proto::v1 as pb;
+use deog_robot_client::convert::pose_or_origin;
+use deog_robot_client::{MapClient, SimClient, TileCache};
+use deog_simulator::deog_rig::{Reading, Rig};
+
+use crate::connection::{ConnectionArgs, SimConnectionArgs};
+use crate::wander::{sim_rig, spawn_publisher, spawn_state_reader};
+
+/// Options of `deog explore`.
+#[derive(Debug, Args)]
+pub struct ExploreArgs {
+    /// The robot to drive.
+    #[arg(long, env = "DEOG_ROBOT")]
+    pub robot: String,
+    /// The shared map whose frontiers it drives to (the one its
+    /// cartographer writes).
+    #[arg(long)]
+    pub map: String,
+    #[command(flatten)]
+    pub sim: SimConnectionArgs,
+    /// Spawn the robot first (at the world's start pose).
+    #[arg(long)]
+    pub spawn: bool,
+    /// Simulated seconds after which it stops even with frontiers left
+    /// (0: none).
+    #[arg(long, default_value_t = 0.0)]
+    pub duration: f64,
+    /// Forward speed in the open, m/s.
+    #[arg(long, default_value_t = 0.5)]
+    pub speed: f64,
+    /// Simulated seconds between plans while following a path.
+    #[arg(long, default_value_t = 3.0)]
+    pub replan_s: f64,
+    /// Frontiers shorter than this are ignored, metres.
+    #[arg(long, default_value_t = 0.5)]
+    pub min_frontier_m: f64,
+    /// Drive without publishing frames.
+    #[arg(long)]
+    pub no_publish: bool,
+    #[command(flatten)]
+    pub connection: ConnectionArgs,
+}
+
+/// Cells of unknown margin kept around the robot and the map in a window.
+const WINDOW_MARGIN_CELLS: i32 = 40;
+/// Plans in a row that found nothing before the robot is done.
+const EMPTY_PLANS_TO_STOP: u32 = 3;
+/// Simulated seconds a barred goal stays barred.
+const BAR_S: f64 = 60.0;
+/// Simulated seconds without nearing its goal before it is barred.
+const STALL_S: f64 = 12.0;
+/// Simulated seconds turned in place to look about when the map has
+/// nothing near the robot yet, or after being blocked.
+const LOOK_ABOUT_S: f64 = 2.0;
+
+/// The map as the explorer reads it: the cache's cells classified.
+struct CachedMap<'a> {
+    cache: &'a TileCache,
+    thresholds: OccupancyThresholds,
+}
+
+impl OccupancyView for CachedMap<'_> {
+    fn occupancy(&self, cell: CellIndex) -> Occupancy {
+        self.thresholds.classify(self.cache.cell(cell))
+    }
+}
+
+/// What one plan found.
+enum Plan {
+    /// A goal and the way there.
+    Go(Goal, PathFollower),
+    /// Nothing known around the robot yet: look about first.
+    LookAbout,
+    /// No reachable frontier.
+    Nothing { frontiers: usize },
+}
+
+/// The explorer's state between frames.
+struct Explorer {
+    map: String,
+    client: MapClient,
+    cache: TileCache,
+    resolution: Resolution,
+    rig: Rig,
+    costs: CostParams,
+    goals: GoalParams,
+    follow: FollowParams,
+    min_frontier_m: f64,
+    blacklist: Blacklist,
+}
+
+impl Explorer {
+    async fn new(client: MapClient, map: &str, rig: Rig, args: &ExploreArgs) -> Result<Self> {
+        let info = client
+            .map_info(map)
+            .await
+            .with_context(|| format!("map {map:?}: is its cartographer running?"))?;
+        let resolution = Resolution::new(info.resolution_m)?;
+        let tile_size = TileSize::new(info.tile_size)?;
+        let costs = CostParams {
+            lethal_radius_m: rig.body_radius() + 0.08,
+            inflation_m: rig.body_radius() + 0.5,
+            ..CostParams::default()
+        };
+        let follow = FollowParams {
+            cruise_speed: args.speed,
+            ..FollowParams::default()
+        };
+        follow.validate()?;
+        Ok(Self {
+            map: map.to_string(),
+            client,
+            cache: TileCache::new(map, tile_size),
+            resolution,
+            rig,
+            costs,
+            goals: GoalParams::default(),
+            follow,
+            min_frontier_m: args.min_frontier_m,
+            blacklist: Blacklist::default(),
+        })
+    }
+
+    /// Reads what changed on the map, then plans from `pose`.
+    async fn plan(&mut self, pose: Pose2, now_s: f64) -> Result<Plan> {
+        let info = self.client.map_info(&self.map).await?;
+        let robot = self.resolution.cell_of(pose.x, pose.y)?;
+        let around = CellBox::new(
+            CellIndex::new(robot.x - WINDOW_MARGIN_CELLS, robot.y - WINDOW_MARGIN_CELLS),
+            CellIndex::new(robot.x + WINDOW_MARGIN_CELLS, robot.y + WINDOW_MARGIN_CELLS),
+        )
+        .context("a window around the robot")?;
+        let region = match info.bounds_cells {
+            Some(b) => CellBox::new(
+                CellIndex::new(b.min_x - WINDOW_MARGIN_CELLS, b.min_y - WINDOW_MARGIN_CELLS),
+                CellIndex::new(b.max_x + WINDOW_MARGIN_CELLS, b.max_y + WINDOW_MARGIN_CELLS),
+            )
+            .map_or(around, |map| map.union(&around)),
+            None => around,
+        };
+        self.cache.refresh(&self.client, region).await?;
+        let view = CachedMap {
+            cache: &self.cache,
+            thresholds: OccupancyThresholds::default(),
+        };
+        let window = OccupancyWindow::from_view(&view, region, self.resolution)?;
+        let costmap = Costmap::inflate(&window, self.costs);
+        let Some(costs) = TravelCosts::from(&window, &costmap, robot) else {
+            bail!("the robot's cell lies outside its own window");
+        };
+        let known_nearby = window
+            .neighbours(window.index_of(robot).unwrap_or(0))
+            .any(|(i, _)| window.at(i) == Occupancy::Free);
+        let frontiers = find_frontiers(&window, self.min_frontier_m);
+        self.blacklist.expire(now_s);
+        let claims: [(f64, f64); 0] = [];
+        let Some(goal) = choose_goal(
+            &window,
+            &frontiers,
+            &costs,
+            &claims,
+            &self.blacklist,
+            &self.goals,
+        ) else {
+            if !known_nearby {
+                return Ok(Plan::LookAbout);
+            }
+            return Ok(Plan::Nothing {
+                frontiers: frontiers.len(),
+            });
+        };
+        let goal_index = window
+            .index_of(goal.cell)
+            .context("the goal lies in the window")?;
+        let path = costs
+            .path_to(&window, goal_index)
+            .context("a reachable goal has a path")?
+            .into_iter()
+            .map(|cell| window.centre_of(cell))
+            .collect();
+        Ok(Plan::Go(goal, PathFollower::new(path, self.follow)?))
+    }
+
+    /// What the robot's ranges see around it, metres from its body.
+    fn clearance(&self, ranges: &[f64]) -> Clearance {
+        let mut clearance = Clearance {
+            front: f64::INFINITY,
+            left: f64::INFINITY,
+            right: f64::INFINITY,
+        };
+        for (beam, &range) in self.rig.beams().iter().zip(ranges) {
+            let Some(Reading::Echo(range)) = beam.classify(range) else {
+                continue;
+            };
+            let x = beam.mount.x + range * beam.mount.theta.cos();
+            let y = beam.mount.y + range * beam.mount.theta.sin();
+            let distance = (x.hypot(y) - self.rig.body_radius()).max(0.0);
+            let bearing = normalize_angle(y.atan2(x)).to_degrees();
+            let side = if bearing.abs() <= 35.0 {
+                &mut clearance.front
+            } else if (35.0..=120.0).contains(&bearing) {
+                &mut clearance.left
+            } else if (-120.0..=-35.0).contains(&bearing) {
+                &mut clearance.right
+            } else {
+                continue;
+            };
+            *side = side.min(distance);
+        }
+        clearance
+    }
+}
+
+/// The goal being driven to, and how it is going.
+struct Pursuit {
+    goal: Goal,
+    follower: PathFollower,
+    planned_at_s: f64,
+    best_distance: f64,
+    best_at_s: f64,
+}
+
+#[derive(Debug, Default)]
+struct Summary {
+    frames: u64,
+    published: u64,
+    goals: u64,
+    barred: u64,
+    bumps: u64,
+    distance_m: f64,
+    sim_seconds: f64,
+    finished: bool,
+}
+
+/// Runs the explorer until no reachable frontier is left, its duration
+/// passes, ctrl-c or SIGTERM.
+pub fn run(args: ExploreArgs) -> Result<()> {
+    check_robot_name(&args.robot).context("--robot")?;
+    deog_proto::names::check_map_name(&args.map).context("--map")?;
+    for (name, value, least) in [
+        ("--duration", args.duration, 0.0),
+        ("--replan-s", args.replan_s, 0.1),
+        ("--min-frontier-m", args.min_frontier_m, 0.0),
+    ] {
+        if !(value.is_finite() && value >= least) {
+            bail!("{name} must be at least {least}, got {value}");
+        }
+    }
+    if !(args.speed.is_finite() && args.speed > 0.0 && args.speed <= 2.0) {
+        bail!(
+            "--speed must be above 0 and at most 2 m/s, got {}",
+            args.speed
+        );
+    }
+    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    let summary = runtime.block_on(explore(&args))?;
+    let ending = if summary.finished {
+        "no reachable frontier left: explored"
+    } else {
+        "stopped before the map was explored"
+    };
+    println!(
+        "{}: {ending}; {} goals, {} barred, {:.1} m driven over {:.1} simulated s, {} bumps, {} frames ({} published)",
+        args.robot,
+        summary.goals,
+        summary.barred,
+        summary.distance_m,
+        summary.sim_seconds,
+        summary.bumps,
+        summary.frames,
+        summary.published
+    );
+    Ok(())
+}
+
+async fn explore(args: &ExploreArgs) -> Result<Summary> {
+    let sim = SimClient::connect(args.sim.client_config()?.retrying_forever()).await?;
+    let rig = sim_rig(&sim).await?;
+    let client = MapClient::connect(args.connection.client_config()?.retrying_forever()).await?;
+    if args.spawn {
+        let state = sim.spawn(&args.robot, None).await?;
+        let p = pose_or_origin(state.true_pose);
+        tracing::info!(robot = %args.robot, x = p.x, y = p.y, "spawned");
+    }
+    let publisher = if args.no_publish {
+        None
+    } else {
+        if !deog_simulator::deog_rig::is_built_in(rig.name()) {
+            client.put_rig(&rig).await.context("storing the rig")?;
+        }
+        Some(spawn_publisher(client.clone()))
+    };
+    // The cartographer makes the map from the first frames: wait for it.
+    let mut explorer = loop {
+        match Explorer::new(client.clone(), &args.map, rig.clone(), args).await {
+            Ok(explorer) => break explorer,
+            Err(error) if publisher.is_some() => {
+                tracing::debug!(%error, "waiting for the map");
+                tokio::time::sleep(Duration::from_millis(200)).await;
+                // Frames must flow for the map to appear: publish while waiting.
+                let state = sim.state(&args.robot).await?;
+                if let Some((frames, _)) = &publisher {
+                    let _ = frames.send(frame_of(&args.robot, &state, &rig)).await;
+                }
+            }
+            Err(error) => return Err(error),
+        }
+    };
+    let mut states = spawn_state_reader(sim.watch(&args.robot).await?);
+    let shutdown = deog_harness::shutdown_signal();
+    tokio::pin!(shutdown);
+    let mut summary = Summary::default();
+    let mut pursuit: Option<Pursuit> = None;
+    let mut look_about_until: Option<f64> = None;
+    let mut empty_plans = 0;
+    let mut last_sequence = 0;
+    let mut start_time = None;
+    let mut last_pose: Option<Pose2> = None;
+    let mut was_bumped = false;
+    let mut next_plan_s = f64::NEG_INFINITY;
+    'run: loop {
+        let first = tokio::select! {
+            () = &mut shutdown => break,
+            state = states.0.recv() => match state {
+                Some(state) => state,
+                None => {
+                    states.1.await.context("the state reader panicked")??;
+                    bail!("the simulator ended the state stream");
+                }
+            },
+        };
+        let mut newest = None;
+        let mut backlog = vec![first];
+        while let Ok(state) = states.0.try_recv() {
+            backlog.push(state);
+        }
+        for state in backlog {
+            if state.sequence == 0 || state.sequence <= last_sequence {
+                continue;
+            }
+            last_sequence = state.sequence;
+            let truth = pose_or_origin(state.true_pose);
+            let start = *start_time.get_or_insert(state.time_s);
+            if let Some(previous) = last_pose {
+                summary.distance_m += (truth.x - previous.x).hypot(truth.y - previous.y);
+            }
+            last_pose = Some(truth);
+            if state.bumper && !was_bumped {
+                summary.bumps += 1;
+            }
+            was_bumped = state.bumper;
+            summary.frames += 1;
+            summary.sim_seconds = state.time_s - start;
+            if let Some((frames, _)) = &publisher
+                && frames
+                    .send(frame_of(&args.robot, &state, &rig))
+                    .await
+                    .is_err()
+            {
+                break 'run;
+            }
+            if args.duration > 0.0 && summary.sim_seconds >= args.duration {
+                break 'run;
+            }
+            newest = Some(state);
+        }
+        let Some(state) = newest else { continue };
+        let now = state.time_s;
+        let pose = pose_or_origin(state.true_pose);
+        let clearance = explorer.clearance(&state.ranges);
+
+        if look_about_until.is_some_and(|until| now < until) {
+            let turn = if clearance.left >= clearance.right {
+                1.0
+            } else {
+                -1.0
+            };
+            sim.drive(&args.robot, 0.0, turn * explorer.follow.max_turn_rate)
+                .await?;
+            continue;
+        }
+        look_about_until = None;
+        let replan = pursuit
+            .as_ref()
+            .is_none_or(|p| now - p.planned_at_s >= args.replan_s);
+        if replan && now >= next_plan_s {
+            match explorer.plan(pose, now).await? {
+                Plan::Go(goal, follower) => {
+                    empty_plans = 0;
+                    let same = pursuit
+                        .as_ref()
+                        .is_some_and(|p| (p.goal.x - goal.x).hypot(p.goal.y - goal.y) < 0.5);
+                    let distance = (goal.x - pose.x).hypot(goal.y - pose.y);
+                    let (best_distance, best_at_s) = match &pursuit {
+                        Some(p) if same => (p.best_distance, p.best_at_s),
+                        _ => {
+                            summary.goals += 1;
+                            tracing::info!(
+                                x = goal.x,
+                                y = goal.y,
+                                frontier_m = goal.frontier_m,
+                                travel_m = goal.travel_m,
+                                "new goal"
+                            );
+                            (distance, now)
+                        }
+                    };
+                    pursuit = Some(Pursuit {
+                        goal,
+                        follower,
+                        planned_at_s: now,
+                        best_distance,
+                        best_at_s,
+                    });
+                }
+                Plan::LookAbout => {
+                    look_about_until = Some(now + LOOK_ABOUT_S);
+                    continue;
+                }
+                Plan::Nothing { frontiers } => {
+                    pursuit = None;
+                    empty_plans += 1;
+                    tracing::info!(frontiers, empty_plans, "no reachable frontier");
+                    if empty_plans >= EMPTY_PLANS_TO_STOP {
+                        summary.finished = true;
+                        break 'run;
+                    }
+                    // Let the cartographer catch up before looking again.
+                    next_plan_s = now + 1.0;
+                    sim.drive(&args.robot, 0.0, 0.0).await?;
+                    continue;
+                }
+            }
+        }
+        let Some(p) = pursuit.as_mut() else {
+            sim.drive(&args.robot, 0.0, 0.0).await?;
+            continue;
+        };
+        let distance = (p.goal.x - pose.x).hypot(p.goal.y - pose.y);
+        if distance < p.best_distance - 0.1 {
+            p.best_distance = distance;
+            p.best_at_s = now;
+        }
+        let stalled = now - p.best_at_s > STALL_S;
+        let (linear, angular) = match p.follower.command(pose, clearance) {
+            FollowCommand::Drive { linear, angular } if !stalled => (linear, angular),
+            FollowCommand::Arrived => {
+                pursuit = None;
+                (0.0, 0.0)
+            }
+            FollowCommand::Drive { .. } | FollowCommand::Blocked => {
+                if stalled {
+                    explorer.blacklist.add(p.goal.x, p.goal.y, now + BAR_S);
+                    summary.barred += 1;
+                    tracing::info!(
+                        x = p.goal.x,
+                        y = p.goal.y,
+                        "goal not neared: barred for a while"
+                    );
+                }
+                pursuit = None;
+                look_about_until = Some(now + LOOK_ABOUT_S);
+                (0.0, 0.0)
+            }
+        };
+        sim.drive(&args.robot, linear, angular).await?;
+    }
+    if let Err(error) = sim.drive(&args.robot, 0.0, 0.0).await {
+        tracing::warn!(%error, "could not stop the robot");
+    }
+    if let Some((frames, task)) = publisher {
+        drop(frames);
+        summary.published = task.await.context("the frame publisher panicked")??;
+    }
+    Ok(summary)
+}
+
+fn frame_of(robot: &str, state: &pb::RobotState, rig: &Rig) -> pb::SonarFrame {
+    pb::SonarFrame {
+        robot: robot.to_string(),
+        sequence: state.sequence,
+        time_s: state.time_s,
+        odometry: state.odometry,
+        true_pose: state.true_pose,
+        ranges: state.ranges.clone(),
+        rig: rig.name().to_owned(),
+        reference_pose: None,
+    }
+}
