@@ -23,8 +23,8 @@ pub const MAP_FRAME: &str = "map";
 
 /// The longest side, in cells, of a published grid; a larger map is sent
 /// coarser (each published cell the most occupied of the cells it covers),
-/// so one message stays within a few megabytes.
-pub const MAX_GRID_SIDE: u32 = 2048;
+/// so one message stays within 5 MiB.
+pub const MAX_GRID_SIDE: u32 = 1024;
 
 /// Bytes per grid cell: red, green, blue, alpha, occupancy.
 const GRID_CELL_BYTES: u32 = 5;
@@ -138,9 +138,8 @@ pub fn occupancy_grid(layer: &MapLayer, timestamp: Timestamp) -> Option<Grid> {
     })?;
     let width = (max_x - min_x + 1) * side;
     let height = (max_y - min_y + 1) * side;
-    let step = width.max(height).div_euclid(i64::from(MAX_GRID_SIDE))
-        + i64::from(width.max(height) % i64::from(MAX_GRID_SIDE) != 0);
-    let step = step.max(1);
+    let max_side = i64::from(MAX_GRID_SIDE);
+    let step = ((width.max(height) + max_side - 1) / max_side).max(1);
     let columns = (width + step - 1) / step;
     let rows = (height + step - 1) / step;
     // Both are at most MAX_GRID_SIDE, so the casts and products fit.
@@ -477,12 +476,13 @@ mod tests {
             tiles,
         };
         let grid = occupancy_grid(&layer, Timestamp::new(1, 0)).unwrap();
-        // 6400 cells wide: every 4 cells become one.
-        assert_eq!(grid.column_count, 1600);
-        assert!((grid.cell_size.unwrap().x - 0.4).abs() < 1e-12);
+        // 6400 cells wide: every 7 by 7 cells become one.
+        assert_eq!(grid.column_count, 915);
+        assert!(grid.column_count <= MAX_GRID_SIDE);
+        assert!((grid.cell_size.unwrap().x - 0.7).abs() < 1e-12);
         let rows = grid.data.len() / grid.row_stride as usize;
-        assert_eq!(rows, 16);
-        let at = (15 * 1600 + 15) * 5;
+        assert_eq!(rows, 10);
+        let at = (9 * 915 + 9) * 5;
         assert_eq!(grid.data[at], 3, "the wall survives the merge");
     }
 
