@@ -7,8 +7,9 @@
 //
 //   { channels: [{ topic, schemaName, encoding, schemaEncoding }],
 //     counts: { topic: messages }, bytes: { topic: bytes },
-//     latest: { topic: a summary of the newest message }, missing: [...],
-//     errors: [...] }
+//     times: { topic: [seconds after connecting each message arrived] }
+//       (the first 500), latest: { topic: a summary of the newest
+//       message }, missing: [...], errors: [...] }
 //
 // Usage: node client.mjs --url ws://127.0.0.1:8765 [--seconds 5]
 //          [--want /map,/tf] [--timeout 60]
@@ -161,6 +162,8 @@ async function main() {
   const counts = {};
   const bytes = {};
   const latest = {};
+  const times = {};
+  let connectedAt = Date.now();
   const errors = [];
   let nextSubscription = 0;
 
@@ -212,6 +215,8 @@ async function main() {
       const view = new Uint8Array(data.buffer, data.byteOffset, data.byteLength);
       counts[channel.topic] += 1;
       bytes[channel.topic] += view.byteLength;
+      times[channel.topic] ??= [];
+      if (times[channel.topic].length < 500) times[channel.topic].push((Date.now() - connectedAt) / 1000);
       if (!channel.type) return;
       try {
         const raw = channel.type.decode(view);
@@ -227,6 +232,7 @@ async function main() {
   const connectBy = Date.now() + 30_000;
   while (client === null) {
     try {
+      connectedAt = Date.now();
       client = await attempt();
     } catch (error) {
       if (Date.now() > connectBy) {
@@ -260,6 +266,7 @@ async function main() {
     })),
     counts,
     bytes,
+    times,
     latest,
     missing: missing(),
     errors,

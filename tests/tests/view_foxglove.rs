@@ -278,6 +278,23 @@ fn foxglove_shows_the_map_poses_scans_and_cones_of_a_running_system() {
         (1.0..=2.0 * seconds + 4.0).contains(&(count("/map") as f64)),
         "{report}"
     );
+    // The grid is sent again as the cartographer changes tiles, well
+    // after the subscription's first, and never twice within its period
+    // (a subscription to /map is answered at once, once).
+    let map_times: Vec<f64> = report["times"]["/map"]
+        .as_array()
+        .expect("the grids' times")
+        .iter()
+        .filter_map(Value::as_f64)
+        .collect();
+    assert!(
+        map_times.iter().any(|&t| t > map_times[0] + 1.0),
+        "no grid after the first second: {map_times:?}"
+    );
+    assert!(
+        map_times.windows(2).all(|w| w[1] - w[0] >= 0.4),
+        "grids closer than the 2 Hz throttle: {map_times:?}"
+    );
 
     // The grid: the map's resolution, aligned to its tiles, covering at
     // least what the server held before the client looked, walls and

@@ -18,8 +18,9 @@
 //! One task follows the shared state's updates, as a page's connection
 //! does: every 50 ms it builds what changed under the state's lock and
 //! logs it after the lock is released. A client subscribing to a topic
-//! is sent everything held at once, so a still robot or a finished map
-//! shows without waiting for a change.
+//! is sent what that topic shows at once (the map for `/map`, every
+//! robot for `/tf`, the robot for its own topics), so a still robot or a
+//! finished map shows without waiting for a change.
 
 use std::collections::{BTreeSet, HashMap};
 use std::net::SocketAddr;
@@ -53,16 +54,17 @@ pub struct FoxgloveServer {
     context: Arc<Context>,
     handle: WebSocketServerHandle,
     addr: SocketAddr,
-    subscribed: mpsc::UnboundedReceiver<()>,
+    subscribed: mpsc::UnboundedReceiver<String>,
 }
 
-/// Hears clients subscribe, so they are sent what is already held.
-struct SubscribeListener(mpsc::UnboundedSender<()>);
+/// Hears clients subscribe (the topics), so they are sent what is already
+/// held.
+struct SubscribeListener(mpsc::UnboundedSender<String>);
 
 impl ServerListener for SubscribeListener {
-    fn on_subscribe(&self, _client: Client, _channel: ChannelView) {
+    fn on_subscribe(&self, _client: Client, channel: ChannelView) {
         // The task ends only at shutdown; a subscription then is moot.
-        let _ = self.0.send(());
+        let _ = self.0.send(channel.topic().to_string());
     }
 }
 
@@ -115,11 +117,11 @@ impl FoxgloveServer {
             tokio::select! {
                 () = shared.shutdown.cancelled() => break,
                 _ = tick.tick() => publisher.push(&shared),
-                Some(()) = subscribed.recv() => publisher.everything = true,
+                Some(topic) = subscribed.recv() => publisher.subscribed(&topic),
                 update = updates.recv() => match update {
                     Ok(update) => publisher.note(update),
                     // Fell behind: send everything again.
-                    Err(RecvError::Lagged(_)) => publisher.everything = true,
+                    Err(RecvError::Lagged(_)) => publisher.want_everything(),
                     Err(RecvError::Closed) => break,
                 },
             }
@@ -193,7 +195,12 @@ struct Publisher {
     map_changed: bool,
     map_sent: Option<Instant>,
     changed_robots: BTreeSet<String>,
-    everything: bool,
+    /// The map is sent at the next push, however recently it was sent.
+    map_wanted: bool,
+    /// Every robot is sent whole at the next push.
+    all_robots_wanted: bool,
+    /// These robots are sent whole at the next push.
+    robots_wanted: BTreeSet<String>,
 }
 
 impl Publisher {
@@ -207,7 +214,27 @@ impl Publisher {
             map_changed: true,
             map_sent: None,
             changed_robots: BTreeSet::new(),
-            everything: true,
+            map_wanted: false,
+            all_robots_wanted: false,
+            robots_wanted: BTreeSet::new(),
+        }
+    }
+
+    fn want_everything(&mut self) {
+        self.map_wanted = true;
+        self.all_robots_wanted = true;
+    }
+
+    /// A client subscribed to `topic`: what it shows is sent whole.
+    fn subscribed(&mut self, topic: &str) {
+        match topic {
+            "/map" => self.map_wanted = true,
+            "/tf" => self.all_robots_wanted = true,
+            _ => {
+                if let Some(robot) = robot_of_topic(topic) {
+                    self.robots_wanted.insert(robot.to_string());
+                }
+            }
         }
     }
 
@@ -236,14 +263,16 @@ impl Publisher {
         }
         let now = Instant::now();
         let stamp = Timestamp::now();
-        let everything = std::mem::take(&mut self.everything);
+        let map_wanted = std::mem::take(&mut self.map_wanted);
+        let all_robots = std::mem::take(&mut self.all_robots_wanted);
+        let wanted = std::mem::take(&mut self.robots_wanted);
         let mut out = Vec::new();
         {
             let state = shared.state();
             let map_due = self
                 .map_sent
                 .is_none_or(|sent| now.duration_since(sent) >= MAP_PERIOD);
-            if (everything || self.map_changed && map_due)
+            if (map_wanted || self.map_changed && map_due)
                 && let Some(layer) = self.map.as_deref().and_then(|m| state.map(m))
             {
                 self.map_changed = false;
@@ -252,14 +281,12 @@ impl Publisher {
                     out.push(Outgoing::Grid(grid));
                 }
             }
-            let names: Vec<String> = if everything {
-                self.changed_robots.clear();
-                state.robots().keys().cloned().collect()
+            let mut names = std::mem::take(&mut self.changed_robots);
+            if all_robots {
+                names.extend(state.robots().keys().cloned());
             } else {
-                std::mem::take(&mut self.changed_robots)
-                    .into_iter()
-                    .collect()
-            };
+                names.extend(wanted.iter().cloned());
+            }
             let mut transforms = Vec::new();
             for name in names {
                 let Some(track) = state.robots().get(&name) else {
@@ -275,16 +302,12 @@ impl Publisher {
                 if let Some(pose) = body {
                     transforms.push(messages::body_transform(&name, pose, stamp));
                 }
-                robot_messages(
-                    &self.context,
-                    &name,
-                    track,
-                    channels,
-                    everything,
+                let round = Round {
+                    everything: all_robots || wanted.contains(&name),
                     now,
                     stamp,
-                    &mut out,
-                );
+                };
+                channels.messages(&self.context, &name, track, &round, &mut out);
             }
             if !transforms.is_empty() {
                 out.push(Outgoing::Transforms(FrameTransforms { transforms }));
@@ -303,84 +326,111 @@ impl Publisher {
     }
 }
 
-/// A robot's messages: its true pose, its estimate when new, its beams,
-/// and its paths when due.
-#[allow(clippy::too_many_arguments)]
-fn robot_messages(
-    context: &Arc<Context>,
-    robot: &str,
-    track: &RobotTrack,
-    channels: &mut RobotChannels,
+/// The robot a robot's topic (`/<robot>/...`) names.
+fn robot_of_topic(topic: &str) -> Option<&str> {
+    let (robot, rest) = topic.strip_prefix('/')?.split_once('/')?;
+    (!robot.is_empty() && !rest.is_empty()).then_some(robot)
+}
+
+/// One push for one robot: whether all of it is sent again, and the
+/// push's times.
+struct Round {
     everything: bool,
     now: Instant,
     stamp: Timestamp,
-    out: &mut Vec<Outgoing>,
-) {
-    if let Some(truth) = track.true_pose {
-        out.push(Outgoing::Pose(
-            Arc::clone(&channels.true_pose),
-            messages::pose_in_map(truth, stamp),
-        ));
-    }
-    if let Some(estimate) = &track.estimate {
-        let key = (estimate.map.clone(), estimate.sequence);
-        if everything || channels.estimate_sent.as_ref() != Some(&key) {
-            channels.estimate_sent = Some(key);
+}
+
+impl RobotChannels {
+    /// A robot's messages: its true pose, its estimate when new, its beams,
+    /// and its paths when due.
+    fn messages(
+        &mut self,
+        context: &Arc<Context>,
+        robot: &str,
+        track: &RobotTrack,
+        round: &Round,
+        out: &mut Vec<Outgoing>,
+    ) {
+        let Round {
+            everything,
+            now,
+            stamp,
+        } = *round;
+        if let Some(truth) = track.true_pose {
             out.push(Outgoing::Pose(
-                Arc::clone(&channels.estimate),
-                messages::pose_in_map(estimate.pose, stamp),
+                Arc::clone(&self.true_pose),
+                messages::pose_in_map(truth, stamp),
             ));
+        }
+        if let Some(estimate) = &track.estimate {
+            let key = (estimate.map.clone(), estimate.sequence);
+            if everything || self.estimate_sent.as_ref() != Some(&key) {
+                self.estimate_sent = Some(key);
+                out.push(Outgoing::Pose(
+                    Arc::clone(&self.estimate),
+                    messages::pose_in_map(estimate.pose, stamp),
+                ));
+                out.push(Outgoing::Scene(
+                    Arc::clone(&self.covariance),
+                    messages::covariance_ellipse(robot, estimate, stamp),
+                ));
+            }
+        }
+        let has_cones = track.beams.iter().any(|b| b.half_angle > 0.0);
+        if has_cones || self.had_cones {
+            self.had_cones = has_cones;
             out.push(Outgoing::Scene(
-                Arc::clone(&channels.covariance),
-                messages::covariance_ellipse(robot, estimate, stamp),
+                Arc::clone(&self.sonar),
+                messages::sonar_cones(robot, &track.beams, stamp),
             ));
         }
-    }
-    let has_cones = track.beams.iter().any(|b| b.half_angle > 0.0);
-    if has_cones || channels.had_cones {
-        channels.had_cones = has_cones;
-        out.push(Outgoing::Scene(
-            Arc::clone(&channels.sonar),
-            messages::sonar_cones(robot, &track.beams, stamp),
-        ));
-    }
-    for (index, scan) in messages::laser_scans(&track.beams, stamp)
-        .into_iter()
-        .enumerate()
-    {
-        while channels.scans.len() <= index {
-            let topic = scan_topic(robot, channels.scans.len());
-            channels.scans.push(channel(context, &topic));
+        for (index, scan) in messages::laser_scans(&track.beams, stamp)
+            .into_iter()
+            .enumerate()
+        {
+            while self.scans.len() <= index {
+                let topic = scan_topic(robot, self.scans.len());
+                self.scans.push(channel(context, &topic));
+            }
+            out.push(Outgoing::Scan(Arc::clone(&self.scans[index]), scan));
         }
-        out.push(Outgoing::Scan(Arc::clone(&channels.scans[index]), scan));
-    }
-    let path_due = channels
-        .path_sent
-        .is_none_or(|sent| now.duration_since(sent) >= PATH_PERIOD);
-    if everything || path_due {
-        channels.path_sent = Some(now);
-        if !track.true_path.is_empty() {
-            out.push(Outgoing::Path(
-                Arc::clone(&channels.true_path),
-                messages::path_in_map(track.true_path.iter().copied(), stamp),
-            ));
-        }
-        if !track.estimate_path.is_empty() {
-            out.push(Outgoing::Path(
-                Arc::clone(&channels.estimate_path),
-                messages::path_in_map(track.estimate_path.iter().map(|p| [p.x, p.y]), stamp),
-            ));
+        let path_due = self
+            .path_sent
+            .is_none_or(|sent| now.duration_since(sent) >= PATH_PERIOD);
+        if everything || path_due {
+            self.path_sent = Some(now);
+            if !track.true_path.is_empty() {
+                out.push(Outgoing::Path(
+                    Arc::clone(&self.true_path),
+                    messages::path_in_map(track.true_path.iter().copied(), stamp),
+                ));
+            }
+            if !track.estimate_path.is_empty() {
+                out.push(Outgoing::Path(
+                    Arc::clone(&self.estimate_path),
+                    messages::path_in_map(track.estimate_path.iter().map(|p| [p.x, p.y]), stamp),
+                ));
+            }
         }
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::scan_topic;
+    use super::{robot_of_topic, scan_topic};
 
     #[test]
     fn the_first_laser_is_the_scan_topic() {
         assert_eq!(scan_topic("r1", 0), "/r1/scan");
         assert_eq!(scan_topic("r1", 1), "/r1/scan_2");
+    }
+
+    #[test]
+    fn a_robots_topics_name_it() {
+        assert_eq!(robot_of_topic("/r1/scan_2"), Some("r1"));
+        assert_eq!(robot_of_topic("/scout-1.a/true_pose"), Some("scout-1.a"));
+        assert_eq!(robot_of_topic("/map"), None);
+        assert_eq!(robot_of_topic("//x"), None);
+        assert_eq!(robot_of_topic("/r1/"), None);
     }
 }
