@@ -45,9 +45,9 @@ const PUSH_PERIOD: Duration = Duration::from_millis(50);
 const MAP_PERIOD: Duration = Duration::from_millis(500);
 /// The shortest time between two paths of a robot.
 const PATH_PERIOD: Duration = Duration::from_secs(1);
-/// Messages queued per client before the oldest are dropped: a whole
-/// round for a few dozen robots.
-const CLIENT_BACKLOG: usize = 4_096;
+/// Messages queued per client before the oldest are dropped: some
+/// seconds of one robot's data, so a stalled client holds few grids.
+const CLIENT_BACKLOG: usize = 1_024;
 
 /// The Foxglove WebSocket server of a view, listening, not yet sending.
 pub struct FoxgloveServer {
