@@ -25,6 +25,11 @@ pub struct ViewArgs {
     /// name.
     #[arg(long, value_name = "ADDR")]
     pub sim: Option<String>,
+    /// Also serve the live data over the Foxglove WebSocket protocol here
+    /// (host:port, e.g. 127.0.0.1:8765): in Foxglove, Open connection,
+    /// Foxglove WebSocket, ws://ADDR.
+    #[arg(long, value_name = "ADDR")]
+    pub foxglove: Option<SocketAddr>,
     /// Points kept per robot path.
     #[arg(long, default_value_t = 4_000)]
     pub path_points: usize,
@@ -54,6 +59,7 @@ pub fn run(args: ViewArgs) -> Result<()> {
             path_points: args.path_points,
             ..TrackLimits::default()
         },
+        foxglove: args.foxglove,
     };
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     runtime.block_on(async {
@@ -61,6 +67,10 @@ pub fn run(args: ViewArgs) -> Result<()> {
         let view = View::bind(config, shutdown.clone()).await?;
         let addr = view.local_addr()?;
         println!("deog view: serving http://{addr}/");
+        if let Some(foxglove) = view.foxglove_addr() {
+            println!("deog view: Foxglove on ws://{foxglove}");
+            tracing::info!(%foxglove, "serving Foxglove");
+        }
         tracing::info!(%addr, "serving the view");
         let stop = shutdown.clone();
         tokio::spawn(async move {

@@ -13,8 +13,12 @@
 //! - [`protocol`]: the JSON and binary messages the page is sent.
 //! - [`web`]: the HTTP routes, the page's embedded files (`web/`), and one
 //!   WebSocket connection per open page.
+//! - [`foxglove`]: the same live data over the Foxglove WebSocket protocol
+//!   (`--foxglove`), built by the pure [`foxglove_messages`].
 
 pub mod feeds;
+pub mod foxglove;
+pub mod foxglove_messages;
 pub mod protocol;
 pub mod state;
 pub mod web;
@@ -45,6 +49,14 @@ pub enum ViewError {
     /// Serving the page failed.
     #[error("serving the page: {0}")]
     Serve(std::io::Error),
+    /// The Foxglove WebSocket server could not start.
+    #[error("serving Foxglove on {addr}: {source}")]
+    Foxglove {
+        /// The address asked for.
+        addr: SocketAddr,
+        /// Why.
+        source: ::foxglove::FoxgloveError,
+    },
 }
 
 /// What the view follows and where it serves.
@@ -60,6 +72,8 @@ pub struct ViewConfig {
     pub map: Option<String>,
     /// What is kept per robot.
     pub limits: TrackLimits,
+    /// Where the Foxglove WebSocket server listens, when one is wanted.
+    pub foxglove: Option<SocketAddr>,
 }
 
 /// A view bound to its address, its followers not yet started.
@@ -67,6 +81,7 @@ pub struct View {
     listener: TcpListener,
     shared: Arc<Shared>,
     simulator: Option<SimClient>,
+    foxglove: Option<crate::foxglove::FoxgloveServer>,
 }
 
 use feeds::Shared;
@@ -84,6 +99,14 @@ impl View {
                     addr: config.listen,
                     source,
                 })?;
+        let foxglove = match config.foxglove {
+            Some(addr) => Some(
+                crate::foxglove::FoxgloveServer::start(addr)
+                    .await
+                    .map_err(|source| ViewError::Foxglove { addr, source })?,
+            ),
+            None => None,
+        };
         let client = MapClient::connect(config.server).await?;
         let simulator = match config.simulator {
             Some(sim) => Some(SimClient::connect(sim).await?),
@@ -94,6 +117,7 @@ impl View {
             listener,
             shared,
             simulator,
+            foxglove,
         })
     }
 
@@ -102,10 +126,18 @@ impl View {
         self.listener.local_addr().map_err(ViewError::Serve)
     }
 
+    /// The address the Foxglove WebSocket server listens on, when there is one.
+    pub fn foxglove_addr(&self) -> Option<SocketAddr> {
+        self.foxglove.as_ref().map(|f| f.local_addr())
+    }
+
     /// Follows the system and serves the page until the shutdown token is
     /// cancelled.
     pub async fn run(self) -> Result<(), ViewError> {
         feeds::start(&self.shared, self.simulator);
+        if let Some(foxglove) = self.foxglove {
+            tokio::spawn(foxglove.run(Arc::clone(&self.shared)));
+        }
         let shutdown = self.shared.shutdown.clone();
         axum::serve(self.listener, web::router(self.shared))
             .with_graceful_shutdown(async move { shutdown.cancelled().await })

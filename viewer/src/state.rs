@@ -75,6 +75,8 @@ pub struct WorldBeam {
     pub half_angle: f64,
     /// Whether something answered.
     pub echo: bool,
+    /// Which sensor of the rig made it (an index into the rig's sensors).
+    pub sensor: usize,
 }
 
 /// A localizer's latest estimate.
@@ -420,6 +422,7 @@ pub fn world_beams(rig: &Rig, at: Pose2, ranges: &[f64]) -> Vec<WorldBeam> {
                     BeamShape::Ray => 0.0,
                 },
                 echo,
+                sensor: beam.sensor,
             })
         })
         .collect()
