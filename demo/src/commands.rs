@@ -119,6 +119,29 @@ pub(crate) fn view(addresses: &Addresses, listen: SocketAddr) -> Vec<OsString> {
     ])
 }
 
+/// An explorer that spawns `robot` and drives it to the shared map's
+/// frontiers until none is left or the plan's duration has passed.
+pub(crate) fn explore(
+    plan: &DemoPlan,
+    robot: &PlannedRobot,
+    addresses: &Addresses,
+) -> Vec<OsString> {
+    os(&[
+        "explore",
+        "--robot",
+        &robot.name,
+        "--map",
+        MAP,
+        "--spawn",
+        "--duration",
+        &plan.schedule.duration_s.to_string(),
+        "--sim",
+        &addresses.sim_url(),
+        "--server",
+        &addresses.server_url(),
+    ])
+}
+
 /// A wanderer that spawns `robot` and drives it for the plan's duration.
 pub(crate) fn wander(
     plan: &DemoPlan,

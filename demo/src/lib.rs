@@ -24,6 +24,9 @@
 //!   judging and the reports.
 //! - `pacer`: the loops' quarter-second tick and the ctrl-c/SIGTERM that
 //!   ends them.
+//! - `coverage`: the share of the world's reachable free space the map
+//!   has seen, sampled every 10 simulated seconds, and the times to 95%
+//!   and 99%.
 //! - `kidnap`: carrying the first robot off without its odometry noticing.
 //! - `status_line`: the line on stderr rewritten in place, and notes above
 //!   it.
@@ -38,6 +41,7 @@
 //!   without any process.
 
 mod commands;
+mod coverage;
 #[cfg(test)]
 mod fixtures;
 mod judge;
@@ -51,6 +55,7 @@ mod report;
 mod run;
 mod status_line;
 
+pub use coverage::CoverageSample;
 pub use options::DemoOptions;
 pub use report::{DemoKidnapRecord, DemoReport};
 pub use run::run;

@@ -199,6 +199,7 @@ mod tests {
             kidnap: Some(&kidnap),
             wall_s: 80.4,
             max_lags_s: Vec::new(),
+            coverage: Vec::new(),
             commands: vec![("server".to_string(), "deog server --data d".to_string())],
         };
         let md = report(&outcome);
@@ -227,6 +228,7 @@ mod tests {
             kidnap: None,
             wall_s: 1.0,
             max_lags_s: Vec::new(),
+            coverage: Vec::new(),
             commands: Vec::new(),
         };
         assert!(report(&outcome).contains("No robot was kidnapped."));
@@ -241,6 +243,7 @@ mod tests {
             kidnap: None,
             wall_s: 80.4,
             max_lags_s: vec![("scout-1".to_string(), Some(0.4))],
+            coverage: Vec::new(),
             commands: Vec::new(),
         };
         let summary = summary(&outcome);

@@ -64,6 +64,11 @@ pub struct DemoOptions {
     /// Start no live view.
     #[arg(long)]
     pub no_view: bool,
+    /// The robots explore: each drives to the shared map's frontiers
+    /// (`deog explore`) instead of at random, and stops once none it can
+    /// reach is left.
+    #[arg(long)]
+    pub explore: bool,
     /// The localizers correct with every frame, however far behind their
     /// robots they fall (by default one that falls behind skips to the
     /// newest frame within a second): for a machine too slow for the

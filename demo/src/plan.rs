@@ -49,6 +49,8 @@ pub(crate) struct DemoPlan {
     pub every_frame: bool,
     /// Where the live view is asked to serve; `None` for no view.
     pub view: Option<std::net::SocketAddr>,
+    /// Whether explorers drive the robots rather than wanderers.
+    pub explore: bool,
     /// The PostgreSQL database the servers share; `None` for a sled store
     /// in the output folder.
     pub store: Option<String>,
@@ -101,9 +103,15 @@ impl DemoPlan {
             keep: options.keep,
             every_frame: options.every_frame,
             view: (!options.no_view).then_some(options.view),
+            explore: options.explore,
             store: options.store.clone(),
             servers: options.servers.max(1) as usize,
         })
+    }
+
+    /// The prefix of the names of the processes that drive the robots.
+    pub fn driver_prefix(&self) -> &'static str {
+        if self.explore { "explore-" } else { "wander-" }
     }
 
     /// The robots' names, in order.

@@ -10,6 +10,7 @@ use deog_evaluation::localization::{LocalizationRecord, PoseRecord};
 use deog_evaluation::map_quality::MapQualityRecord;
 use serde::Serialize;
 
+use crate::coverage::{CoverageSample, time_to};
 use crate::judge::Judgement;
 use crate::kidnap::KidnapDone;
 use crate::markdown;
@@ -29,6 +30,8 @@ pub(crate) struct DemoOutcome<'a> {
     /// Each robot's largest localizer lag, simulated seconds (`None`: its
     /// localizer never published an estimate while the robots drove).
     pub max_lags_s: Vec<(String, Option<f64>)>,
+    /// The map's coverage of the reachable free space as the robots drove.
+    pub coverage: Vec<CoverageSample>,
     /// Each process's name and command line, in the order they started.
     pub commands: Vec<(String, String)>,
 }
@@ -69,6 +72,16 @@ pub struct DemoReport {
     pub localize_at_s: f64,
     /// The kidnap; `null` when nobody was kidnapped.
     pub kidnap: Option<DemoKidnapRecord>,
+    /// Whether explorers drove the robots (`--explore`) rather than
+    /// wanderers.
+    pub explore: bool,
+    /// The map's coverage of the world's reachable free space, every 10
+    /// simulated seconds and once the robots stopped.
+    pub coverage: Vec<CoverageSample>,
+    /// Simulated seconds until the coverage reached 95%; `null` if never.
+    pub coverage_95_s: Option<f64>,
+    /// The same for 99%.
+    pub coverage_99_s: Option<f64>,
 }
 
 /// One robot in report.json: the localization library's record, and how
@@ -125,6 +138,10 @@ impl DemoReport {
                 from: k.from.into(),
                 to: k.to.into(),
             }),
+            explore: plan.explore,
+            coverage: outcome.coverage.clone(),
+            coverage_95_s: time_to(&outcome.coverage, 0.95),
+            coverage_99_s: time_to(&outcome.coverage, 0.99),
         }
     }
 
@@ -171,6 +188,16 @@ mod tests {
             kidnap: Some(&kidnap),
             wall_s: 80.5,
             max_lags_s: vec![("scout-1".to_string(), Some(0.75))],
+            coverage: vec![
+                crate::coverage::CoverageSample {
+                    simulated_s: 10.0,
+                    fraction: 0.5,
+                },
+                crate::coverage::CoverageSample {
+                    simulated_s: 20.0,
+                    fraction: 0.97,
+                },
+            ],
             commands: Vec::new(),
         };
         let text = DemoReport::new(&outcome).to_json().expect("serialises");
@@ -188,9 +215,20 @@ mod tests {
                 "seed",
                 "sonar",
                 "localize_at_s",
-                "kidnap"
+                "kidnap",
+                "explore",
+                "coverage",
+                "coverage_95_s",
+                "coverage_99_s"
             ])
         );
+        assert_eq!(json["explore"], false);
+        assert_eq!(
+            json["coverage"][1],
+            serde_json::json!({"simulated_s": 20.0, "fraction": 0.97})
+        );
+        assert_eq!(json["coverage_95_s"], 20.0);
+        assert_eq!(json["coverage_99_s"], Value::Null);
         assert_eq!(json["sonar"], "default");
         assert_eq!(json["duration_s"], 80.5);
         assert_eq!(json["simulated_s"], 100.0);
@@ -234,6 +272,7 @@ mod tests {
             kidnap: None,
             wall_s: 1.0,
             max_lags_s: Vec::new(),
+            coverage: Vec::new(),
             commands: Vec::new(),
         };
         let json: Value = serde_json::from_str(&DemoReport::new(&outcome).to_json().expect("JSON"))

@@ -12,6 +12,7 @@ use deog_harness::{Role, Supervisor, connect, free_loopback_addr};
 use deog_robot_client::{ClientConfig, MapClient, SimClient};
 
 use crate::commands::{self, Addresses};
+use crate::coverage::CoverageCurve;
 use crate::judge::judge;
 use crate::kidnap::{KidnapDone, kidnap_robot};
 use crate::markdown;
@@ -50,7 +51,7 @@ struct Demo<'a> {
 async fn demo(plan: &DemoPlan) -> Result<()> {
     let started = Instant::now();
     let mut demo = Demo::start(plan).await?;
-    let (kidnap, max_lags_s) = demo.drive().await?;
+    let (kidnap, max_lags_s, coverage) = demo.drive().await?;
     demo.drain().await?;
 
     let out = &plan.out;
@@ -61,6 +62,7 @@ async fn demo(plan: &DemoPlan) -> Result<()> {
         kidnap: kidnap.as_ref(),
         wall_s: started.elapsed().as_secs_f64(),
         max_lags_s,
+        coverage: coverage.samples().to_vec(),
         commands: demo
             .children
             .command_lines()
@@ -194,10 +196,15 @@ impl<'a> Demo<'a> {
             println!("deog demo: watch it live at http://{listen}/");
         }
         for robot in &plan.robots {
+            let driver = if plan.explore {
+                commands::explore(plan, robot, &addresses)
+            } else {
+                commands::wander(plan, robot, &addresses)
+            };
             children.start(
-                &format!("wander-{}", robot.name),
+                &format!("{}{}", plan.driver_prefix(), robot.name),
                 Role::Task,
-                &commands::wander(plan, robot, &addresses),
+                &driver,
             )?;
             children.start(
                 &format!("map-{}", robot.name),
@@ -222,11 +229,18 @@ impl Demo<'_> {
     /// localizers and makes the kidnap when their times come, and keeps
     /// the status line. Returns the kidnap, if one was made, and each
     /// robot's largest localizer lag.
-    async fn drive(&mut self) -> Result<(Option<KidnapDone>, Vec<(String, Option<f64>)>)> {
+    async fn drive(
+        &mut self,
+    ) -> Result<(
+        Option<KidnapDone>,
+        Vec<(String, Option<f64>)>,
+        CoverageCurve,
+    )> {
         let plan = self.plan;
         let mut progress = Progress::new(plan.robot_names());
         let mut localizers_started = 0;
         let mut kidnap: Option<KidnapDone> = None;
+        let mut coverage = CoverageCurve::default();
         loop {
             self.pacer.next(&mut self.status).await?;
             self.children.check()?;
@@ -269,12 +283,16 @@ impl Demo<'_> {
                 .line(&self.map_client, now, plan.schedule.duration_s, &clocks)
                 .await;
             self.status.show(&line);
-            if self.children.all_done("wander-") {
+            if !states.is_empty() {
+                coverage.sample_if_due(&self.map_client, plan, now).await?;
+            }
+            if self.children.all_done(plan.driver_prefix()) {
+                coverage.sample(&self.map_client, plan, now).await?;
                 let lags = progress
                     .max_lags()
                     .map(|(robot, lag)| (robot.to_string(), lag))
                     .collect();
-                return Ok((kidnap, lags));
+                return Ok((kidnap, lags, coverage));
             }
         }
     }
