@@ -70,6 +70,8 @@ pub struct ExploreArgs {
 const WINDOW_MARGIN_CELLS: i32 = 40;
 /// Plans in a row that found nothing before the robot is done.
 const EMPTY_PLANS_TO_STOP: u32 = 3;
+/// Simulated seconds another explorer's goal counts without news of it.
+const CLAIM_LIFETIME_S: f64 = 120.0;
 /// Simulated seconds a barred goal stays barred.
 const BAR_S: f64 = 60.0;
 /// Simulated seconds without nearing its goal before it is barred.
@@ -102,6 +104,7 @@ enum Plan {
 
 /// The explorer's state between frames.
 struct Explorer {
+    robot: String,
     map: String,
     client: MapClient,
     cache: TileCache,
@@ -133,6 +136,7 @@ impl Explorer {
         };
         follow.validate()?;
         Ok(Self {
+            robot: args.robot.clone(),
             map: map.to_string(),
             client,
             cache: TileCache::new(map, tile_size),
@@ -178,7 +182,7 @@ impl Explorer {
             .any(|(i, _)| window.at(i) == Occupancy::Free);
         let frontiers = find_frontiers(&window, self.min_frontier_m);
         self.blacklist.expire(now_s);
-        let claims: [(f64, f64); 0] = [];
+        let claims = self.claims(now_s).await?;
         let Some(goal) = choose_goal(
             &window,
             &frontiers,
@@ -204,6 +208,38 @@ impl Explorer {
             .map(|cell| window.centre_of(cell))
             .collect();
         Ok(Plan::Go(goal, PathFollower::new(path, self.follow)?))
+    }
+
+    /// The goals other explorers hold on the map: active, and set within
+    /// the last two minutes (an explorer that died says nothing more).
+    async fn claims(&self, now_s: f64) -> Result<Vec<(f64, f64)>> {
+        Ok(self
+            .client
+            .goals(&self.map)
+            .await
+            .context("reading the other explorers' goals")?
+            .into_iter()
+            .filter(|g| {
+                g.active && g.robot != self.robot && (now_s - g.time_s).abs() < CLAIM_LIFETIME_S
+            })
+            .map(|g| (g.x, g.y))
+            .collect())
+    }
+
+    /// Tells the other explorers where this one is heading; `active`
+    /// false gives the goal up.
+    async fn publish_goal(&self, x: f64, y: f64, time_s: f64, active: bool) -> Result<()> {
+        self.client
+            .publish_goal(pb::ExplorationGoal {
+                robot: self.robot.clone(),
+                map: self.map.clone(),
+                x,
+                y,
+                time_s,
+                active,
+            })
+            .await
+            .context("publishing the goal")
     }
 
     /// What the robot's ranges see around it, metres from its body.
@@ -341,6 +377,7 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
     let mut last_sequence = 0;
     let mut start_time = None;
     let mut last_pose: Option<Pose2> = None;
+    let mut last_time_s = 0.0;
     let mut was_bumped = false;
     let mut next_plan_s = f64::NEG_INFINITY;
     'run: loop {
@@ -376,6 +413,7 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
             was_bumped = state.bumper;
             summary.frames += 1;
             summary.sim_seconds = state.time_s - start;
+            last_time_s = state.time_s;
             if let Some((frames, _)) = &publisher
                 && frames
                     .send(frame_of(&args.robot, &state, &rig))
@@ -430,6 +468,8 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
                             (distance, now)
                         }
                     };
+                    // Each plan refreshes the claim, so that it stays fresh.
+                    explorer.publish_goal(goal.x, goal.y, now, true).await?;
                     pursuit = Some(Pursuit {
                         goal,
                         follower,
@@ -492,6 +532,11 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
     }
     if let Err(error) = sim.drive(&args.robot, 0.0, 0.0).await {
         tracing::warn!(%error, "could not stop the robot");
+    }
+    // Give the goal up, so the others need not avoid it.
+    let at = last_pose.unwrap_or_default();
+    if let Err(error) = explorer.publish_goal(at.x, at.y, last_time_s, false).await {
+        tracing::warn!(%error, "could not give the goal up");
     }
     if let Some((frames, task)) = publisher {
         drop(frames);

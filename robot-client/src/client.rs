@@ -360,6 +360,33 @@ impl MapClient {
         Ok(())
     }
 
+    /// Stores an explorer's current goal on its map, replacing its earlier
+    /// one. Safe to retry: the same goal again changes nothing.
+    pub async fn publish_goal(&self, goal: pb::ExplorationGoal) -> Result<(), ClientError> {
+        let raw = self.raw.clone();
+        with_retry(&self.config.retry, || {
+            let (mut raw, goal) = (raw.clone(), goal.clone());
+            async move { raw.publish_goal(goal).await }
+        })
+        .await?;
+        Ok(())
+    }
+
+    /// Every explorer's latest goal on `map`, active or given up.
+    pub async fn goals(&self, map: &str) -> Result<Vec<pb::ExplorationGoal>, ClientError> {
+        let raw = self.raw.clone();
+        let request = pb::ListGoalsRequest {
+            map: map.to_string(),
+        };
+        Ok(with_retry(&self.config.retry, || {
+            let (mut raw, request) = (raw.clone(), request.clone());
+            async move { raw.list_goals(request).await }
+        })
+        .await?
+        .into_inner()
+        .goals)
+    }
+
     /// The rig a frame's `rig` field names (empty: the Scout's), as the
     /// server knows it.
     pub async fn rig(&self, frame_rig: &str) -> Result<Rig, ClientError> {

@@ -309,6 +309,16 @@ pub fn sonar_frame(field: &str, frame: &pb::SonarFrame, limits: &Limits) -> Resu
     Ok(())
 }
 
+/// Checks an explorer's goal: names as everywhere, finite numbers.
+pub fn exploration_goal(goal: &pb::ExplorationGoal) -> Result<(), StoreError> {
+    robot_name("robot", &goal.robot)?;
+    map_name("map", &goal.map)?;
+    finite("x", goal.x)?;
+    finite("y", goal.y)?;
+    finite("time_s", goal.time_s)?;
+    Ok(())
+}
+
 /// Checks a pose estimate.
 pub fn pose_estimate(estimate: &pb::PoseEstimate) -> Result<(), StoreError> {
     robot_name("robot", &estimate.robot)?;

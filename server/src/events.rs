@@ -6,7 +6,7 @@
 //! reader does then is the service's policy (see `service.rs`).
 
 use deog_grid::TileKey;
-use deog_proto::v1::PoseEstimate;
+use deog_proto::v1::{ExplorationGoal, PoseEstimate};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use tokio::sync::broadcast;
@@ -49,6 +49,7 @@ pub struct Events {
     maps: Mutex<HashMap<String, broadcast::Sender<MapEvent>>>,
     frames: broadcast::Sender<FrameNote>,
     poses: broadcast::Sender<Arc<PoseEstimate>>,
+    goals: broadcast::Sender<Arc<ExplorationGoal>>,
 }
 
 impl Events {
@@ -60,6 +61,7 @@ impl Events {
             maps: Mutex::new(HashMap::new()),
             frames: broadcast::channel(capacity).0,
             poses: broadcast::channel(capacity).0,
+            goals: broadcast::channel(capacity).0,
         }
     }
 
@@ -114,5 +116,15 @@ impl Events {
     /// Tells pose watchers.
     pub fn pose_stored(&self, pose: Arc<PoseEstimate>) {
         let _ = self.poses.send(pose);
+    }
+
+    /// Hears every goal stored from now on.
+    pub fn watch_goals(&self) -> broadcast::Receiver<Arc<ExplorationGoal>> {
+        self.goals.subscribe()
+    }
+
+    /// Tells the goal watchers of a stored goal.
+    pub fn goal_stored(&self, goal: Arc<ExplorationGoal>) {
+        let _ = self.goals.send(goal);
     }
 }

@@ -912,4 +912,81 @@ impl<S: Store> MapService for MapServer<S> {
         });
         Ok(Response::new(ReceiverStream::new(rx)))
     }
+
+    async fn publish_goal(
+        &self,
+        request: Request<pb::ExplorationGoal>,
+    ) -> Result<Response<pb::PublishGoalResponse>, Status> {
+        let goal = request.into_inner();
+        self.limits.check_size("ExplorationGoal", &goal)?;
+        convert::exploration_goal(&goal)?;
+        let store = self.store.clone();
+        let (map, robot, bytes) = (
+            goal.map.clone(),
+            goal.robot.clone(),
+            prost::Message::encode_to_vec(&goal),
+        );
+        tokio::task::spawn_blocking(move || store.put_goal(&map, &robot, bytes))
+            .await
+            .map_err(|_| Status::internal("goal writer failed"))??;
+        self.events.goal_stored(Arc::new(goal));
+        Ok(Response::new(pb::PublishGoalResponse {}))
+    }
+
+    async fn list_goals(
+        &self,
+        request: Request<pb::ListGoalsRequest>,
+    ) -> Result<Response<pb::ListGoalsResponse>, Status> {
+        let map = convert::map_name("map", &request.into_inner().map)?;
+        let store = self.store.clone();
+        let stored = tokio::task::spawn_blocking(move || store.goals(&map))
+            .await
+            .map_err(|_| Status::internal("goal reader failed"))??;
+        let goals = stored
+            .iter()
+            .map(|(_, bytes)| decode::<pb::ExplorationGoal>(bytes, "goal"))
+            .collect::<Result<_, _>>()?;
+        Ok(Response::new(pb::ListGoalsResponse { goals }))
+    }
+
+    type WatchGoalsStream = ResponseStream<pb::ExplorationGoal>;
+
+    async fn watch_goals(
+        &self,
+        request: Request<pb::ListGoalsRequest>,
+    ) -> Result<Response<Self::WatchGoalsStream>, Status> {
+        let map = convert::map_name("map", &request.into_inner().map)?;
+        let mut goals = self.events.watch_goals();
+        let (tx, rx) = mpsc::channel(self.stream_buffer);
+        let server = self.clone();
+        tokio::spawn(async move {
+            loop {
+                let goal = tokio::select! {
+                    () = server.shutdown.cancelled() => {
+                        let _ = tx.send(Err(Status::unavailable("the map server is shutting down"))).await;
+                        break;
+                    }
+                    () = tx.closed() => break,
+                    goal = goals.recv() => goal,
+                };
+                match goal {
+                    Ok(goal) => {
+                        if goal.map != map {
+                            continue;
+                        }
+                        if tx.send(Ok((*goal).clone())).await.is_err() {
+                            break;
+                        }
+                    }
+                    // Goals are stored: ListGoals has what a lagging
+                    // watcher skipped.
+                    Err(broadcast::error::RecvError::Lagged(missed)) => {
+                        tracing::debug!(missed, "goal watcher fell behind");
+                    }
+                    Err(broadcast::error::RecvError::Closed) => break,
+                }
+            }
+        });
+        Ok(Response::new(ReceiverStream::new(rx)))
+    }
 }

@@ -276,6 +276,96 @@ async fn poses_are_stored_read_by_range_and_watched() {
     assert_eq!(read[1], better);
 }
 
+fn goal(robot: &str, map: &str, x: f64, active: bool) -> pb::ExplorationGoal {
+    pb::ExplorationGoal {
+        robot: robot.into(),
+        map: map.into(),
+        x,
+        y: -1.5,
+        time_s: 12.5,
+        active,
+    }
+}
+
+#[tokio::test]
+async fn explorers_goals_are_kept_one_per_map_and_robot_listed_and_watched() {
+    let server = TestServer::start().await;
+    let mut client = server.client().await;
+    let mut watched = client
+        .watch_goals(pb::ListGoalsRequest { map: "m".into() })
+        .await
+        .unwrap()
+        .into_inner();
+    client
+        .publish_goal(goal("a", "m", 1.0, true))
+        .await
+        .unwrap();
+    client
+        .publish_goal(goal("b", "m", 2.0, true))
+        .await
+        .unwrap();
+    client
+        .publish_goal(goal("a", "other", 3.0, true))
+        .await
+        .unwrap();
+    // A newer goal replaces the robot's earlier one on that map.
+    client
+        .publish_goal(goal("a", "m", 4.0, false))
+        .await
+        .unwrap();
+    let list = |map: &str| pb::ListGoalsRequest { map: map.into() };
+    let mut on_m = client
+        .list_goals(list("m"))
+        .await
+        .unwrap()
+        .into_inner()
+        .goals;
+    on_m.sort_by(|x, y| x.robot.cmp(&y.robot));
+    assert_eq!(
+        on_m,
+        [goal("a", "m", 4.0, false), goal("b", "m", 2.0, true)]
+    );
+    let on_other = client
+        .list_goals(list("other"))
+        .await
+        .unwrap()
+        .into_inner()
+        .goals;
+    assert_eq!(on_other, [goal("a", "other", 3.0, true)]);
+    assert!(
+        client
+            .list_goals(list("none"))
+            .await
+            .unwrap()
+            .into_inner()
+            .goals
+            .is_empty()
+    );
+    // The watcher of m hears m's goals only, in order.
+    assert_eq!(next(&mut watched).await, goal("a", "m", 1.0, true));
+    assert_eq!(next(&mut watched).await, goal("b", "m", 2.0, true));
+    assert_eq!(next(&mut watched).await, goal("a", "m", 4.0, false));
+    // Bad goals are refused and change nothing.
+    let mut bad = goal("a", "m", f64::NAN, true);
+    let status = client.publish_goal(bad.clone()).await.unwrap_err();
+    assert_eq!(status.code(), tonic::Code::InvalidArgument, "{status}");
+    bad.x = 0.0;
+    bad.robot = "bad\0name".into();
+    assert_eq!(
+        client.publish_goal(bad).await.unwrap_err().code(),
+        tonic::Code::InvalidArgument
+    );
+    let status = client.list_goals(list("")).await.unwrap_err();
+    assert_eq!(status.code(), tonic::Code::InvalidArgument);
+    let after = client
+        .list_goals(list("m"))
+        .await
+        .unwrap()
+        .into_inner()
+        .goals;
+    assert_eq!(after.len(), 2);
+}
+
 fn laser_rig(name: &str, beams: u32) -> pb::Rig {
     pb::Rig {
         name: name.into(),

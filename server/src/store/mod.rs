@@ -126,6 +126,12 @@ pub trait Store: Send + Sync + 'static {
         visit: &mut dyn FnMut(u64, &[u8]) -> bool,
     ) -> Result<(), StoreError>;
 
+    /// Stores an explorer's encoded goal on `map`, replacing its earlier
+    /// one. Called from any thread.
+    fn put_goal(&self, map: &str, robot: &str, bytes: Vec<u8>) -> Result<(), StoreError>;
+    /// Every explorer's latest encoded goal on `map`, by robot name.
+    fn goals(&self, map: &str) -> Result<Vec<(String, Vec<u8>)>, StoreError>;
+
     /// Every stored rig, encoded, by name.
     fn rigs(&self) -> Result<Vec<(String, Vec<u8>)>, StoreError>;
     /// Stores an encoded rig under `name`, replacing any earlier one; the

@@ -6,7 +6,7 @@
 //! keys). Frames live in the
 //! tree `frames` under `f<robot>\0<sequence>` with a summary per robot under
 //! `r<robot>`; poses in `poses` under `<robot>\0<sequence>`; rigs in `rigs`
-//! under their name. Names never hold
+//! under their name; explorers' goals in `goals` under `<map>\0<robot>`. Names never hold
 //! a zero byte (the service checks), and sequences are big-endian, so a
 //! robot's frames sort by sequence.
 
@@ -70,6 +70,7 @@ struct OpenStore {
     frames: sled::Tree,
     poses: sled::Tree,
     rigs: sled::Tree,
+    goals: sled::Tree,
     maps: RwLock<HashMap<String, sled::Tree>>,
 }
 
@@ -124,6 +125,7 @@ impl OpenStore {
         let frames = db.open_tree("frames")?;
         let poses = db.open_tree("poses")?;
         let rigs = db.open_tree("rigs")?;
+        let goals = db.open_tree("goals")?;
         let mut maps = HashMap::new();
         for name in db.tree_names() {
             let Some(map) = std::str::from_utf8(&name)
@@ -146,6 +148,7 @@ impl OpenStore {
             frames,
             poses,
             rigs,
+            goals,
             maps: RwLock::new(maps),
         })
     }
@@ -504,6 +507,22 @@ impl Store for SledStore {
         Ok(())
     }
 
+    fn put_goal(&self, map: &str, robot: &str, bytes: Vec<u8>) -> Result<(), StoreError> {
+        self.current()?.goals.insert(goal_key(map, robot), bytes)?;
+        Ok(())
+    }
+
+    fn goals(&self, map: &str) -> Result<Vec<(String, Vec<u8>)>, StoreError> {
+        let prefix = goal_key(map, "");
+        let mut out = Vec::new();
+        for entry in self.current()?.goals.scan_prefix(&prefix) {
+            let (key, value) = entry?;
+            let robot = String::from_utf8_lossy(&key[prefix.len()..]).into_owned();
+            out.push((robot, value.to_vec()));
+        }
+        Ok(out)
+    }
+
     fn flush(&self) -> Result<(), StoreError> {
         self.current()?.db.flush()?;
         Ok(())
@@ -556,6 +575,15 @@ impl Store for SledStore {
         fresh.db.flush()?;
         Ok(())
     }
+}
+
+/// A goal's key: the map, a zero byte, the robot.
+fn goal_key(map: &str, robot: &str) -> Vec<u8> {
+    let mut key = Vec::with_capacity(map.len() + robot.len() + 1);
+    key.extend_from_slice(map.as_bytes());
+    key.push(0);
+    key.extend_from_slice(robot.as_bytes());
+    key
 }
 
 #[cfg(test)]

@@ -395,6 +395,12 @@ impl Store for SuiteStore {
     fn put_rig(&self, name: &str, bytes: Vec<u8>) -> Result<(), StoreError> {
         self.inner.put_rig(name, bytes)
     }
+    fn put_goal(&self, map: &str, robot: &str, bytes: Vec<u8>) -> Result<(), StoreError> {
+        self.inner.put_goal(map, robot, bytes)
+    }
+    fn goals(&self, map: &str) -> Result<Vec<(String, Vec<u8>)>, StoreError> {
+        self.inner.goals(map)
+    }
     fn flush(&self) -> Result<(), StoreError> {
         self.inner.flush()?;
         self.flushes.fetch_add(1, Ordering::Relaxed);

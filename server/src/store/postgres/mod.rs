@@ -403,6 +403,27 @@ impl Store for PostgresStore {
         })
     }
 
+    fn put_goal(&self, map: &str, robot: &str, bytes: Vec<u8>) -> Result<(), StoreError> {
+        self.with(|conn| {
+            conn.execute(
+                "INSERT INTO goals (map, robot, goal) VALUES ($1, $2, $3) \
+                 ON CONFLICT (map, robot) DO UPDATE SET goal = excluded.goal",
+                &[&map, &robot, &bytes],
+            )?;
+            Ok(())
+        })
+    }
+
+    fn goals(&self, map: &str) -> Result<Vec<(String, Vec<u8>)>, StoreError> {
+        self.with(|conn| {
+            let rows = conn.query(
+                "SELECT robot, goal FROM goals WHERE map = $1 ORDER BY robot",
+                &[&map],
+            )?;
+            Ok(rows.iter().map(|row| (row.get(0), row.get(1))).collect())
+        })
+    }
+
     fn flush(&self) -> Result<(), StoreError> {
         // Every write is committed before it returns.
         Ok(())

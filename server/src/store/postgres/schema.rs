@@ -54,6 +54,13 @@ const MIGRATIONS: &[&str] = &[
          id integer PRIMARY KEY,
          at timestamptz NOT NULL
      );",
+    // 2: explorers' goals, one per map and robot.
+    "CREATE TABLE goals (
+         map text NOT NULL,
+         robot text NOT NULL,
+         goal bytea NOT NULL,
+         PRIMARY KEY (map, robot)
+     );",
 ];
 
 /// The schema version this build writes.
