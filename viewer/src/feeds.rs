@@ -166,6 +166,30 @@ async fn follow_catalogue(shared: Arc<Shared>) {
             }
             Err(error) => debug!(%error, "listing the maps"),
         }
+        let followed: Vec<String> = shared
+            .followed_maps
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .iter()
+            .cloned()
+            .collect();
+        for map in followed {
+            match shared.client.goals(&map).await {
+                Ok(goals) => {
+                    let mut state = shared.state();
+                    let changes: Vec<Change> = goals
+                        .into_iter()
+                        .filter_map(|g| {
+                            let at = g.active.then(|| (g.map.clone(), g.x, g.y));
+                            state.on_goal(&g.robot, at)
+                        })
+                        .collect();
+                    drop(state);
+                    shared.publish(changes);
+                }
+                Err(error) => debug!(%map, %error, "reading the explorers' goals"),
+            }
+        }
         match shared.client.robots().await {
             Ok(robots) => {
                 for robot in robots {

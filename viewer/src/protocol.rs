@@ -109,6 +109,9 @@ fn robot(name: &str, track: &RobotTrack, history: bool) -> Value {
             round(b.x), round(b.y), round(b.angle), round(b.range), round(b.half_angle), u8::from(b.echo),
         ])).collect::<Vec<_>>(),
         "estimate": track.estimate.as_ref().map(estimate),
+        "goal": track.goal.as_ref().map(|(map, x, y)| json!({
+            "map": map, "x": round(*x), "y": round(*y),
+        })),
         "error": track.error.map(|e| json!({
             "m": round(e.distance_m), "deg": round(e.heading_deg),
         })),

@@ -156,6 +156,8 @@ pub struct RobotTrack {
     pub estimate_path: VecDeque<EstimatePoint>,
     /// Kidnaps seen, oldest first.
     pub kidnaps: VecDeque<Kidnap>,
+    /// Where its explorer is heading (map, x, y), while it has a goal.
+    pub goal: Option<(String, f64, f64)>,
     true_by_sequence: VecDeque<(u64, Pose2)>,
     last_truth_time_s: Option<f64>,
 }
@@ -357,6 +359,19 @@ impl ViewState {
     }
 }
 
+impl ViewState {
+    /// An explorer's goal: where it heads, or `None` once given up. Says
+    /// whether that changed what is shown.
+    pub fn on_goal(&mut self, robot: &str, goal: Option<(String, f64, f64)>) -> Option<Change> {
+        let track = self.robots.entry(robot.to_string()).or_default();
+        if track.goal == goal {
+            return None;
+        }
+        track.goal = goal;
+        Some(Change::Robot(robot.to_string()))
+    }
+}
+
 impl RobotTrack {
     /// Takes a true pose into the path; says whether it was a kidnap (a
     /// jump faster than any drive: 0.5 m plus 2 m/s of the time between).
@@ -547,6 +562,17 @@ mod tests {
             ..estimate
         };
         assert_eq!(state.on_estimate("r", older), None);
+    }
+
+    #[test]
+    fn a_goal_shows_until_it_is_given_up() {
+        let mut state = ViewState::new(TrackLimits::default());
+        let goal = Some(("m".to_string(), 1.0, 2.0));
+        assert!(state.on_goal("r", goal.clone()).is_some());
+        assert_eq!(state.on_goal("r", goal.clone()), None, "nothing new");
+        assert_eq!(state.robots()["r"].goal, goal);
+        assert!(state.on_goal("r", None).is_some());
+        assert_eq!(state.robots()["r"].goal, None);
     }
 
     #[test]

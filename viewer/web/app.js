@@ -419,6 +419,35 @@ function drawKidnaps(robot) {
   }
 }
 
+// An explorer's goal: a diamond in its colour, a dashed line from the
+// robot to it.
+function drawGoal(robot, color) {
+  const goal = robot.data.goal;
+  if (!goal || !view.map || goal.map !== view.map.name) return;
+  const [gx, gy] = toScreen(goal.x, goal.y);
+  const from = robot.shown || robot.shownEstimate;
+  ctx.strokeStyle = color;
+  ctx.lineWidth = 1.5;
+  if (from) {
+    const [sx, sy] = toScreen(from[0], from[1]);
+    ctx.globalAlpha = 0.6;
+    ctx.setLineDash([2, 4]);
+    ctx.beginPath();
+    ctx.moveTo(sx, sy);
+    ctx.lineTo(gx, gy);
+    ctx.stroke();
+    ctx.setLineDash([]);
+    ctx.globalAlpha = 1;
+  }
+  ctx.fillStyle = color;
+  ctx.beginPath();
+  ctx.moveTo(gx, gy - 7); ctx.lineTo(gx + 6, gy); ctx.lineTo(gx, gy + 7); ctx.lineTo(gx - 6, gy);
+  ctx.closePath();
+  ctx.fill();
+  ctx.strokeStyle = '#fff';
+  ctx.stroke();
+}
+
 function drawRobot(robot, color, dt) {
   const radius = Math.max(4, (robot.data.radius || 0.2) * view.scale);
   robot.shown = glide(robot.shown, robot.data.true_pose, dt);
@@ -515,6 +544,7 @@ function frame(now) {
   for (const robot of robots) drawBeams(robot, colorOf(robot.name));
   for (const robot of robots) drawPaths(robot, colorOf(robot.name));
   for (const robot of robots) drawKidnaps(robot);
+  for (const robot of robots) drawGoal(robot, colorOf(robot.name));
   for (const robot of robots) drawRobot(robot, colorOf(robot.name), dt);
   drawScaleBar();
   const ended = performance.now();
@@ -566,6 +596,7 @@ window.deogView = {
       error: r.data.error,
       kidnaps: r.kidnaps.length,
       truePathPoints: r.truePath.length,
+      goal: r.data.goal || null,
       color: colorOf(r.name),
     }));
   },
