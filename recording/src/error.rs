@@ -22,8 +22,11 @@ pub enum RecordingError {
         reason: String,
     },
     /// The MCAP container itself is unreadable or could not be written.
-    #[error("MCAP: {0}")]
+    #[error("MCAP")]
     Mcap(#[from] mcap::McapError),
+    /// Bytes that are not an MCAP file at all.
+    #[error("not an MCAP file (it does not begin with MCAP's magic bytes)")]
+    NotMcap,
     /// No topic of the kind needed, or not the one asked for.
     #[error("{0}")]
     Topic(String),

@@ -197,6 +197,9 @@ pub fn read_recording(
 /// Every channel's messages, for the types read here (others are only
 /// named, for the errors that list topics).
 fn read_topics(mcap: &[u8]) -> Result<BTreeMap<String, Topic>, RecordingError> {
+    if !mcap.starts_with(mcap::MAGIC) {
+        return Err(RecordingError::NotMcap);
+    }
     let mut topics: BTreeMap<String, Topic> = BTreeMap::new();
     for message in mcap::MessageStream::new(mcap)? {
         let message = message?;
@@ -262,25 +265,18 @@ fn pick_scan_topic(
             None
         }
     };
-    let name = pick_topic(
-        topics,
-        asked,
-        "scan",
-        "--scan-topic",
-        &[LaserScan::TYPE_NAME],
-    )
-    .or_else(|laser_error| {
-        if asked.is_some() {
-            // Asked for by name: it may be a topic of Range messages.
-            pick_topic(topics, asked, "scan", "--scan-topic", &[Range::TYPE_NAME])
-                .map_err(|_| laser_error)
-        } else if topics.values().any(|t| names_type::<LaserScan>(&t.schema)) {
-            Err(laser_error)
-        } else {
-            pick_topic(topics, None, "scan", "--scan-topic", &[Range::TYPE_NAME])
-                .map_err(|_| laser_error)
-        }
-    })?;
+    let laser_topics = topics
+        .values()
+        .filter(|t| names_type::<LaserScan>(&t.schema))
+        .count();
+    // Asked for by name, either kind; else the one laser, or the one
+    // topic of sonars where there is no laser.
+    let types: &[&str] = match (asked, laser_topics) {
+        (Some(_), _) => &[LaserScan::TYPE_NAME, Range::TYPE_NAME],
+        (None, 0) => &[Range::TYPE_NAME],
+        (None, _) => &[LaserScan::TYPE_NAME],
+    };
+    let name = pick_topic(topics, asked, "scan", "--scan-topic", types)?;
     let kind = kind_of(&topics[&name]).ok_or_else(|| {
         RecordingError::Topic(format!("{name} holds neither LaserScan nor Range messages"))
     })?;
