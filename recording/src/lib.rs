@@ -19,6 +19,10 @@
 //!   ([`write_recording`]), and the topics and coordinate frames used.
 //! - [`pose_track`]: poses over time, interpolated between samples.
 //! - [`scan_rig`]: the rig a recording's scans and `/tf_static` describe.
+//! - [`topics`]: a recording's channels by topic, and the topics an
+//!   import takes.
+//! - [`scans`]: scans (LaserScan, or rounds of Range) as frames' readings
+//!   and the rig they make.
 //! - [`import`]: a recording read into frames ([`read_recording`]).
 //! - [`error`]: the one error type, [`RecordingError`].
 //!
@@ -58,7 +62,9 @@ pub mod occupancy;
 pub mod pose_track;
 pub mod record;
 pub mod scan_rig;
+pub mod scans;
 pub mod schemas;
+pub mod topics;
 
 pub use cdr::{CdrReader, CdrWriter};
 pub use error::RecordingError;

@@ -70,7 +70,8 @@ pub struct ImportArgs {
     pub laser: Option<LaserChoice>,
     /// The rig the frames come from: a built-in name (scout, pioneer3dx,
     /// laser180) or a rig file. Data files default to scout; a CARMEN log
-    /// to the geometry the log itself gives. Every frame's count of ranges
+    /// to the geometry the log itself gives, a ROS 2 recording to its
+    /// scans' with the mounts on /tf_static. Every frame's count of ranges
     /// must be the rig's.
     #[arg(long, conflicts_with = "map")]
     pub rig: Option<String>,
