@@ -3,6 +3,8 @@
 
 use std::collections::BTreeMap;
 
+use mcap::sans_io::{LinearReaderOptions, MessageReadEvent, MessageReader};
+
 use crate::error::RecordingError;
 use crate::messages::{
     LaserScan, Odometry, PoseStamped, PoseWithCovarianceStamped, Range, RosMessage, TfMessage,
@@ -35,8 +37,26 @@ pub(crate) fn read_topics(mcap: &[u8]) -> Result<BTreeMap<String, Topic>, Record
         return Err(RecordingError::NotMcap);
     }
     let mut topics: BTreeMap<String, Topic> = BTreeMap::new();
-    for message in mcap::MessageStream::new(mcap)? {
-        let message = message?;
+    // The reader allocates what a record claims before reading it: a
+    // bound on records keeps a corrupt length an error, not an abort.
+    let limit = (mcap.len() as u64)
+        .saturating_mul(MAX_INFLATION)
+        .clamp(MIN_RECORD_LIMIT, MAX_RECORD_LIMIT);
+    let options = LinearReaderOptions::default()
+        .with_record_length_limit(usize::try_from(limit).unwrap_or(usize::MAX));
+    let mut reader = MessageReader::new_with_options(options);
+    let mut unread = mcap;
+    while let Some(event) = reader.next_event() {
+        let message = match event? {
+            MessageReadEvent::ReadRequest(wanted) => {
+                let n = wanted.min(unread.len());
+                reader.insert(n).copy_from_slice(&unread[..n]);
+                reader.notify_read(n);
+                unread = &unread[n..];
+                continue;
+            }
+            MessageReadEvent::Message(message) => message,
+        };
         let channel = &message.channel;
         let topic = topics
             .entry(channel.topic.clone())
@@ -67,6 +87,16 @@ pub(crate) fn read_topics(mcap: &[u8]) -> Result<BTreeMap<String, Topic>, Record
     }
     Ok(topics)
 }
+
+/// The most bytes a record inside a chunk may take for each byte of the
+/// file: far beyond what zstd or lz4 reach on sensor data.
+const MAX_INFLATION: u64 = 1024;
+
+/// Records of up to this size are taken whatever the file's size.
+const MIN_RECORD_LIMIT: u64 = 64 << 20;
+
+/// No record may take more than this.
+const MAX_RECORD_LIMIT: u64 = 4 << 30;
 
 pub(crate) fn is_read_here(schema: &str) -> bool {
     names_type::<LaserScan>(schema)

@@ -414,3 +414,51 @@ fn scans_of_another_geometry_are_refused() {
     let err = read_recording(&bytes, &options()).unwrap_err().to_string();
     assert!(err.contains("scan 2 on /scan has 4 beams"), "{err}");
 }
+
+/// An MCAP record: opcode, length, body.
+fn mcap_record(opcode: u8, body: &[u8]) -> Vec<u8> {
+    let mut out = vec![opcode];
+    out.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    out.extend_from_slice(body);
+    out
+}
+
+fn mcap_string(text: &str) -> Vec<u8> {
+    let mut out = (text.len() as u32).to_le_bytes().to_vec();
+    out.extend_from_slice(text.as_bytes());
+    out
+}
+
+#[test]
+fn a_compressed_record_claiming_an_enormous_length_is_an_error_not_an_abort() {
+    // Inside the chunk, a message record that claims 2^57 bytes: the
+    // reader must not try to make room for them.
+    let mut inner = vec![0x05];
+    inner.extend_from_slice(&(1u64 << 57).to_le_bytes());
+    inner.extend_from_slice(&[0; 32]);
+    let compressed = zstd::bulk::compress(&inner, 3).unwrap();
+    let mut chunk = Vec::new();
+    chunk.extend_from_slice(&0u64.to_le_bytes()); // message start time
+    chunk.extend_from_slice(&0u64.to_le_bytes()); // message end time
+    chunk.extend_from_slice(&(inner.len() as u64).to_le_bytes());
+    chunk.extend_from_slice(&0u32.to_le_bytes()); // no CRC
+    chunk.extend_from_slice(&mcap_string("zstd"));
+    chunk.extend_from_slice(&(compressed.len() as u64).to_le_bytes());
+    chunk.extend_from_slice(&compressed);
+    let mut file = mcap::MAGIC.to_vec();
+    let mut header = mcap_string("ros2");
+    header.extend_from_slice(&mcap_string("hand"));
+    file.extend(mcap_record(0x01, &header));
+    file.extend(mcap_record(0x06, &chunk));
+    file.extend(mcap_record(0x0f, &0u32.to_le_bytes()));
+    file.extend(mcap_record(0x02, &[0; 20]));
+    file.extend_from_slice(mcap::MAGIC);
+    let err = read_recording(&file, &options()).unwrap_err();
+    let cause = std::error::Error::source(&err).map(ToString::to_string);
+    assert!(
+        cause
+            .as_deref()
+            .is_some_and(|c| c.contains("length exceeds limit")),
+        "{err}: {cause:?}"
+    );
+}
