@@ -29,7 +29,8 @@ const FRAMES_PER_REQUEST: usize = 500;
 #[command(group(ArgGroup::new("target").required(true).args(["robot", "map"])))]
 #[command(group(ArgGroup::new("source").required(true).args(["file", "carmen", "mcap"])))]
 pub struct ImportArgs {
-    /// Import a data file or a CARMEN log as this robot's frames.
+    /// Import a data file, a CARMEN log or a ROS 2 recording as this
+    /// robot's frames.
     #[arg(long, env = "DEOG_ROBOT")]
     pub robot: Option<String>,
     /// Import a map_server map (FILE is its YAML) into this map, created
