@@ -8,7 +8,7 @@ use approx::assert_abs_diff_eq;
 use deog_grid::{ClampLimits, LogOdds, Pose2, Resolution, Tile, TileKey, TileMap, TileSize};
 use deog_recording::messages::{
     Header, LaserScan, OccupancyGrid, Odometry, PoseWithCovariance, PoseWithCovarianceStamped,
-    RosMessage, Time, decode, encode,
+    Range, RosMessage, Time, decode, encode,
 };
 use deog_recording::{
     Estimate, Frame, ImportOptions, MountSource, Recording, read_recording, schema_text,
@@ -461,4 +461,54 @@ fn a_compressed_record_claiming_an_enormous_length_is_an_error_not_an_abort() {
             .is_some_and(|c| c.contains("length exceeds limit")),
         "{err}: {cause:?}"
     );
+}
+
+fn range_at(seconds: f64, frame_id: &str, range: f32) -> Vec<u8> {
+    encode(&Range {
+        header: Header::new(Time::from_seconds(seconds).unwrap(), frame_id),
+        radiation_type: Range::ULTRASOUND,
+        field_of_view: 0.5,
+        min_range: 0.1,
+        max_range: 5.0,
+        range,
+    })
+}
+
+#[test]
+fn sonars_make_a_frame_once_each_has_reported_and_a_broken_round_is_left_out() {
+    let bytes = handmade(&[
+        (
+            "/sonar",
+            Range::TYPE_NAME,
+            vec![
+                range_at(1.0, "front", 1.0),
+                range_at(1.01, "back", 2.0),
+                // The back sonar misses this round.
+                range_at(1.2, "front", 1.1),
+                range_at(1.4, "front", 1.2),
+                range_at(1.41, "back", f32::INFINITY),
+            ],
+        ),
+        (
+            "/odom",
+            Odometry::TYPE_NAME,
+            vec![odom_at(0.5, 0.0), odom_at(2.5, 2.0)],
+        ),
+    ]);
+    let back = read_recording(&bytes, &options()).unwrap();
+    assert_eq!(back.scan_topic, "/sonar");
+    assert_eq!(back.scan_messages, 5);
+    assert_eq!(back.incomplete, 1);
+    assert_eq!(back.frames.len(), 2);
+    assert!(back.rig.all_sonar());
+    assert_eq!(back.rig.readings(), 2);
+    assert_eq!(back.frames[0].ranges, vec![1.0, 2.0]);
+    // A round's time is its last reading's; +inf is no echo.
+    assert_abs_diff_eq!(back.frames[1].time_s, 1.41, epsilon = 1e-9);
+    assert_eq!(back.frames[1].ranges, vec![1.2f32 as f64, 5.0]);
+    assert_abs_diff_eq!(back.frames[1].odometry.x, 0.91, epsilon = 1e-9);
+    let SensorKind::Sonar { half_angle } = back.rig.sensors()[0].kind else {
+        panic!("a sonar");
+    };
+    assert_abs_diff_eq!(half_angle, 0.25, epsilon = 1e-7);
 }
