@@ -14,6 +14,7 @@ mod import;
 mod localize;
 mod map;
 mod pose_args;
+mod record;
 mod rig_args;
 mod server;
 mod sim;
@@ -75,10 +76,14 @@ enum Command {
     /// Carries a simulated robot to another pose without telling its
     /// odometry: the kidnapped-robot test.
     Teleport(teleport::TeleportArgs),
-    /// Imports recorded data into the map server: a wanderer data file or a
-    /// CARMEN log (--carmen) as a robot's frames (--robot), or a map_server
-    /// map as a map (--map).
+    /// Imports recorded data into the map server: a wanderer data file, a
+    /// CARMEN log (--carmen) or a ROS 2 recording (--mcap) as a robot's
+    /// frames (--robot), or a map_server map as a map (--map).
     Import(import::ImportArgs),
+    /// Records a robot's frames, odometry, true and reference poses, its
+    /// localizer's estimates and optionally a map (--map) as a ROS 2
+    /// recording in MCAP (--mcap FILE), for ROS 2 and Foxglove tools.
+    Record(record::RecordArgs),
     /// Copies maps (tiles, cursors), frames, pose estimates and rigs from
     /// one store to another, resumably, checking each map at the end
     Copy(copy::CopyArgs),
@@ -139,6 +144,7 @@ fn run(command: Command) -> Result<()> {
         Command::Sim(args) => sim::run(args),
         Command::Wander(args) => wander::run(args),
         Command::Import(args) => import::run(args),
+        Command::Record(args) => record::run(args),
         Command::Copy(args) => copy::run(args),
         Command::Export(args) => export::run(args),
         Command::Map(args) => map::run(args),

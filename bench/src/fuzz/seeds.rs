@@ -261,6 +261,36 @@ pub fn carmen_log() -> Vec<Vec<u8>> {
     vec![CARMEN_HEAD.to_vec()]
 }
 
+/// Recordings as `deog record` writes them: a laser's and the Scout's
+/// sonars', three frames each.
+pub fn ros2_mcap() -> Vec<Vec<u8>> {
+    ["laser180", "scout"]
+        .iter()
+        .map(|name| {
+            let rig = deog_rig::built_in_rig(name).expect("a built-in rig");
+            let frames: Vec<deog_recording::Frame> = (0..3u32)
+                .map(|i| deog_recording::Frame {
+                    sequence: u64::from(i) + 1,
+                    time_s: 1.0 + f64::from(i) * 0.1,
+                    odometry: Pose2::new(0.1 * f64::from(i), 0.0, 0.0),
+                    true_pose: Some(Pose2::new(0.1 * f64::from(i), 0.0, 0.0)),
+                    reference_pose: None,
+                    ranges: vec![1.5; rig.readings()],
+                })
+                .collect();
+            let mut out = std::io::Cursor::new(Vec::new());
+            let recording = deog_recording::Recording {
+                rig: &rig,
+                frames: &frames,
+                estimates: &[],
+                map: None,
+            };
+            deog_recording::write_recording(&mut out, &recording).expect("a recording");
+            out.into_inner()
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -285,6 +315,19 @@ mod tests {
             deog_rig::parse_rig(std::str::from_utf8(&s).unwrap(), "seed").unwrap();
         }
         deog_logs::CarmenLog::parse(CARMEN_HEAD, "seed").unwrap();
+        for s in ros2_mcap() {
+            let options = deog_recording::ImportOptions {
+                first_sequence: 1,
+                ..deog_recording::ImportOptions::default()
+            };
+            assert_eq!(
+                deog_recording::read_recording(&s, &options)
+                    .unwrap()
+                    .frames
+                    .len(),
+                3
+            );
+        }
     }
 
     #[test]

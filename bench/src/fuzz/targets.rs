@@ -108,6 +108,11 @@ pub const TARGETS: &[Target] = &[
         decode: carmen_log,
         seeds: seeds::carmen_log,
     },
+    Target {
+        name: "ros2-mcap",
+        decode: ros2_mcap,
+        seeds: seeds::ros2_mcap,
+    },
 ];
 
 /// The target named `name`.
@@ -342,6 +347,15 @@ fn world_toml(bytes: &[u8]) {
 /// A CARMEN log's text, as `CarmenLog::load` reads it after any gzip.
 fn carmen_log(bytes: &[u8]) {
     drop(deog_logs::CarmenLog::parse(bytes, "fuzz.log"));
+}
+
+/// A ROS 2 recording, as `deog import --mcap` reads it.
+fn ros2_mcap(bytes: &[u8]) {
+    let options = deog_recording::ImportOptions {
+        first_sequence: 1,
+        ..deog_recording::ImportOptions::default()
+    };
+    drop(deog_recording::read_recording(bytes, &options));
 }
 
 #[cfg(test)]

@@ -1,11 +1,13 @@
 //! `deog import`: brings recorded data into the map server. With `--robot`,
 //! a wanderer data file (the thesis's `x y theta s1 ... s16` lines) or a
-//! CARMEN log (`--carmen`) becomes that robot's frames; with `--map`, a ROS
-//! map_server map (YAML + image) becomes that map's cells.
+//! CARMEN log (`--carmen`) or a ROS 2 recording (`--mcap`) becomes that
+//! robot's frames; with `--map`, a ROS map_server map (YAML + image)
+//! becomes that map's cells.
 
 mod carmen;
 mod data_file;
 mod image;
+mod mcap;
 
 use std::path::PathBuf;
 
@@ -26,9 +28,10 @@ const FRAMES_PER_REQUEST: usize = 500;
 /// `--carmen`, a CARMEN log) and `--map` (a map_server map).
 #[derive(Debug, Args)]
 #[command(group(ArgGroup::new("target").required(true).args(["robot", "map"])))]
-#[command(group(ArgGroup::new("source").required(true).args(["file", "carmen"])))]
+#[command(group(ArgGroup::new("source").required(true).args(["file", "carmen", "mcap"])))]
 pub struct ImportArgs {
-    /// Import a data file or a CARMEN log as this robot's frames.
+    /// Import a data file, a CARMEN log or a ROS 2 recording as this
+    /// robot's frames.
     #[arg(long, env = "DEOG_ROBOT")]
     pub robot: Option<String>,
     /// Import a map_server map (FILE is its YAML) into this map, created
@@ -44,13 +47,33 @@ pub struct ImportArgs {
     /// one, its reference pose (a corrected log's pose, or TRUEPOS).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["map", "units", "pose", "period"])]
     pub carmen: Option<PathBuf>,
+    /// Import this ROS 2 recording (MCAP) as the robot's frames: each
+    /// sensor_msgs/LaserScan (or each round of sensor_msgs/Range) with the
+    /// nav_msgs/Odometry interpolated at its stamp, the rig built from the
+    /// scans' geometry and the mounts on /tf_static.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["map", "units", "pose", "period"])]
+    pub mcap: Option<PathBuf>,
+    /// With --mcap: the topic of the scans (LaserScan or Range); needed
+    /// only when the recording has several.
+    #[arg(long, value_name = "TOPIC", requires = "mcap")]
+    pub scan_topic: Option<String>,
+    /// With --mcap: the topic of the odometry (nav_msgs/Odometry); needed
+    /// only when the recording has several.
+    #[arg(long, value_name = "TOPIC", requires = "mcap")]
+    pub odom_topic: Option<String>,
+    /// With --mcap: a topic of reference poses (PoseStamped,
+    /// PoseWithCovarianceStamped or Odometry, map frame), stored as each
+    /// frame's reference pose.
+    #[arg(long, value_name = "TOPIC", requires = "mcap")]
+    pub reference_topic: Option<String>,
     /// With --carmen: which laser's scans to import (default: the front
     /// laser, or the only one the log has).
     #[arg(long, value_enum, requires = "carmen")]
     pub laser: Option<LaserChoice>,
     /// The rig the frames come from: a built-in name (scout, pioneer3dx,
     /// laser180) or a rig file. Data files default to scout; a CARMEN log
-    /// to the geometry the log itself gives. Every frame's count of ranges
+    /// to the geometry the log itself gives, a ROS 2 recording to its
+    /// scans' with the mounts on /tf_static. Every frame's count of ranges
     /// must be the rig's.
     #[arg(long, conflicts_with = "map")]
     pub rig: Option<String>,
@@ -93,6 +116,9 @@ pub enum LaserChoice {
 
 /// Runs the import.
 pub fn run(args: ImportArgs) -> Result<()> {
+    if let Some(recording) = &args.mcap {
+        return mcap::import(&args, recording);
+    }
     match (&args.robot, &args.map, &args.file, &args.carmen) {
         (Some(robot), None, None, Some(log)) => carmen::import(&args, robot, log),
         (Some(robot), None, Some(file), None) => data_file::import(&args, robot, file),
