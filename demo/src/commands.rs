@@ -105,11 +105,17 @@ pub(crate) fn sim(plan: &DemoPlan, addresses: &Addresses) -> Vec<OsString> {
 
 /// The live view of the shared map, the robots and their estimates,
 /// serving its page on `listen`.
-pub(crate) fn view(addresses: &Addresses, listen: SocketAddr) -> Vec<OsString> {
+pub(crate) fn view(
+    addresses: &Addresses,
+    listen: SocketAddr,
+    foxglove: SocketAddr,
+) -> Vec<OsString> {
     os(&[
         "view",
         "--listen",
         &listen.to_string(),
+        "--foxglove",
+        &foxglove.to_string(),
         "--map",
         MAP,
         "--server",

@@ -64,6 +64,11 @@ pub struct DemoOptions {
     /// Start no live view.
     #[arg(long)]
     pub no_view: bool,
+    /// Where the live view also serves Foxglove's WebSocket protocol (open
+    /// it in Foxglove as a live connection); when that port is taken, a
+    /// free one (the address is printed).
+    #[arg(long, value_name = "ADDR", default_value = "127.0.0.1:8765")]
+    pub foxglove: std::net::SocketAddr,
     /// The robots explore: each drives to the shared map's frontiers
     /// (`deog explore`) instead of at random, and stops once none it can
     /// reach is left.

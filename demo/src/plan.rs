@@ -49,6 +49,8 @@ pub(crate) struct DemoPlan {
     pub every_frame: bool,
     /// Where the live view is asked to serve; `None` for no view.
     pub view: Option<std::net::SocketAddr>,
+    /// Where the view is asked to serve Foxglove's protocol.
+    pub foxglove: std::net::SocketAddr,
     /// Whether explorers drive the robots rather than wanderers.
     pub explore: bool,
     /// The PostgreSQL database the servers share; `None` for a sled store
@@ -103,6 +105,7 @@ impl DemoPlan {
             keep: options.keep,
             every_frame: options.every_frame,
             view: (!options.no_view).then_some(options.view),
+            foxglove: options.foxglove,
             explore: options.explore,
             store: options.store.clone(),
             servers: options.servers.max(1) as usize,

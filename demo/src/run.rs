@@ -192,8 +192,13 @@ impl<'a> Demo<'a> {
         .await?;
         if let Some(asked) = plan.view {
             let listen = view_address(asked)?;
-            children.start("view", Role::Service, &commands::view(&addresses, listen))?;
-            println!("deog demo: watch it live at http://{listen}/");
+            let foxglove = view_address(plan.foxglove)?;
+            children.start(
+                "view",
+                Role::Service,
+                &commands::view(&addresses, listen, foxglove),
+            )?;
+            println!("deog demo: watch it live at http://{listen}/ (in Foxglove: ws://{foxglove})");
         }
         for robot in &plan.robots {
             let driver = if plan.explore {

@@ -14,11 +14,14 @@ fn a_short_demo_localizes_every_robot_and_maps_the_room() {
     let started = Instant::now();
     // A port of its own: other tests' demos may run at the same time.
     let view = deog_tests::free_loopback_addr().to_string();
+    let foxglove = deog_tests::free_loopback_addr().to_string();
     let output = Command::new(deog_binary())
         .args([
             "demo",
             "--view",
             &view,
+            "--foxglove",
+            &foxglove,
             "--robots",
             "2",
             "--duration",
@@ -45,7 +48,9 @@ fn a_short_demo_localizes_every_robot_and_maps_the_room() {
     assert!(output.status.success(), "demo failed:\n{stdout}\n{stderr}");
     let elapsed = started.elapsed().as_secs_f64();
     assert!(
-        stdout.contains(&format!("watch it live at http://{view}/")),
+        stdout.contains(&format!(
+            "watch it live at http://{view}/ (in Foxglove: ws://{foxglove})"
+        )),
         "{stdout}"
     );
     let view_log = std::fs::read_to_string(out.path().join("logs/view.log")).unwrap_or_default();
