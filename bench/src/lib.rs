@@ -52,9 +52,14 @@
 //!   headless Chromium: frames per second idle (the baseline) and with
 //!   robots driving, tile latency from acknowledgement to page, the view
 //!   process's memory and CPU.
+//! - [`explore`]: `deog bench explore`, wanderers and explorers side by
+//!   side on the same world, seeds and robot counts, each run a whole
+//!   `deog demo` child process read back from its report.json: time to
+//!   95% and 99% coverage, the map right, bumps.
 //! - [`option_error`]: [`OptionError`], an option out of its range or
 //!   options that do not go together.
 
+pub mod explore;
 pub mod fuzz;
 pub mod laser_mapping;
 pub mod localize;

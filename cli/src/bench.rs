@@ -58,6 +58,11 @@ enum BenchTarget {
     /// per second idle and with robots driving, how soon a tile reaches
     /// the page after its acknowledgement, the view's memory and CPU.
     View(deog_bench::view::ViewBenchOptions),
+    /// Wanderers and explorers on the same world, seeds and robot counts,
+    /// side by side (each run a whole `deog demo` without localizers):
+    /// simulated time to 95% and 99% of the reachable free space, the map
+    /// right, bumps, and whether the robots stopped by themselves.
+    Explore(deog_bench::explore::ExploreBenchOptions),
 }
 
 /// Runs `deog bench`.
@@ -72,5 +77,6 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchTarget::SonarMapping(options) => deog_bench::sonar_mapping::run(options),
         BenchTarget::Fuzz(options) => deog_bench::fuzz::run(options),
         BenchTarget::View(options) => deog_bench::view::run(options),
+        BenchTarget::Explore(options) => deog_bench::explore::run(options),
     }
 }

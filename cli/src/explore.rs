@@ -7,16 +7,20 @@
 //! the robot's radius, prices every cell from the robot at once and picks
 //! the frontier whose length is worth most against the way there; a pure
 //! pursuit follows the path, and the robot's own ranges slow and stop it
-//! short of anything ahead, mapped or not. A goal that cannot be reached
-//! or is not neared for a while is barred for a minute.
+//! short of anything ahead, mapped or not. Plans are made in a task of
+//! their own, on the map's cells merged to about 10 cm, so that the
+//! steering never waits for one. A goal that cannot be reached or is not
+//! neared for a while is barred for a minute; a goal reached is barred
+//! for five (if it is still a frontier once reached, it is one nothing
+//! more can be seen from).
 
 use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use deog_explore::{
-    Blacklist, Clearance, CostParams, Costmap, FollowCommand, FollowParams, Goal, GoalParams,
-    OccupancyWindow, PathFollower, TravelCosts, choose_goal, find_frontiers,
+    Blacklist, Clearance, CostParams, Costmap, DeadReckoning, FollowCommand, FollowParams, Goal,
+    GoalParams, OccupancyWindow, PathFollower, TravelCosts, choose_goal_keeping, find_frontiers,
 };
 use deog_grid::{
     CellBox, CellIndex, Occupancy, OccupancyThresholds, OccupancyView, Pose2, Resolution, TileSize,
@@ -56,15 +60,43 @@ pub struct ExploreArgs {
     /// Simulated seconds between plans while following a path.
     #[arg(long, default_value_t = 3.0)]
     pub replan_s: f64,
+    /// Cell size the paths are planned on, metres: the map's cells merged
+    /// up to about this size (never finer than the map).
+    #[arg(long, default_value_t = 0.1)]
+    pub plan_resolution_m: f64,
     /// Frontiers shorter than this are ignored, metres.
     #[arg(long, default_value_t = 0.5)]
     pub min_frontier_m: f64,
+    /// The pose it plans and steers from: the simulator's true pose, the
+    /// robot's odometry, or a localizer's converged estimates carried
+    /// forward by the odometry since their frames (`estimate`; until the
+    /// first one the robot turns on the spot).
+    #[arg(long, value_enum, default_value_t = DrivePose::True)]
+    pub pose: DrivePose,
+    /// With --pose estimate: the map the estimates are made on (default:
+    /// --map).
+    #[arg(long)]
+    pub estimate_map: Option<String>,
     /// Drive without publishing frames.
     #[arg(long)]
     pub no_publish: bool,
     #[command(flatten)]
     pub connection: ConnectionArgs,
 }
+
+/// Which pose `deog explore` plans and steers from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum DrivePose {
+    /// The simulator's true pose.
+    True,
+    /// The robot's odometry.
+    Odometry,
+    /// A localizer's converged estimates, carried forward by odometry.
+    Estimate,
+}
+
+/// Wall-clock time between two reads of the localizer's new estimates.
+const ESTIMATE_POLL: Duration = Duration::from_millis(250);
 
 /// Cells of unknown margin kept around the robot and the map in a window.
 const WINDOW_MARGIN_CELLS: i32 = 40;
@@ -74,6 +106,8 @@ const EMPTY_PLANS_TO_STOP: u32 = 3;
 const CLAIM_LIFETIME_S: f64 = 120.0;
 /// Simulated seconds a barred goal stays barred.
 const BAR_S: f64 = 60.0;
+/// Simulated seconds a goal reached stays barred.
+const ARRIVED_BAR_S: f64 = 300.0;
 /// Simulated seconds without nearing its goal before it is barred.
 const STALL_S: f64 = 12.0;
 /// Simulated seconds turned in place to look about when the map has
@@ -102,23 +136,45 @@ enum Plan {
     Nothing { frontiers: usize },
 }
 
-/// The explorer's state between frames.
-struct Explorer {
+/// The planning half: reads the map and picks goals. It runs as a task of
+/// its own, so that the robot keeps being steered, and stopped short of
+/// walls, while a plan is worked out.
+struct Planner {
     robot: String,
     map: String,
     client: MapClient,
     cache: TileCache,
     resolution: Resolution,
-    rig: Rig,
     costs: CostParams,
     goals: GoalParams,
     follow: FollowParams,
     min_frontier_m: f64,
+    /// Map cells merged into a planning cell, per side.
+    coarsening: u32,
+}
+
+/// What a plan starts from.
+struct PlanRequest {
+    pose: Pose2,
+    now_s: f64,
+    /// The goal being driven to, if any.
+    current: Option<(f64, f64)>,
     blacklist: Blacklist,
 }
 
-impl Explorer {
-    async fn new(client: MapClient, map: &str, rig: Rig, args: &ExploreArgs) -> Result<Self> {
+/// The steering half's own state: what it needs besides the plans.
+struct Explorer {
+    robot: String,
+    map: String,
+    client: MapClient,
+    rig: Rig,
+    follow: FollowParams,
+    goals: GoalParams,
+    blacklist: Blacklist,
+}
+
+impl Planner {
+    async fn new(client: MapClient, map: &str, rig: &Rig, args: &ExploreArgs) -> Result<Self> {
         let info = client
             .map_info(map)
             .await
@@ -130,28 +186,31 @@ impl Explorer {
             inflation_m: rig.body_radius() + 0.5,
             ..CostParams::default()
         };
-        let follow = FollowParams {
-            cruise_speed: args.speed,
-            ..FollowParams::default()
-        };
-        follow.validate()?;
         Ok(Self {
             robot: args.robot.clone(),
             map: map.to_string(),
             client,
             cache: TileCache::new(map, tile_size),
             resolution,
-            rig,
             costs,
             goals: GoalParams::default(),
-            follow,
+            follow: follow_params(args)?,
             min_frontier_m: args.min_frontier_m,
-            blacklist: Blacklist::default(),
+            coarsening: (args.plan_resolution_m / resolution.metres())
+                .round()
+                .max(1.0) as u32,
         })
     }
 
-    /// Reads what changed on the map, then plans from `pose`.
-    async fn plan(&mut self, pose: Pose2, now_s: f64) -> Result<Plan> {
+    /// Reads what changed on the map, then plans from the request's pose.
+    async fn plan(&mut self, request: &PlanRequest) -> Result<Plan> {
+        let began = std::time::Instant::now();
+        let PlanRequest {
+            pose,
+            now_s,
+            current,
+            ref blacklist,
+        } = *request;
         let info = self.client.map_info(&self.map).await?;
         let robot = self.resolution.cell_of(pose.x, pose.y)?;
         let around = CellBox::new(
@@ -168,11 +227,14 @@ impl Explorer {
             None => around,
         };
         self.cache.refresh(&self.client, region).await?;
+        let claims = self.claims(now_s).await?;
         let view = CachedMap {
             cache: &self.cache,
             thresholds: OccupancyThresholds::default(),
         };
-        let window = OccupancyWindow::from_view(&view, region, self.resolution)?;
+        let window = OccupancyWindow::from_view(&view, region, self.resolution)?
+            .coarsened(self.coarsening)?;
+        let robot = window.resolution().cell_of(pose.x, pose.y)?;
         let costmap = Costmap::inflate(&window, self.costs);
         let Some(costs) = TravelCosts::from(&window, &costmap, robot) else {
             bail!("the robot's cell lies outside its own window");
@@ -181,16 +243,22 @@ impl Explorer {
             .neighbours(window.index_of(robot).unwrap_or(0))
             .any(|(i, _)| window.at(i) == Occupancy::Free);
         let frontiers = find_frontiers(&window, self.min_frontier_m);
-        self.blacklist.expire(now_s);
-        let claims = self.claims(now_s).await?;
-        let Some(goal) = choose_goal(
+        let chosen = choose_goal_keeping(
             &window,
             &frontiers,
             &costs,
             &claims,
-            &self.blacklist,
+            blacklist,
+            current,
             &self.goals,
-        ) else {
+        );
+        tracing::debug!(
+            cells = window.len(),
+            frontiers = frontiers.len(),
+            ms = began.elapsed().as_secs_f64() * 1e3,
+            "planned"
+        );
+        let Some(goal) = chosen else {
             if !known_nearby {
                 return Ok(Plan::LookAbout);
             }
@@ -225,7 +293,73 @@ impl Explorer {
             .map(|g| (g.x, g.y))
             .collect())
     }
+}
 
+/// Plans one request at a time, as the steering loop asks, until it stops
+/// asking.
+fn spawn_planner(
+    mut planner: Planner,
+) -> (
+    tokio::sync::mpsc::Sender<PlanRequest>,
+    tokio::sync::mpsc::Receiver<Result<(PlanRequest, Plan)>>,
+) {
+    let (requests, mut asked) = tokio::sync::mpsc::channel::<PlanRequest>(1);
+    let (answers, plans) = tokio::sync::mpsc::channel(1);
+    tokio::spawn(async move {
+        while let Some(request) = asked.recv().await {
+            let plan = planner.plan(&request).await.map(|plan| (request, plan));
+            if answers.send(plan).await.is_err() {
+                break;
+            }
+        }
+    });
+    (requests, plans)
+}
+
+/// Follows the localizer's converged estimates of `robot` on `map`: the
+/// newest one's frame and pose.
+fn spawn_estimate_follower(
+    client: MapClient,
+    robot: &str,
+    map: &str,
+) -> tokio::sync::watch::Receiver<Option<(u64, Pose2)>> {
+    let (newest, follow) = tokio::sync::watch::channel(None);
+    let (robot, map) = (robot.to_string(), map.to_string());
+    tokio::spawn(async move {
+        let mut from = 0;
+        loop {
+            match client.read_poses(&robot, from, 0).await {
+                Ok(poses) => {
+                    if let Some(last) = poses.last() {
+                        from = last.frame_sequence + 1;
+                    }
+                    let found = poses
+                        .iter()
+                        .rev()
+                        .find(|p| p.map == map && p.converged)
+                        .map(|p| (p.frame_sequence, pose_or_origin(p.pose)));
+                    if found.is_some() && newest.send(found).is_err() {
+                        break;
+                    }
+                }
+                Err(error) => tracing::warn!(%error, "reading the estimates"),
+            }
+            tokio::time::sleep(ESTIMATE_POLL).await;
+        }
+    });
+    follow
+}
+
+fn follow_params(args: &ExploreArgs) -> Result<FollowParams> {
+    let follow = FollowParams {
+        cruise_speed: args.speed,
+        ..FollowParams::default()
+    };
+    follow.validate()?;
+    Ok(follow)
+}
+
+impl Explorer {
     /// Tells the other explorers where this one is heading; `active`
     /// false gives the goal up.
     async fn publish_goal(&self, x: f64, y: f64, time_s: f64, active: bool) -> Result<()> {
@@ -298,14 +432,24 @@ struct Summary {
 pub fn run(args: ExploreArgs) -> Result<()> {
     check_robot_name(&args.robot).context("--robot")?;
     deog_proto::names::check_map_name(&args.map).context("--map")?;
+    if let Some(map) = &args.estimate_map {
+        deog_proto::names::check_map_name(map).context("--estimate-map")?;
+    }
     for (name, value, least) in [
         ("--duration", args.duration, 0.0),
         ("--replan-s", args.replan_s, 0.1),
         ("--min-frontier-m", args.min_frontier_m, 0.0),
+        ("--plan-resolution-m", args.plan_resolution_m, 0.0),
     ] {
         if !(value.is_finite() && value >= least) {
             bail!("{name} must be at least {least}, got {value}");
         }
+    }
+    if args.plan_resolution_m > 0.5 {
+        bail!(
+            "--plan-resolution-m must be at most 0.5 (coarser cells close doors), got {}",
+            args.plan_resolution_m
+        );
     }
     if !(args.speed.is_finite() && args.speed > 0.0 && args.speed <= 2.0) {
         bail!(
@@ -352,9 +496,9 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
         Some(spawn_publisher(client.clone()))
     };
     // The cartographer makes the map from the first frames: wait for it.
-    let mut explorer = loop {
-        match Explorer::new(client.clone(), &args.map, rig.clone(), args).await {
-            Ok(explorer) => break explorer,
+    let planner = loop {
+        match Planner::new(client.clone(), &args.map, &rig, args).await {
+            Ok(planner) => break planner,
             Err(error) if publisher.is_some() => {
                 tracing::debug!(%error, "waiting for the map");
                 tokio::time::sleep(Duration::from_millis(200)).await;
@@ -367,6 +511,25 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
             Err(error) => return Err(error),
         }
     };
+    let mut explorer = Explorer {
+        robot: args.robot.clone(),
+        map: args.map.clone(),
+        client: client.clone(),
+        rig: rig.clone(),
+        follow: planner.follow,
+        goals: planner.goals,
+        blacklist: Blacklist::default(),
+    };
+    let (plan_requests, mut plans) = spawn_planner(planner);
+    let mut reckoning = DeadReckoning::new();
+    let mut estimates = (args.pose == DrivePose::Estimate).then(|| {
+        spawn_estimate_follower(
+            client.clone(),
+            &args.robot,
+            args.estimate_map.as_deref().unwrap_or(&args.map),
+        )
+    });
+    let mut planning = false;
     let mut states = spawn_state_reader(sim.watch(&args.robot).await?);
     let shutdown = deog_harness::shutdown_signal();
     tokio::pin!(shutdown);
@@ -409,6 +572,12 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
             last_pose = Some(truth);
             if state.bumper && !was_bumped {
                 summary.bumps += 1;
+                tracing::warn!(
+                    x = truth.x,
+                    y = truth.y,
+                    heading_deg = truth.theta.to_degrees(),
+                    "bumped into something"
+                );
             }
             was_bumped = state.bumper;
             summary.frames += 1;
@@ -429,8 +598,28 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
         }
         let Some(state) = newest else { continue };
         let now = state.time_s;
-        let pose = pose_or_origin(state.true_pose);
         let clearance = explorer.clearance(&state.ranges);
+        reckoning.odometry(state.sequence, pose_or_origin(state.odometry));
+        if let Some(estimates) = &mut estimates
+            && estimates.has_changed().unwrap_or(false)
+            && let Some((sequence, estimate)) = *estimates.borrow_and_update()
+        {
+            reckoning.estimate(sequence, estimate);
+        }
+        let pose = match args.pose {
+            DrivePose::True => pose_or_origin(state.true_pose),
+            DrivePose::Odometry => pose_or_origin(state.odometry),
+            DrivePose::Estimate => match reckoning.pose() {
+                Some(pose) => pose,
+                None => {
+                    // Nowhere to plan from yet: turn, so the localizer
+                    // sees the walls all around.
+                    sim.drive(&args.robot, 0.0, 0.5 * explorer.follow.max_turn_rate)
+                        .await?;
+                    continue;
+                }
+            },
+        };
 
         if look_about_until.is_some_and(|until| now < until) {
             let turn = if clearance.left >= clearance.right {
@@ -443,59 +632,83 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
             continue;
         }
         look_about_until = None;
+        // A plan that came back since the last state.
+        match plans.try_recv() {
+            Ok(answer) => {
+                planning = false;
+                let (request, plan) = answer?;
+                match plan {
+                    Plan::Go(goal, follower) => {
+                        empty_plans = 0;
+                        let same = pursuit.as_ref().is_some_and(|p| {
+                            (p.goal.x - goal.x).hypot(p.goal.y - goal.y)
+                                <= explorer.goals.current_radius_m
+                        });
+                        let distance = (goal.x - pose.x).hypot(goal.y - pose.y);
+                        let (best_distance, best_at_s) = match &pursuit {
+                            Some(p) if same => (p.best_distance, p.best_at_s),
+                            _ => {
+                                summary.goals += 1;
+                                tracing::info!(
+                                    x = goal.x,
+                                    y = goal.y,
+                                    frontier_m = goal.frontier_m,
+                                    travel_m = goal.travel_m,
+                                    "new goal"
+                                );
+                                (distance, now)
+                            }
+                        };
+                        // Each plan refreshes the claim, so that it stays fresh.
+                        explorer.publish_goal(goal.x, goal.y, now, true).await?;
+                        pursuit = Some(Pursuit {
+                            goal,
+                            follower,
+                            planned_at_s: request.now_s,
+                            best_distance,
+                            best_at_s,
+                        });
+                    }
+                    Plan::LookAbout => {
+                        look_about_until = Some(now + LOOK_ABOUT_S);
+                        continue;
+                    }
+                    Plan::Nothing { frontiers } => {
+                        pursuit = None;
+                        empty_plans += 1;
+                        tracing::info!(frontiers, empty_plans, "no reachable frontier");
+                        if empty_plans >= EMPTY_PLANS_TO_STOP {
+                            summary.finished = true;
+                            break 'run;
+                        }
+                        // Let the cartographer catch up before looking again.
+                        next_plan_s = now + 1.0;
+                        sim.drive(&args.robot, 0.0, 0.0).await?;
+                        continue;
+                    }
+                }
+            }
+            Err(tokio::sync::mpsc::error::TryRecvError::Empty) => {}
+            Err(tokio::sync::mpsc::error::TryRecvError::Disconnected) => {
+                bail!("the planner stopped")
+            }
+        }
         let replan = pursuit
             .as_ref()
             .is_none_or(|p| now - p.planned_at_s >= args.replan_s);
-        if replan && now >= next_plan_s {
-            match explorer.plan(pose, now).await? {
-                Plan::Go(goal, follower) => {
-                    empty_plans = 0;
-                    let same = pursuit
-                        .as_ref()
-                        .is_some_and(|p| (p.goal.x - goal.x).hypot(p.goal.y - goal.y) < 0.5);
-                    let distance = (goal.x - pose.x).hypot(goal.y - pose.y);
-                    let (best_distance, best_at_s) = match &pursuit {
-                        Some(p) if same => (p.best_distance, p.best_at_s),
-                        _ => {
-                            summary.goals += 1;
-                            tracing::info!(
-                                x = goal.x,
-                                y = goal.y,
-                                frontier_m = goal.frontier_m,
-                                travel_m = goal.travel_m,
-                                "new goal"
-                            );
-                            (distance, now)
-                        }
-                    };
-                    // Each plan refreshes the claim, so that it stays fresh.
-                    explorer.publish_goal(goal.x, goal.y, now, true).await?;
-                    pursuit = Some(Pursuit {
-                        goal,
-                        follower,
-                        planned_at_s: now,
-                        best_distance,
-                        best_at_s,
-                    });
-                }
-                Plan::LookAbout => {
-                    look_about_until = Some(now + LOOK_ABOUT_S);
-                    continue;
-                }
-                Plan::Nothing { frontiers } => {
-                    pursuit = None;
-                    empty_plans += 1;
-                    tracing::info!(frontiers, empty_plans, "no reachable frontier");
-                    if empty_plans >= EMPTY_PLANS_TO_STOP {
-                        summary.finished = true;
-                        break 'run;
-                    }
-                    // Let the cartographer catch up before looking again.
-                    next_plan_s = now + 1.0;
-                    sim.drive(&args.robot, 0.0, 0.0).await?;
-                    continue;
-                }
-            }
+        if replan && !planning && now >= next_plan_s {
+            explorer.blacklist.expire(now);
+            let request = PlanRequest {
+                pose,
+                now_s: now,
+                current: pursuit.as_ref().map(|p| (p.goal.x, p.goal.y)),
+                blacklist: explorer.blacklist.clone(),
+            };
+            plan_requests
+                .send(request)
+                .await
+                .context("the planner stopped")?;
+            planning = true;
         }
         let Some(p) = pursuit.as_mut() else {
             sim.drive(&args.robot, 0.0, 0.0).await?;
@@ -510,6 +723,13 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
         let (linear, angular) = match p.follower.command(pose, clearance) {
             FollowCommand::Drive { linear, angular } if !stalled => (linear, angular),
             FollowCommand::Arrived => {
+                // A frontier the robot stands on and still sees as one
+                // (a gap in a wall's line, the far side of furniture)
+                // cannot be seen better from there: bar the place, or
+                // the robot would come back to it for ever.
+                explorer
+                    .blacklist
+                    .add(p.goal.x, p.goal.y, now + ARRIVED_BAR_S);
                 pursuit = None;
                 (0.0, 0.0)
             }

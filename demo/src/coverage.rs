@@ -47,13 +47,16 @@ impl CoverageCurve {
 
     /// Samples the map now.
     pub async fn sample(&mut self, client: &MapClient, plan: &DemoPlan, now_s: f64) -> Result<()> {
-        let Ok((_, map)) = client.download(MAP).await else {
-            // No map yet: nothing seen.
-            self.samples.push(CoverageSample {
-                simulated_s: now_s,
-                fraction: 0.0,
-            });
-            return Ok(());
+        let map = match client.download(MAP).await {
+            Ok((_, map)) if map.observed_count() > 0 => map,
+            // No map yet, or one made but not written: nothing seen.
+            _ => {
+                self.samples.push(CoverageSample {
+                    simulated_s: now_s,
+                    fraction: 0.0,
+                });
+                return Ok(());
+            }
         };
         let seeds = robot_starts(client).await?;
         let quality = map_quality(&QualityInput {

@@ -64,8 +64,10 @@ pub(crate) async fn judge(client: &MapClient, plan: &DemoPlan, out: &Path) -> Re
     let png = verdict_png(&input).context("drawing where the map is right and wrong")?;
     write(out, VERDICT_PNG, &png)?;
     let mut robots = Vec::with_capacity(plan.robots.len());
-    for name in plan.robot_names() {
-        robots.push(judge_robot(client, &map, name, out).await?);
+    if plan.localize {
+        for name in plan.robot_names() {
+            robots.push(judge_robot(client, &map, name, out).await?);
+        }
     }
     Ok(Judgement {
         robots,

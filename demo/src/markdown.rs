@@ -44,70 +44,81 @@ pub(crate) fn report(outcome: &DemoOutcome<'_>) -> String {
     let plan = outcome.plan;
     let judgement = outcome.judgement;
     let _ = writeln!(md, "# deog demo: {}\n", plan.world.name());
-    let _ = writeln!(
+    let driver = if plan.explore { "explorer" } else { "wanderer" };
+    let _ = write!(
         md,
-        "{} robots drove {} simulated seconds at {}x (seed {}), in {:.0} s of wall-clock time. \
-         Each robot had its own wanderer, cartographer and localizer process; the \
-         localizers started from {:.0} s, one after another {:.0} s apart, with no idea \
-         where their robots were.",
+        "{} robots drove {} simulated seconds at {}x (seed {}), in {:.0} s of wall-clock time. ",
         plan.robots.len(),
         plan.schedule.duration_s,
         plan.schedule.speed,
         plan.seed,
         outcome.wall_s,
-        plan.schedule.localize_at_s,
-        plan.schedule.localizer_start_s(1, plan.robots.len()) - plan.schedule.localize_at_s,
     );
-    match outcome.kidnap {
-        Some(k) => {
+    if !plan.localize {
+        let _ = writeln!(
+            md,
+            "Each robot had its own {driver} and cartographer process; no localizer ran."
+        );
+    } else {
+        let _ = writeln!(
+            md,
+            "Each robot had its own {driver}, cartographer and localizer process; the \
+             localizers started from {:.0} s, one after another {:.0} s apart, with no idea \
+             where their robots were.",
+            plan.schedule.localize_at_s,
+            plan.schedule.localizer_start_s(1, plan.robots.len()) - plan.schedule.localize_at_s,
+        );
+        match outcome.kidnap {
+            Some(k) => {
+                let _ = writeln!(
+                    md,
+                    "At {:.1} s {} was kidnapped: carried from ({:.2}, {:.2}) to ({:.2}, {:.2}) \
+                     without its odometry noticing.",
+                    k.time_s, k.robot, k.from.x, k.from.y, k.to.x, k.to.y
+                );
+            }
+            None => {
+                let _ = writeln!(md, "No robot was kidnapped.");
+            }
+        }
+        let _ = writeln!(md, "\n## Localization\n");
+        let _ = writeln!(
+            md,
+            "| robot | converged after | mean abs. error x | y | heading | RMS position | kidnapped | recovered after |"
+        );
+        let _ = writeln!(md, "|---|---:|---:|---:|---:|---:|---|---:|");
+        for robot in &judgement.robots {
+            let r = &robot.report;
+            let stats = r.stats.as_ref();
             let _ = writeln!(
                 md,
-                "At {:.1} s {} was kidnapped: carried from ({:.2}, {:.2}) to ({:.2}, {:.2}) \
-                 without its odometry noticing.",
-                k.time_s, k.robot, k.from.x, k.from.y, k.to.x, k.to.y
+                "| {} | {} | {} | {} | {} | {} | {} | {} |",
+                r.robot,
+                seconds(r.converge_s()),
+                metres(stats.map(|s| s.x_m.mean_abs)),
+                metres(stats.map(|s| s.y_m.mean_abs)),
+                stats.map_or("-".to_string(), |s| format!(
+                    "{:.2}°",
+                    s.theta_rad.mean_abs.to_degrees()
+                )),
+                metres(stats.map(|s| s.rms_position_m)),
+                if r.kidnapped() { "yes" } else { "no" },
+                match r.recovered() {
+                    None => "-".to_string(),
+                    Some(false) => "not recovered".to_string(),
+                    Some(true) => seconds(r.recover_s()),
+                },
             );
         }
-        None => {
-            let _ = writeln!(md, "No robot was kidnapped.");
+        for robot in &judgement.robots {
+            let _ = writeln!(md, "\n### {}\n", robot.report.robot);
+            let _ = writeln!(
+                md,
+                "True path red, estimate green; a kidnap is marked.\n\n![{}]({})\n",
+                robot.report.robot, robot.plot
+            );
+            let _ = writeln!(md, "```\n{}```", robot.report.table());
         }
-    }
-    let _ = writeln!(md, "\n## Localization\n");
-    let _ = writeln!(
-        md,
-        "| robot | converged after | mean abs. error x | y | heading | RMS position | kidnapped | recovered after |"
-    );
-    let _ = writeln!(md, "|---|---:|---:|---:|---:|---:|---|---:|");
-    for robot in &judgement.robots {
-        let r = &robot.report;
-        let stats = r.stats.as_ref();
-        let _ = writeln!(
-            md,
-            "| {} | {} | {} | {} | {} | {} | {} | {} |",
-            r.robot,
-            seconds(r.converge_s()),
-            metres(stats.map(|s| s.x_m.mean_abs)),
-            metres(stats.map(|s| s.y_m.mean_abs)),
-            stats.map_or("-".to_string(), |s| format!(
-                "{:.2}°",
-                s.theta_rad.mean_abs.to_degrees()
-            )),
-            metres(stats.map(|s| s.rms_position_m)),
-            if r.kidnapped() { "yes" } else { "no" },
-            match r.recovered() {
-                None => "-".to_string(),
-                Some(false) => "not recovered".to_string(),
-                Some(true) => seconds(r.recover_s()),
-            },
-        );
-    }
-    for robot in &judgement.robots {
-        let _ = writeln!(md, "\n### {}\n", robot.report.robot);
-        let _ = writeln!(
-            md,
-            "True path red, estimate green; a kidnap is marked.\n\n![{}]({})\n",
-            robot.report.robot, robot.plot
-        );
-        let _ = writeln!(md, "```\n{}```", robot.report.table());
     }
     let _ = writeln!(md, "\n## Map\n");
     let _ = writeln!(
@@ -201,6 +212,7 @@ mod tests {
             max_lags_s: Vec::new(),
             coverage: Vec::new(),
             commands: vec![("server".to_string(), "deog server --data d".to_string())],
+            driven: Default::default(),
         };
         let md = report(&outcome);
         assert!(md.starts_with(
@@ -230,6 +242,7 @@ mod tests {
             max_lags_s: Vec::new(),
             coverage: Vec::new(),
             commands: Vec::new(),
+            driven: Default::default(),
         };
         assert!(report(&outcome).contains("No robot was kidnapped."));
     }
@@ -245,6 +258,7 @@ mod tests {
             max_lags_s: vec![("scout-1".to_string(), Some(0.4))],
             coverage: Vec::new(),
             commands: Vec::new(),
+            driven: Default::default(),
         };
         let summary = summary(&outcome);
         let lines: Vec<&str> = summary.lines().collect();

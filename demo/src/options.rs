@@ -52,6 +52,10 @@ pub struct DemoOptions {
     /// Kidnap nobody.
     #[arg(long)]
     pub no_kidnap: bool,
+    /// Start no localizer (and so kidnap nobody): the robots only build the
+    /// map, for runs that measure the mapping or the exploring alone.
+    #[arg(long, conflicts_with_all = ["localize_at", "kidnap_at", "every_frame"])]
+    pub no_localize: bool,
     /// Leave the map server running at the end, to look at the map and the
     /// robots' frames with other deog commands (its address and process id
     /// are printed).
@@ -152,7 +156,7 @@ impl DemoOptions {
             Some(t) => t,
             None => duration / 4.0,
         };
-        let kidnap_at = match (self.no_kidnap, self.kidnap_at) {
+        let kidnap_at = match (self.no_kidnap || self.no_localize, self.kidnap_at) {
             (true, _) => None,
             (false, Some(t)) if !(t.is_finite() && t > localize_at && t < duration) => bail!(
                 "--kidnap-at must come after --localize-at ({localize_at} s) and before --duration ({duration} s), got {t}"

@@ -53,6 +53,8 @@ pub(crate) struct DemoPlan {
     pub foxglove: std::net::SocketAddr,
     /// Whether explorers drive the robots rather than wanderers.
     pub explore: bool,
+    /// Whether localizers run.
+    pub localize: bool,
     /// The PostgreSQL database the servers share; `None` for a sled store
     /// in the output folder.
     pub store: Option<String>,
@@ -107,6 +109,7 @@ impl DemoPlan {
             view: (!options.no_view).then_some(options.view),
             foxglove: options.foxglove,
             explore: options.explore,
+            localize: !options.no_localize,
             store: options.store.clone(),
             servers: options.servers.max(1) as usize,
         })

@@ -3,6 +3,7 @@
 //! report.json are an interface: README.md documents them and the
 //! end-to-end test reads them.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{Context, Result};
@@ -34,6 +35,18 @@ pub(crate) struct DemoOutcome<'a> {
     pub coverage: Vec<CoverageSample>,
     /// Each process's name and command line, in the order they started.
     pub commands: Vec<(String, String)>,
+    /// How the robots drove.
+    pub driven: Driven,
+}
+
+/// How the robots drove, as the simulator saw it when the last one
+/// stopped.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub(crate) struct Driven {
+    /// Simulated seconds until the last robot's driver ended.
+    pub simulated_s: f64,
+    /// Each robot's bumps into obstacles, in the plan's order.
+    pub bumps: Vec<(String, u64)>,
 }
 
 impl DemoOutcome<'_> {
@@ -82,6 +95,14 @@ pub struct DemoReport {
     pub coverage_95_s: Option<f64>,
     /// The same for 99%.
     pub coverage_99_s: Option<f64>,
+    /// Whether localizers ran (not with `--no-localize`).
+    pub localize: bool,
+    /// Simulated seconds until the last robot's driver ended: `simulated_s`
+    /// for wanderers, less for explorers that found nothing left to explore.
+    pub driven_s: f64,
+    /// Each robot's bumps into obstacles, as the simulator counted them (a
+    /// press of the bumper counts once).
+    pub bumps: BTreeMap<String, u64>,
 }
 
 /// One robot in report.json: the localization library's record, and how
@@ -142,6 +163,9 @@ impl DemoReport {
             coverage: outcome.coverage.clone(),
             coverage_95_s: time_to(&outcome.coverage, 0.95),
             coverage_99_s: time_to(&outcome.coverage, 0.99),
+            localize: plan.localize,
+            driven_s: outcome.driven.simulated_s,
+            bumps: outcome.driven.bumps.iter().cloned().collect(),
         }
     }
 
@@ -199,6 +223,10 @@ mod tests {
                 },
             ],
             commands: Vec::new(),
+            driven: Driven {
+                simulated_s: 100.0,
+                bumps: vec![("scout-1".to_string(), 0), ("scout-2".to_string(), 2)],
+            },
         };
         let text = DemoReport::new(&outcome).to_json().expect("serialises");
         assert!(text.ends_with("}\n"));
@@ -219,7 +247,10 @@ mod tests {
                 "explore",
                 "coverage",
                 "coverage_95_s",
-                "coverage_99_s"
+                "coverage_99_s",
+                "localize",
+                "driven_s",
+                "bumps"
             ])
         );
         assert_eq!(json["explore"], false);
@@ -229,6 +260,12 @@ mod tests {
         );
         assert_eq!(json["coverage_95_s"], 20.0);
         assert_eq!(json["coverage_99_s"], Value::Null);
+        assert_eq!(json["localize"], true);
+        assert_eq!(json["driven_s"], 100.0);
+        assert_eq!(
+            json["bumps"],
+            serde_json::json!({"scout-1": 0, "scout-2": 2})
+        );
         assert_eq!(json["sonar"], "default");
         assert_eq!(json["duration_s"], 80.5);
         assert_eq!(json["simulated_s"], 100.0);
@@ -274,6 +311,7 @@ mod tests {
             max_lags_s: Vec::new(),
             coverage: Vec::new(),
             commands: Vec::new(),
+            driven: Driven::default(),
         };
         let json: Value = serde_json::from_str(&DemoReport::new(&outcome).to_json().expect("JSON"))
             .expect("JSON");

@@ -20,7 +20,7 @@ use crate::options::DemoOptions;
 use crate::pacer::Pacer;
 use crate::plan::DemoPlan;
 use crate::progress::Progress;
-use crate::report::{DemoOutcome, write_reports};
+use crate::report::{DemoOutcome, Driven, write_reports};
 use crate::status_line::StatusLine;
 
 /// How long the cartographers and localizers may take to drain their
@@ -51,7 +51,7 @@ struct Demo<'a> {
 async fn demo(plan: &DemoPlan) -> Result<()> {
     let started = Instant::now();
     let mut demo = Demo::start(plan).await?;
-    let (kidnap, max_lags_s, coverage) = demo.drive().await?;
+    let (kidnap, max_lags_s, coverage, driven) = demo.drive().await?;
     demo.drain().await?;
 
     let out = &plan.out;
@@ -68,6 +68,7 @@ async fn demo(plan: &DemoPlan) -> Result<()> {
             .command_lines()
             .map(|(name, line)| (name.to_string(), line.to_string()))
             .collect(),
+        driven,
     };
     write_reports(&outcome, out)?;
     print!("{}", markdown::summary(&outcome));
@@ -232,14 +233,16 @@ impl<'a> Demo<'a> {
 impl Demo<'_> {
     /// Until every wanderer has finished its simulated time: starts the
     /// localizers and makes the kidnap when their times come, and keeps
-    /// the status line. Returns the kidnap, if one was made, and each
-    /// robot's largest localizer lag.
+    /// the status line. Returns the kidnap, if one was made, each
+    /// robot's largest localizer lag, the coverage curve and how the
+    /// robots drove.
     async fn drive(
         &mut self,
     ) -> Result<(
         Option<KidnapDone>,
         Vec<(String, Option<f64>)>,
         CoverageCurve,
+        Driven,
     )> {
         let plan = self.plan;
         let mut progress = Progress::new(plan.robot_names());
@@ -251,7 +254,8 @@ impl Demo<'_> {
             self.children.check()?;
             let states = self.sim.robots().await.context("asking the simulator")?;
             let now = states.iter().map(|s| s.time_s).fold(0.0, f64::max);
-            while localizers_started < plan.robots.len()
+            while plan.localize
+                && localizers_started < plan.robots.len()
                 && states.len() == plan.robots.len()
                 && now
                     >= plan
@@ -297,7 +301,20 @@ impl Demo<'_> {
                     .max_lags()
                     .map(|(robot, lag)| (robot.to_string(), lag))
                     .collect();
-                return Ok((kidnap, lags, coverage));
+                let driven = Driven {
+                    simulated_s: now,
+                    bumps: plan
+                        .robot_names()
+                        .map(|name| {
+                            let bumps = states
+                                .iter()
+                                .find(|s| s.name == name)
+                                .map_or(0, |s| s.bumps);
+                            (name.to_string(), bumps)
+                        })
+                        .collect(),
+                };
+                return Ok((kidnap, lags, coverage, driven));
             }
         }
     }

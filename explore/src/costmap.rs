@@ -66,7 +66,13 @@ impl Costmap {
     /// The costmap of `window`.
     pub fn inflate(window: &OccupancyWindow, params: CostParams) -> Self {
         let metres = window.resolution().metres();
-        let clearance_m = clearance(window, metres);
+        // Clearance past the inflation distance changes nothing: the
+        // brushfire stops there, and farther cells count as open.
+        let clearance_m = clearance(
+            window,
+            metres,
+            params.inflation_m.max(params.lethal_radius_m) + metres,
+        );
         let span = (params.inflation_m - params.lethal_radius_m).max(metres);
         let step_factor = clearance_m
             .iter()
@@ -92,7 +98,7 @@ impl Costmap {
     }
 
     /// Metres from the cell at `index` to the nearest occupied cell
-    /// (infinite where the window has none).
+    /// (infinite where none lies within the inflation distance).
     pub fn clearance_m(&self, index: usize) -> f64 {
         self.clearance_m[index]
     }
@@ -114,10 +120,10 @@ impl Costmap {
     }
 }
 
-/// Distance from each cell to the nearest occupied one, metres: a
-/// brushfire over the 8-connected grid (within a few per cent of the
-/// Euclidean distance).
-fn clearance(window: &OccupancyWindow, metres: f64) -> Vec<f64> {
+/// Distance from each cell to the nearest occupied one, metres, up to
+/// `limit_m` (infinite beyond): a brushfire over the 8-connected grid
+/// (within a few per cent of the Euclidean distance).
+fn clearance(window: &OccupancyWindow, metres: f64, limit_m: f64) -> Vec<f64> {
     let mut distance = vec![f64::INFINITY; window.len()];
     let mut queue = BinaryHeap::new();
     for (index, slot) in distance.iter_mut().enumerate() {
@@ -132,7 +138,7 @@ fn clearance(window: &OccupancyWindow, metres: f64) -> Vec<f64> {
         }
         for (next, length) in window.neighbours(index) {
             let candidate = d + length * metres;
-            if candidate < distance[next] {
+            if candidate < distance[next] && candidate <= limit_m {
                 distance[next] = candidate;
                 queue.push(MinQueued(candidate, next));
             }

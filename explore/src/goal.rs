@@ -22,6 +22,13 @@ pub struct GoalParams {
     pub claim_discount: f64,
     /// A blacklisted place bars frontier cells within this distance, metres.
     pub blacklist_radius_m: f64,
+    /// What a robot's current goal is worth on top of its score, weighted
+    /// metres: a new goal must beat it by this much, so that a robot does
+    /// not swing between two frontiers of about the same worth.
+    pub persistence_m: f64,
+    /// A frontier keeps being the current goal's while one of its cells
+    /// lies within this distance of it, metres.
+    pub current_radius_m: f64,
 }
 
 impl Default for GoalParams {
@@ -31,6 +38,8 @@ impl Default for GoalParams {
             claim_radius_m: 4.0,
             claim_discount: 0.9,
             blacklist_radius_m: 0.6,
+            persistence_m: 4.0,
+            current_radius_m: 1.0,
         }
     }
 }
@@ -98,6 +107,20 @@ pub fn choose_goal(
     blacklist: &Blacklist,
     params: &GoalParams,
 ) -> Option<Goal> {
+    choose_goal_keeping(window, frontiers, costs, claims, blacklist, None, params)
+}
+
+/// As [`choose_goal`], for a robot already driving to `current`: the
+/// frontier still holding it is worth `persistence_m` more.
+pub fn choose_goal_keeping(
+    window: &OccupancyWindow,
+    frontiers: &[Frontier],
+    costs: &TravelCosts,
+    claims: &[(f64, f64)],
+    blacklist: &Blacklist,
+    current: Option<(f64, f64)>,
+    params: &GoalParams,
+) -> Option<Goal> {
     let mut best: Option<Goal> = None;
     for frontier in frontiers {
         let Some((index, travel_m)) = frontier
@@ -125,7 +148,13 @@ pub fn choose_goal(
             })
             .fold(0.0, f64::max);
         let gain = params.gain_weight * frontier.size_m * (1.0 - params.claim_discount * claimed);
-        let score = gain - travel_m;
+        let kept = current.is_some_and(|(gx, gy)| {
+            frontier.cells.iter().any(|&index| {
+                let (fx, fy) = window.centre_of(window.cell_at(index));
+                (fx - gx).hypot(fy - gy) <= params.current_radius_m
+            })
+        });
+        let score = gain - travel_m + if kept { params.persistence_m } else { 0.0 };
         if best.as_ref().is_none_or(|b| score > b.score) {
             best = Some(Goal {
                 cell,
@@ -211,6 +240,35 @@ mod tests {
         )
         .unwrap();
         assert_eq!(goal.cell.x, 28, "{goal:?}");
+    }
+
+    #[test]
+    fn the_current_goal_holds_against_a_slightly_better_one() {
+        let (window, frontiers, costs) = setup();
+        let params = params();
+        // The far end is about 2.1 m farther: worth keeping with a
+        // persistence above that, not below.
+        let far = Some((2.85, 0.25));
+        let keeping = |persistence_m| {
+            let params = GoalParams {
+                persistence_m,
+                ..params
+            };
+            choose_goal_keeping(
+                &window,
+                &frontiers,
+                &costs,
+                &[],
+                &Blacklist::default(),
+                far,
+                &params,
+            )
+            .unwrap()
+            .cell
+            .x
+        };
+        assert_eq!(keeping(3.0), 28);
+        assert_eq!(keeping(2.0), 1);
     }
 
     #[test]

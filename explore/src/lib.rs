@@ -13,12 +13,17 @@
 //! - [`frontier`]: [`find_frontiers`], free cells beside unknown ones,
 //!   clustered.
 //! - [`goal`]: [`choose_goal`], gain against travel, discounted near other
-//!   robots' goals, never a blacklisted place.
+//!   robots' goals, never a blacklisted place; [`choose_goal_keeping`]
+//!   holds a robot to its current goal unless another is clearly better.
 //! - [`follow`]: [`PathFollower`], pure pursuit along a path, slowing and
 //!   stopping for what the robot's own ranges see ahead.
+//! - [`dead_reckoning`]: [`DeadReckoning`], a localizer's newest
+//!   estimate carried forward by odometry: the pose to steer from when
+//!   no true pose is known.
 //! - [`error`]: [`ExploreError`], what the steps refuse.
 
 pub mod costmap;
+pub mod dead_reckoning;
 pub mod error;
 pub mod follow;
 pub mod frontier;
@@ -27,9 +32,10 @@ pub mod travel;
 pub mod window;
 
 pub use costmap::{CostParams, Costmap};
+pub use dead_reckoning::DeadReckoning;
 pub use error::ExploreError;
 pub use follow::{Clearance, FollowCommand, FollowParams, PathFollower};
 pub use frontier::{Frontier, find_frontiers};
-pub use goal::{Blacklist, Goal, GoalParams, choose_goal};
+pub use goal::{Blacklist, Goal, GoalParams, choose_goal, choose_goal_keeping};
 pub use travel::TravelCosts;
 pub use window::OccupancyWindow;

@@ -40,6 +40,18 @@ impl Pose2 {
             theta: normalize_angle(self.theta + local.theta),
         }
     }
+
+    /// This pose expressed in `origin`'s frame (`origin⁻¹ ⊕ self`): the
+    /// inverse of [`Pose2::compose`], so `origin.compose(&p.relative_to(&origin)) == p`.
+    pub fn relative_to(&self, origin: &Pose2) -> Pose2 {
+        let (sin, cos) = origin.theta.sin_cos();
+        let (dx, dy) = (self.x - origin.x, self.y - origin.y);
+        Pose2 {
+            x: cos * dx + sin * dy,
+            y: -sin * dx + cos * dy,
+            theta: normalize_angle(self.theta - origin.theta),
+        }
+    }
 }
 
 /// The angle equal to `angle` modulo 2π in (-π, π].
@@ -52,6 +64,20 @@ pub fn normalize_angle(angle: f64) -> f64 {
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+
+    #[test]
+    fn relative_to_undoes_compose() {
+        let origin = Pose2::new(1.0, -2.0, 2.5);
+        let local = Pose2::new(0.3, 0.4, -3.0);
+        let world = origin.compose(&local);
+        let back = world.relative_to(&origin);
+        assert_relative_eq!(back.x, local.x, epsilon = 1e-12);
+        assert_relative_eq!(back.y, local.y, epsilon = 1e-12);
+        assert_relative_eq!(back.theta, local.theta, epsilon = 1e-12);
+        let again = origin.compose(&back);
+        assert_relative_eq!(again.x, world.x, epsilon = 1e-12);
+        assert_relative_eq!(again.theta, world.theta, epsilon = 1e-12);
+    }
 
     #[test]
     fn normalize_keeps_the_half_open_interval() {

@@ -108,6 +108,7 @@ pub fn robot_state(s: &RobotSnapshot) -> pb::RobotState {
         }),
         bumper: s.bumper,
         rig: s.rig.to_string(),
+        bumps: s.bumps,
     }
 }
 

@@ -188,7 +188,15 @@ pub struct Robot {
     command: (f64, f64),
     velocity: (f64, f64),
     bumper: bool,
+    bumps: u64,
+    /// Metres moved unblocked since the last contact.
+    clear_since_contact_m: f64,
 }
+
+/// Metres a robot must move unblocked after touching something for its
+/// next contact to count as another bump: pressing on against a wall
+/// creeps a hair's breadth now and then, and is still the one bump.
+const BUMP_CLEARANCE_M: f64 = 0.05;
 
 impl Robot {
     /// A robot standing still at `pose` (world frame), its odometry starting
@@ -203,6 +211,8 @@ impl Robot {
             command: (0.0, 0.0),
             velocity: (0.0, 0.0),
             bumper: false,
+            bumps: 0,
+            clear_since_contact_m: f64::INFINITY,
         })
     }
 
@@ -240,6 +250,13 @@ impl Robot {
     /// Whether the last attempted translation was blocked by a wall.
     pub fn bumper(&self) -> bool {
         self.bumper
+    }
+
+    /// How many times it has run into an obstacle: each press of the
+    /// bumper counts once, however long it lasts (and a press counts anew
+    /// only after the robot moved a few centimetres clear).
+    pub fn bumps(&self) -> u64 {
+        self.bumps
     }
 
     /// Commands a linear (m/s, forwards positive) and angular (rad/s,
@@ -293,6 +310,8 @@ impl Robot {
     /// [`fits`](Self::fits) first. Errors on a non-finite pose.
     pub fn teleport(&mut self, pose: Pose2) -> Result<(), SimError> {
         self.true_pose = finite_pose("pose", &pose)?;
+        // Wherever it lands, touching there is a new contact.
+        self.clear_since_contact_m = f64::INFINITY;
         Ok(())
     }
 
@@ -322,9 +341,14 @@ impl Robot {
             let from = Point2::new(self.true_pose.x, self.true_pose.y);
             if self.may_move(from, Point2::new(next.x, next.y), index, world) {
                 self.bumper = false;
+                self.clear_since_contact_m += chord.abs();
             } else {
                 chord = 0.0;
                 v1 = 0.0;
+                if self.clear_since_contact_m >= BUMP_CLEARANCE_M {
+                    self.bumps += 1;
+                }
+                self.clear_since_contact_m = 0.0;
                 self.bumper = true;
             }
         }
@@ -548,10 +572,17 @@ mod tests {
         // Wheels do not slip: the odometry stopped where the robot did.
         assert_eq!(robot.odometry(), p);
 
+        // Pressing on is still the one bump.
+        assert_eq!(robot.bumps(), 1);
+
         robot.set_command(-0.5, 0.0).expect("finite");
         robot.step(0.5, &index, &world, &mut rng).expect("valid dt");
         assert!(!robot.bumper());
         assert!(robot.true_pose().x < p.x);
+        robot.set_command(1.0, 0.0).expect("finite");
+        robot.step(3.0, &index, &world, &mut rng).expect("valid dt");
+        assert!(robot.bumper());
+        assert_eq!(robot.bumps(), 2);
     }
 
     #[test]

@@ -99,6 +99,8 @@ pub struct RobotSnapshot {
     pub velocity: (f64, f64),
     /// Whether it is pressed against an obstacle.
     pub bumper: bool,
+    /// Times it has run into an obstacle (a press counts once).
+    pub bumps: u64,
 }
 
 struct SimRobot {
@@ -432,6 +434,7 @@ fn snapshot_of(name: &str, entry: &SimRobot, rig: &Arc<str>, time_s: f64) -> Rob
         sequence: entry.sequence,
         velocity: entry.robot.velocity(),
         bumper: entry.robot.bumper(),
+        bumps: entry.robot.bumps(),
     }
 }
 
