@@ -10,9 +10,9 @@
 //! short of anything ahead, mapped or not. Plans are made in a task of
 //! their own, on the map's cells merged to about 10 cm, so that the
 //! steering never waits for one. A goal that cannot be reached or is not
-//! neared for a while is barred for a minute; a goal reached is barred
-//! for five (if it is still a frontier once reached, it is one nothing
-//! more can be seen from).
+//! neared for a while is barred for a minute; the frontier cells around
+//! a goal reached are barred for an hour (if still a frontier once
+//! reached, nothing more can be seen of it from there).
 
 use std::time::Duration;
 
@@ -106,8 +106,17 @@ const EMPTY_PLANS_TO_STOP: u32 = 3;
 const CLAIM_LIFETIME_S: f64 = 120.0;
 /// Simulated seconds a barred goal stays barred.
 const BAR_S: f64 = 60.0;
-/// Simulated seconds a goal reached stays barred.
-const ARRIVED_BAR_S: f64 = 300.0;
+/// Simulated seconds a goal reached stays barred: for the rest of any
+/// run worth the name (a frontier still there once reached is one nothing
+/// more can be seen from).
+const ARRIVED_BAR_S: f64 = 3600.0;
+/// A goal reached bars the cells of its frontier within this distance of
+/// it, metres (a long frontier's far end may yet be seen from elsewhere)...
+const ARRIVED_BAR_REACH_M: f64 = 2.5;
+/// ...each within this radius, metres.
+const ARRIVED_BAR_CELL_M: f64 = 0.15;
+/// Blocked this near its goal, metres, the robot counts it reached.
+const BLOCKED_REACHES_M: f64 = 1.0;
 /// Simulated seconds without nearing its goal before it is barred.
 const STALL_S: f64 = 12.0;
 /// Simulated seconds turned in place to look about when the map has
@@ -129,7 +138,7 @@ impl OccupancyView for CachedMap<'_> {
 /// What one plan found.
 enum Plan {
     /// A goal and the way there.
-    Go(Goal, PathFollower),
+    Go(Goal, PathFollower, KnownWalls),
     /// Nothing known around the robot yet: look about first.
     LookAbout,
     /// No reachable frontier.
@@ -182,8 +191,12 @@ impl Planner {
         let resolution = Resolution::new(info.resolution_m)?;
         let tile_size = TileSize::new(info.tile_size)?;
         let costs = CostParams {
-            lethal_radius_m: rig.body_radius() + 0.08,
-            inflation_m: rig.body_radius() + 0.5,
+            // Paths are planned on 10 cm cells: the margin covers their
+            // half-diagonal; the inflation keeps paths off walls where
+            // there is room, and the steering's own check of each move
+            // against the known walls covers the pursuit's corner cutting.
+            lethal_radius_m: rig.body_radius() + 0.1,
+            inflation_m: rig.body_radius() + 0.6,
             ..CostParams::default()
         };
         Ok(Self {
@@ -275,7 +288,12 @@ impl Planner {
             .into_iter()
             .map(|cell| window.centre_of(cell))
             .collect();
-        Ok(Plan::Go(goal, PathFollower::new(path, self.follow)?))
+        let walls = KnownWalls {
+            resolution: window.resolution(),
+            window,
+            costmap,
+        };
+        Ok(Plan::Go(goal, PathFollower::new(path, self.follow)?, walls))
     }
 
     /// The goals other explorers hold on the map: active, and set within
@@ -406,6 +424,50 @@ impl Explorer {
     }
 }
 
+/// The walls of the map as a plan saw them: each planning cell's clearance.
+struct KnownWalls {
+    resolution: Resolution,
+    window: OccupancyWindow,
+    costmap: Costmap,
+}
+
+/// Seconds ahead a move is checked against the known walls.
+const WALL_LOOKAHEAD_S: f64 = 0.5;
+/// Metres kept between the body and a known wall's cell centre: about
+/// half a planning cell, for where in its cell the wall lies.
+const WALL_MARGIN_M: f64 = 0.06;
+
+impl KnownWalls {
+    /// Whether driving at (`linear`, `angular`) from `pose` keeps the body
+    /// clear of the known walls over the next moments (cells outside the
+    /// plan's window count as clear).
+    fn clear_ahead(&self, pose: Pose2, linear: f64, angular: f64, rig: &Rig) -> bool {
+        let steps = 5;
+        (1..=steps).all(|step| {
+            let t = WALL_LOOKAHEAD_S * f64::from(step) / f64::from(steps);
+            let heading = pose.theta + 0.5 * angular * t;
+            let (x, y) = (
+                pose.x + linear * t * heading.cos(),
+                pose.y + linear * t * heading.sin(),
+            );
+            let clearance = self
+                .resolution
+                .cell_of(x, y)
+                .ok()
+                .and_then(|cell| self.window.index_of(cell))
+                .map_or(f64::INFINITY, |index| self.costmap.clearance_m(index));
+            // A step away from a wall is always allowed: leaving is safe.
+            let here = self
+                .resolution
+                .cell_of(pose.x, pose.y)
+                .ok()
+                .and_then(|cell| self.window.index_of(cell))
+                .map_or(f64::INFINITY, |index| self.costmap.clearance_m(index));
+            clearance >= rig.body_radius() + WALL_MARGIN_M || clearance >= here
+        })
+    }
+}
+
 /// The goal being driven to, and how it is going.
 struct Pursuit {
     goal: Goal,
@@ -530,6 +592,9 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
         )
     });
     let mut planning = false;
+    let mut known_walls: Option<KnownWalls> = None;
+    // The last goal driven to: where, the nearest the robot came, when.
+    let mut last_goal: Option<(f64, f64, f64, f64)> = None;
     let mut states = spawn_state_reader(sim.watch(&args.robot).await?);
     let shutdown = deog_harness::shutdown_signal();
     tokio::pin!(shutdown);
@@ -638,15 +703,19 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
                 planning = false;
                 let (request, plan) = answer?;
                 match plan {
-                    Plan::Go(goal, follower) => {
+                    Plan::Go(goal, follower, walls) => {
+                        known_walls = Some(walls);
                         empty_plans = 0;
-                        let same = pursuit.as_ref().is_some_and(|p| {
-                            (p.goal.x - goal.x).hypot(p.goal.y - goal.y)
-                                <= explorer.goals.current_radius_m
+                        // The same goal as the last one, even if the pursuit
+                        // was dropped in between (blocked, looking about):
+                        // its progress carries over, so a goal the robot
+                        // keeps being turned back from is still barred.
+                        let same = last_goal.is_some_and(|(x, y, _, _)| {
+                            (x - goal.x).hypot(y - goal.y) <= explorer.goals.current_radius_m
                         });
                         let distance = (goal.x - pose.x).hypot(goal.y - pose.y);
-                        let (best_distance, best_at_s) = match &pursuit {
-                            Some(p) if same => (p.best_distance, p.best_at_s),
+                        let (best_distance, best_at_s) = match last_goal {
+                            Some((_, _, best, at)) if same => (best, at),
                             _ => {
                                 summary.goals += 1;
                                 tracing::info!(
@@ -719,23 +788,40 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
             p.best_distance = distance;
             p.best_at_s = now;
         }
+        last_goal = Some((p.goal.x, p.goal.y, p.best_distance, p.best_at_s));
         let stalled = now - p.best_at_s > STALL_S;
-        let (linear, angular) = match p.follower.command(pose, clearance) {
-            FollowCommand::Drive { linear, angular } if !stalled => (linear, angular),
-            FollowCommand::Arrived => {
-                // A frontier the robot stands on and still sees as one
-                // (a gap in a wall's line, the far side of furniture)
-                // cannot be seen better from there: bar the place, or
-                // the robot would come back to it for ever.
-                explorer
-                    .blacklist
-                    .add(p.goal.x, p.goal.y, now + ARRIVED_BAR_S);
+        let command = p.follower.command(pose, clearance);
+        // Stopped by something just short of the goal is as near as the
+        // robot gets: as good as there.
+        let reached = command == FollowCommand::Arrived
+            || (command == FollowCommand::Blocked && distance <= BLOCKED_REACHES_M);
+        let (linear, angular) = match command {
+            _ if reached => {
+                // A frontier the robot stands at and still sees as one (a
+                // gap in a wall's line, the far side of furniture) cannot
+                // be seen better from there: bar its cells around the
+                // goal, or the robot would come back to it for ever.
+                for &(x, y) in &p.goal.frontier_cells {
+                    if (x - p.goal.x).hypot(y - p.goal.y) <= ARRIVED_BAR_REACH_M {
+                        explorer.blacklist.add_within(
+                            x,
+                            y,
+                            ARRIVED_BAR_CELL_M,
+                            now + ARRIVED_BAR_S,
+                        );
+                    }
+                }
+                if command == FollowCommand::Blocked {
+                    look_about_until = Some(now + LOOK_ABOUT_S);
+                }
                 pursuit = None;
                 (0.0, 0.0)
             }
-            FollowCommand::Drive { .. } | FollowCommand::Blocked => {
+            FollowCommand::Drive { linear, angular } if !stalled => (linear, angular),
+            _ => {
                 if stalled {
                     explorer.blacklist.add(p.goal.x, p.goal.y, now + BAR_S);
+                    last_goal = None;
                     summary.barred += 1;
                     tracing::info!(
                         x = p.goal.x,
@@ -747,6 +833,18 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
                 look_about_until = Some(now + LOOK_ABOUT_S);
                 (0.0, 0.0)
             }
+        };
+        // The map's walls as the last plan knew them: a move that would
+        // bring the body near one within the next half second turns on the
+        // spot instead (a round robot turning in place touches nothing),
+        // for what is too near or too thin for its own ranges to see.
+        let linear = match &known_walls {
+            Some(walls)
+                if linear > 0.0 && !walls.clear_ahead(pose, linear, angular, &explorer.rig) =>
+            {
+                0.0
+            }
+            _ => linear,
         };
         sim.drive(&args.robot, linear, angular).await?;
     }

@@ -19,23 +19,30 @@ pub struct Frontier {
     pub centroid: (f64, f64),
 }
 
-/// Whether the cell at `index` is a frontier cell: free, with an unknown
-/// 4-neighbour (the window's edge counts as unknown).
+/// Cells of unknown, straight out from a frontier cell, that make it one:
+/// a wall whose inside the sensor never marked, or a sliver between two
+/// readings, is thinner than that and leads nowhere.
+pub const FRONTIER_DEPTH_CELLS: i64 = 3;
+
+/// Whether the cell at `index` is a frontier cell: free, with unknown
+/// space [`FRONTIER_DEPTH_CELLS`] deep straight out from one of its sides
+/// (beyond the window's edge counts as unknown).
 pub fn is_frontier_cell(window: &OccupancyWindow, index: usize) -> bool {
     if window.at(index) != Occupancy::Free {
         return false;
     }
-    let (width, height) = (window.width(), window.height());
-    let (x, y) = (index % width, index / width);
-    let unknown = |nx: usize, ny: usize| window.at(ny * width + nx) == Occupancy::Unknown;
-    x == 0
-        || y == 0
-        || x + 1 == width
-        || y + 1 == height
-        || unknown(x - 1, y)
-        || unknown(x + 1, y)
-        || unknown(x, y - 1)
-        || unknown(x, y + 1)
+    let (width, height) = (window.width() as i64, window.height() as i64);
+    let (x, y) = ((index as i64) % width, (index as i64) / width);
+    let unknown = |nx: i64, ny: i64| {
+        nx < 0
+            || ny < 0
+            || nx >= width
+            || ny >= height
+            || window.at((ny * width + nx) as usize) == Occupancy::Unknown
+    };
+    [(1, 0), (-1, 0), (0, 1), (0, -1)]
+        .iter()
+        .any(|&(dx, dy)| (1..=FRONTIER_DEPTH_CELLS).all(|k| unknown(x + k * dx, y + k * dy)))
 }
 
 /// The window's frontiers of at least `min_size_m`, 8-connected cells
@@ -110,6 +117,30 @@ mod tests {
         );
         // Smaller than asked: none.
         assert!(find_frontiers(&window, 0.5).is_empty());
+    }
+
+    #[test]
+    fn unknown_slivers_and_unmarked_walls_are_no_frontier() {
+        // Two rooms, the wall between them marked on its faces but
+        // unknown inside, the right room's far wall too; the left room
+        // opens onto deep unknown (the window's edge).
+        let rows = [
+            "#############",
+            "....#??#..#??",
+            "....#??#..#??",
+            "....#??#..#??",
+            "#############",
+        ];
+        let resolution = Resolution::new(0.1).unwrap();
+        let window = OccupancyWindow::from_rows(&rows, CellIndex::new(0, 0), resolution);
+        let frontiers = find_frontiers(&window, 0.0);
+        // Only the left edge (the window's edge is unknown beyond).
+        assert_eq!(frontiers.len(), 1, "{frontiers:?}");
+        assert!((frontiers[0].centroid.0 - 0.05).abs() < 1e-9);
+        // A wall never marked at all: two unknown cells between free ones.
+        let rows = ["#######", "#..??.#", "#######"];
+        let window = OccupancyWindow::from_rows(&rows, CellIndex::new(0, 0), resolution);
+        assert!(find_frontiers(&window, 0.0).is_empty());
     }
 
     #[test]

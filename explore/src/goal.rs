@@ -59,30 +59,40 @@ pub struct Goal {
     pub travel_m: f64,
     /// Its score: gain less travel.
     pub score: f64,
+    /// The centres of its frontier's cells, metres.
+    pub frontier_cells: Vec<(f64, f64)>,
 }
 
 /// Places not to drive to, each until a time.
 #[derive(Debug, Clone, Default)]
 pub struct Blacklist {
-    entries: Vec<(f64, f64, f64)>,
+    /// (x, y, until, radius: `None` for the caller's).
+    entries: Vec<(f64, f64, f64, Option<f64>)>,
 }
 
 impl Blacklist {
-    /// Bars the place (x, y) until `until_s`.
+    /// Bars the place (x, y) until `until_s`, within the radius
+    /// [`Blacklist::bars`] is asked with.
     pub fn add(&mut self, x: f64, y: f64, until_s: f64) {
-        self.entries.push((x, y, until_s));
+        self.entries.push((x, y, until_s, None));
+    }
+
+    /// Bars the cells within `radius_m` of (x, y) until `until_s`.
+    pub fn add_within(&mut self, x: f64, y: f64, radius_m: f64, until_s: f64) {
+        self.entries.push((x, y, until_s, Some(radius_m)));
     }
 
     /// Forgets entries that ran out by `now_s`.
     pub fn expire(&mut self, now_s: f64) {
-        self.entries.retain(|&(_, _, until)| until > now_s);
+        self.entries.retain(|&(_, _, until, _)| until > now_s);
     }
 
-    /// Whether (x, y) lies within `radius` of a barred place.
+    /// Whether (x, y) lies within `radius` of a barred place (or within
+    /// the place's own radius, when it was barred with one).
     pub fn bars(&self, x: f64, y: f64, radius: f64) -> bool {
         self.entries
             .iter()
-            .any(|&(bx, by, _)| (bx - x).hypot(by - y) <= radius)
+            .any(|&(bx, by, _, own)| (bx - x).hypot(by - y) <= own.unwrap_or(radius))
     }
 
     /// Places barred now.
@@ -163,6 +173,11 @@ pub fn choose_goal_keeping(
                 frontier_m: frontier.size_m,
                 travel_m,
                 score,
+                frontier_cells: frontier
+                    .cells
+                    .iter()
+                    .map(|&index| window.centre_of(window.cell_at(index)))
+                    .collect(),
             });
         }
     }
@@ -283,6 +298,17 @@ mod tests {
         assert!(blacklist.is_empty());
         let goal = choose_goal(&window, &frontiers, &costs, &[], &blacklist, &params).unwrap();
         assert_eq!(goal.cell.x, 1);
+        // A frontier's cells barred one by one bar it too.
+        let mut cells = Blacklist::default();
+        for x in [0.15, 2.85] {
+            for y in [0.15, 0.25, 0.35] {
+                cells.add_within(x, y, 0.05, 10.0);
+            }
+        }
+        assert_eq!(
+            choose_goal(&window, &frontiers, &costs, &[], &cells, &params),
+            None
+        );
         // Everything barred: no goal.
         blacklist.add(0.15, 0.25, 20.0);
         blacklist.add(2.85, 0.25, 20.0);

@@ -1,7 +1,9 @@
 //! `deog explore` as a real process: a map server, the simulator with
 //! map1, a cartographer and one explorer. The explorer ends by itself,
 //! saying the map is explored, without a bump, and the map then covers the
-//! room's reachable free space.
+//! room's reachable free space. And `deog demo --explore --no-localize`:
+//! two explorers sharing the map end by themselves, its report.json saying
+//! so (driven_s, bumps, the coverage curve).
 
 use std::process::Command;
 use std::time::Duration;
@@ -81,4 +83,64 @@ fn one_explorer_maps_a_room_and_stops_by_itself() {
     println!("{stdout}coverage {coverage:.3}, {correct:.3} of observed cells right");
     assert!(coverage >= 0.9, "{json}");
     assert!(correct >= 0.9, "{json}");
+}
+
+#[test]
+fn a_demo_of_two_explorers_ends_by_itself_with_the_room_covered() {
+    let out = tempfile::tempdir().expect("temp dir");
+    let output = Command::new(deog_binary())
+        .args([
+            "demo",
+            "--explore",
+            "--no-localize",
+            "--no-view",
+            "--world",
+            "map1",
+            "--robots",
+            "2",
+            "--duration",
+            "900",
+            "--speed",
+            "8",
+            "--out",
+        ])
+        .arg(out.path())
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("run deog demo");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let text = std::fs::read_to_string(out.path().join("report.json")).expect("report.json");
+    let report: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+    println!("{stdout}");
+    assert_eq!(report["explore"], true, "{text}");
+    assert_eq!(report["localize"], false, "{text}");
+    assert_eq!(
+        report["robots"],
+        serde_json::json!([]),
+        "no localizer: {text}"
+    );
+    let driven = report["driven_s"].as_f64().expect("driven_s");
+    assert!(
+        driven < 900.0 - 2.0,
+        "the explorers ran out of time: {text}"
+    );
+    let bumps = report["bumps"].as_object().expect("bumps per robot");
+    assert_eq!(bumps.len(), 2, "{text}");
+    assert!(bumps.values().all(|b| b == 0), "{text}");
+    assert!(report["coverage_95_s"].as_f64().is_some(), "{text}");
+    let last = report["coverage"]
+        .as_array()
+        .and_then(|c| c.last())
+        .and_then(|s| s["fraction"].as_f64())
+        .expect("a coverage sample");
+    assert!(last >= 0.95, "{text}");
+    assert!(
+        report["map"]["fraction_correct"].as_f64().expect("a map") >= 0.9,
+        "{text}"
+    );
 }
