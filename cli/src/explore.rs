@@ -138,7 +138,7 @@ impl OccupancyView for CachedMap<'_> {
 /// What one plan found.
 enum Plan {
     /// A goal and the way there.
-    Go(Goal, PathFollower, KnownWalls),
+    Go(Goal, PathFollower),
     /// Nothing known around the robot yet: look about first.
     LookAbout,
     /// No reachable frontier.
@@ -192,10 +192,8 @@ impl Planner {
         let tile_size = TileSize::new(info.tile_size)?;
         let costs = CostParams {
             // Paths are planned on 10 cm cells: the margin covers their
-            // half-diagonal; the inflation keeps paths off walls where
-            // there is room, and the steering's own check of each move
-            // against the known walls covers the pursuit's corner cutting.
-            lethal_radius_m: rig.body_radius() + 0.1,
+            // half-diagonal as well as the pursuit's cutting of corners.
+            lethal_radius_m: rig.body_radius() + 0.15,
             inflation_m: rig.body_radius() + 0.6,
             ..CostParams::default()
         };
@@ -288,12 +286,7 @@ impl Planner {
             .into_iter()
             .map(|cell| window.centre_of(cell))
             .collect();
-        let walls = KnownWalls {
-            resolution: window.resolution(),
-            window,
-            costmap,
-        };
-        Ok(Plan::Go(goal, PathFollower::new(path, self.follow)?, walls))
+        Ok(Plan::Go(goal, PathFollower::new(path, self.follow)?))
     }
 
     /// The goals other explorers hold on the map: active, and set within
@@ -424,50 +417,6 @@ impl Explorer {
     }
 }
 
-/// The walls of the map as a plan saw them: each planning cell's clearance.
-struct KnownWalls {
-    resolution: Resolution,
-    window: OccupancyWindow,
-    costmap: Costmap,
-}
-
-/// Seconds ahead a move is checked against the known walls.
-const WALL_LOOKAHEAD_S: f64 = 0.5;
-/// Metres kept between the body and a known wall's cell centre: about
-/// half a planning cell, for where in its cell the wall lies.
-const WALL_MARGIN_M: f64 = 0.06;
-
-impl KnownWalls {
-    /// Whether driving at (`linear`, `angular`) from `pose` keeps the body
-    /// clear of the known walls over the next moments (cells outside the
-    /// plan's window count as clear).
-    fn clear_ahead(&self, pose: Pose2, linear: f64, angular: f64, rig: &Rig) -> bool {
-        let steps = 5;
-        (1..=steps).all(|step| {
-            let t = WALL_LOOKAHEAD_S * f64::from(step) / f64::from(steps);
-            let heading = pose.theta + 0.5 * angular * t;
-            let (x, y) = (
-                pose.x + linear * t * heading.cos(),
-                pose.y + linear * t * heading.sin(),
-            );
-            let clearance = self
-                .resolution
-                .cell_of(x, y)
-                .ok()
-                .and_then(|cell| self.window.index_of(cell))
-                .map_or(f64::INFINITY, |index| self.costmap.clearance_m(index));
-            // A step away from a wall is always allowed: leaving is safe.
-            let here = self
-                .resolution
-                .cell_of(pose.x, pose.y)
-                .ok()
-                .and_then(|cell| self.window.index_of(cell))
-                .map_or(f64::INFINITY, |index| self.costmap.clearance_m(index));
-            clearance >= rig.body_radius() + WALL_MARGIN_M || clearance >= here
-        })
-    }
-}
-
 /// The goal being driven to, and how it is going.
 struct Pursuit {
     goal: Goal,
@@ -592,7 +541,6 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
         )
     });
     let mut planning = false;
-    let mut known_walls: Option<KnownWalls> = None;
     // The last goal driven to: where, the nearest the robot came, when.
     let mut last_goal: Option<(f64, f64, f64, f64)> = None;
     let mut states = spawn_state_reader(sim.watch(&args.robot).await?);
@@ -703,8 +651,7 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
                 planning = false;
                 let (request, plan) = answer?;
                 match plan {
-                    Plan::Go(goal, follower, walls) => {
-                        known_walls = Some(walls);
+                    Plan::Go(goal, follower) => {
                         empty_plans = 0;
                         // The same goal as the last one, even if the pursuit
                         // was dropped in between (blocked, looking about):
@@ -833,18 +780,6 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
                 look_about_until = Some(now + LOOK_ABOUT_S);
                 (0.0, 0.0)
             }
-        };
-        // The map's walls as the last plan knew them: a move that would
-        // bring the body near one within the next half second turns on the
-        // spot instead (a round robot turning in place touches nothing),
-        // for what is too near or too thin for its own ranges to see.
-        let linear = match &known_walls {
-            Some(walls)
-                if linear > 0.0 && !walls.clear_ahead(pose, linear, angular, &explorer.rig) =>
-            {
-                0.0
-            }
-            _ => linear,
         };
         sim.drive(&args.robot, linear, angular).await?;
     }
