@@ -45,11 +45,18 @@ pub(crate) fn report(outcome: &DemoOutcome<'_>) -> String {
     let judgement = outcome.judgement;
     let _ = writeln!(md, "# deog demo: {}\n", plan.world.name());
     let driver = if plan.explore { "explorer" } else { "wanderer" };
+    let drove = if plan.explore {
+        format!(
+            "explored for {:.0} simulated seconds (at most {})",
+            outcome.driven.simulated_s, plan.schedule.duration_s
+        )
+    } else {
+        format!("drove {} simulated seconds", plan.schedule.duration_s)
+    };
     let _ = write!(
         md,
-        "{} robots drove {} simulated seconds at {}x (seed {}), in {:.0} s of wall-clock time. ",
+        "{} robots {drove} at {}x (seed {}), in {:.0} s of wall-clock time. ",
         plan.robots.len(),
-        plan.schedule.duration_s,
         plan.schedule.speed,
         plan.seed,
         outcome.wall_s,
