@@ -802,6 +802,43 @@ impl Mcl {
             lost_score: self.injection_share(),
         })
     }
+
+    /// At most `count` particles drawn by weight (systematic resampling,
+    /// no random draw: the same filter gives the same sample), each moved
+    /// by the odometry since the last correction as [`Mcl::estimate`]
+    /// moves the mean. For viewers: a picture of the belief, not a filter.
+    pub fn sample(&self, count: usize, odometry: &Pose2) -> Vec<Pose2> {
+        let n = self.particles.len();
+        if count == 0 || n == 0 {
+            return Vec::new();
+        }
+        let moved = |p: &Pose2| match self.odometry {
+            Some(last) => OdometryMove::between(&last, odometry).apply(p),
+            None => *p,
+        };
+        if count >= n {
+            return self.particles.iter().map(moved).collect();
+        }
+        let total: f64 = self.weights.iter().sum();
+        if total.is_nan() || total <= 0.0 {
+            // Weights not yet normalised (or all zero): an even stride.
+            return (0..count)
+                .map(|i| moved(&self.particles[i * n / count]))
+                .collect();
+        }
+        let step = total / count as f64;
+        let mut sample = Vec::with_capacity(count);
+        let mut next = step / 2.0;
+        let mut reached = 0.0;
+        for (particle, weight) in self.particles.iter().zip(&self.weights) {
+            reached += weight;
+            while next < reached && sample.len() < count {
+                sample.push(moved(particle));
+                next += step;
+            }
+        }
+        sample
+    }
 }
 
 /// A pose uniformly inside `cell`, any heading.
@@ -832,6 +869,21 @@ mod tests {
             budget_bytes: 1 << 20,
         })
         .unwrap()
+    }
+
+    #[test]
+    fn a_sample_follows_the_weight_and_its_size() {
+        let mcl = two_modes(200, 0.25);
+        let sample = mcl.sample(100, &Pose2::new(0.0, 0.0, 0.0));
+        assert_eq!(sample.len(), 100);
+        let light = sample.iter().filter(|p| (p.x - 2.0).abs() < 1.0).count();
+        assert!(
+            (20..=30).contains(&light),
+            "{light} of 100 in the light mode"
+        );
+        assert_eq!(mcl.sample(0, &Pose2::new(0.0, 0.0, 0.0)).len(), 0);
+        let all = mcl.sample(1_000_000, &Pose2::new(0.0, 0.0, 0.0));
+        assert_eq!(all.len(), mcl.particles().len());
     }
 
     /// A filter holding two tight modes: `light` particles about (2, 2, 0)

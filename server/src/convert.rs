@@ -345,8 +345,28 @@ pub fn pose_estimate(estimate: &pb::PoseEstimate) -> Result<(), StoreError> {
             format!("must be within [0, 1], got {lost}"),
         ));
     }
+    let sample = &estimate.particle_sample;
+    if sample.len() % 3 != 0 || sample.len() > 3 * MAX_PARTICLE_SAMPLE {
+        return Err(StoreError::invalid(
+            "particle_sample",
+            format!(
+                "must hold (x, y, theta) of at most {MAX_PARTICLE_SAMPLE} particles, got {} values",
+                sample.len()
+            ),
+        ));
+    }
+    if let Some(i) = sample.iter().position(|v| !v.is_finite()) {
+        return Err(StoreError::invalid(
+            format!("particle_sample[{i}]"),
+            format!("must be finite, got {}", sample[i]),
+        ));
+    }
     Ok(())
 }
+
+/// The most particles an estimate's sample may hold: a picture for viewers,
+/// not the filter.
+pub const MAX_PARTICLE_SAMPLE: usize = 5_000;
 
 /// An inclusive sequence range where 0 means open.
 pub fn sequence_range(from: u64, to: u64) -> Result<(u64, u64), StoreError> {

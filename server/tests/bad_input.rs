@@ -87,6 +87,7 @@ fn estimate(robot: &str, sequence: u64) -> pb::PoseEstimate {
         particle_count: 100,
         converged: true,
         lost_score: 0.1,
+        particle_sample: Vec::new(),
     }
 }
 
@@ -650,6 +651,21 @@ async fn pose_estimates_with_bad_numbers_are_refused_and_not_stored() {
             with(&|e| e.lost_score = f64::NAN),
             Code::InvalidArgument,
             "lost_score",
+        ),
+        (
+            with(&|e| e.particle_sample = vec![1.0; 7]),
+            Code::InvalidArgument,
+            "particle_sample",
+        ),
+        (
+            with(&|e| e.particle_sample = vec![0.5; 3 * 5_001]),
+            Code::InvalidArgument,
+            "particle_sample",
+        ),
+        (
+            with(&|e| e.particle_sample = vec![0.0, 1.0, f32::NAN]),
+            Code::InvalidArgument,
+            "particle_sample[2]",
         ),
         (
             with(&|e| e.covariance = vec![0.0; 20_000]),

@@ -42,6 +42,7 @@ fn pose(robot: &str, frame_sequence: u64) -> pb::PoseEstimate {
         particle_count: 500,
         converged: frame_sequence > 2,
         lost_score: 0.1,
+        particle_sample: Vec::new(),
     }
 }
 

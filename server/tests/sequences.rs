@@ -270,6 +270,7 @@ async fn a_pose_for_frame_u64_max_is_refused() {
         particle_count: 10,
         converged: false,
         lost_score: 0.0,
+        particle_sample: Vec::new(),
     };
     let status = client
         .publish_pose(estimate(u64::MAX))

@@ -91,6 +91,7 @@ async fn publish(client: &MapClient) {
                 particle_count: 500,
                 converged: s >= 6,
                 lost_score: 0.0,
+                particle_sample: Vec::new(),
             })
             .await
             .expect("pose");

@@ -54,6 +54,7 @@ fn estimate(frame: &pb::SonarFrame) -> pb::PoseEstimate {
         particle_count: 500,
         converged: true,
         lost_score: 0.25,
+        particle_sample: Vec::new(),
     }
 }
 

@@ -257,6 +257,11 @@ fn the_page_shows_the_map_growing_and_the_robot_driving() {
                 particle_count: 700,
                 converged: true,
                 lost_score: 0.1,
+                // Three particles about the truth.
+                particle_sample: [-0.1f32, 0.0, 0.1]
+                    .iter()
+                    .flat_map(|d| [truth.x as f32 + d, truth.y as f32 - d, truth.theta as f32])
+                    .collect(),
             })
             .await
             .expect("publish an estimate");
@@ -266,7 +271,7 @@ fn the_page_shows_the_map_growing_and_the_robot_driving() {
         "the estimate on the page",
         "return window.deogView.robots()[0];",
         Duration::from_secs(10),
-        |v| v["estimate"]["particles"] == 700,
+        |v| v["estimate"]["particles"] == 700 && v["particlesShown"] == 3,
     );
     assert_eq!(shown["estimate"]["converged"], true);
     let error_m = shown["error"]["m"]

@@ -14,8 +14,8 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use deog_proto::v1 as pb;
-use deog_robot_client::{ClientConfig, MapClient};
-use deog_tests::{RunningDeog, ServerProcess, failure, free_loopback_addr, run_deog};
+use deog_robot_client::{ClientConfig, MapClient, SimClient};
+use deog_tests::{RunningDeog, ServerProcess, failure, free_loopback_addr, run_deog, succeeded};
 use serde_json::Value;
 
 /// Four sonars round the body and a 91-beam laser over the front half.
@@ -227,11 +227,53 @@ fn foxglove_shows_the_map_poses_scans_and_cones_of_a_running_system() {
                 particle_count: 700,
                 converged: true,
                 lost_score: 0.1,
+                particle_sample: vec![3.0, 2.5, 0.5, 3.5, 2.5, 1.0],
             })
             .await
             .expect("publish an estimate");
         (info, published)
     });
+    // A kidnap: r1 put down at least 2 m from where it is, somewhere clear.
+    let world = deog_world::load_world_spec("office").expect("the office world");
+    let at = runtime
+        .block_on(async {
+            SimClient::connect(ClientConfig::new(sim_url.clone()))
+                .await
+                .expect("simulator client")
+                .state("r1")
+                .await
+        })
+        .expect("r1's state")
+        .true_pose
+        .expect("r1's pose");
+    let (low, high) = world.bounds();
+    let clear = |x: f64, y: f64| {
+        (0..16).all(|i| {
+            let a = f64::from(i) * std::f64::consts::PI / 8.0;
+            [0.0, 0.3, 0.6]
+                .iter()
+                .all(|r| world.is_free(deog_world::Point2::new(x + r * a.cos(), y + r * a.sin())))
+        })
+    };
+    let put = (0..400)
+        .map(|i| {
+            let (fx, fy) = (f64::from(i % 20) / 20.0, f64::from(i / 20) / 20.0);
+            (low.x + fx * (high.x - low.x), low.y + fy * (high.y - low.y))
+        })
+        .find(|&(x, y)| (x - at.x).hypot(y - at.y) >= 2.0 && clear(x, y))
+        .expect("a clear spot in the office");
+    succeeded(&run_deog(
+        &[
+            "teleport",
+            "--robot",
+            "r1",
+            "--pose",
+            &format!("{},{},0", put.0, put.1),
+            "--sim",
+            &sim_url,
+        ],
+        &[],
+    ));
 
     let want = [
         "/map",
@@ -242,6 +284,8 @@ fn foxglove_shows_the_map_poses_scans_and_cones_of_a_running_system() {
         "/r1/scan",
         "/r1/sonar",
         "/r1/true_path",
+        "/r1/particles",
+        "/r1/kidnaps",
     ];
     let report = run_client(&format!("ws://{foxglove_addr}"), &want);
     println!("{report}");
@@ -259,6 +303,8 @@ fn foxglove_shows_the_map_poses_scans_and_cones_of_a_running_system() {
         ("/r1/scan", "foxglove.LaserScan"),
         ("/r1/sonar", "foxglove.SceneUpdate"),
         ("/r1/true_path", "foxglove.PosesInFrame"),
+        ("/r1/particles", "foxglove.PosesInFrame"),
+        ("/r1/kidnaps", "foxglove.SceneUpdate"),
     ] {
         let channel = channels
             .iter()
@@ -421,6 +467,28 @@ fn foxglove_shows_the_map_poses_scans_and_cones_of_a_running_system() {
     assert_eq!(cones["id"], "r1/sonar");
     assert_eq!(u64_at(cones, "/triangles"), SONARS * 6, "{cones}");
     assert!(u64_at(&latest["/r1/true_path"], "/poses") >= 2);
+    // The particles sent with the estimate, and the kidnap: a line from
+    // where r1 was to where it was put.
+    assert_eq!(u64_at(&latest["/r1/particles"], "/poses"), 2);
+    // (The first pose seen after the jump: the robot may have driven a
+    // step since it was put down.)
+    let kidnaps = latest["/r1/kidnaps"]["entities"]
+        .as_array()
+        .expect("the kidnaps");
+    let kidnap = kidnaps.last().expect("a kidnap");
+    assert_eq!(
+        kidnap["id"],
+        format!("r1/kidnap/{}", kidnaps.len() - 1),
+        "{kidnap}"
+    );
+    let arrived = (
+        f64_at(kidnap, "/spheres/0/x"),
+        f64_at(kidnap, "/spheres/0/y"),
+    );
+    assert!(
+        (arrived.0 - put.0).hypot(arrived.1 - put.1) < 0.1,
+        "put at {put:?}: {kidnap}"
+    );
     assert!(view.is_running(), "deog view ran throughout");
 }
 

@@ -306,6 +306,12 @@ fn estimate_view(estimate: &pb::PoseEstimate) -> EstimateView {
         converged: estimate.converged,
         lost_score: estimate.lost_score,
         particles: estimate.particle_count,
+        particle_sample: estimate
+            .particle_sample
+            .chunks_exact(3)
+            .map(|p| Pose2::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2])))
+            .filter(|p| p.x.is_finite() && p.y.is_finite() && p.theta.is_finite())
+            .collect(),
     }
 }
 

@@ -12,8 +12,8 @@
 //! | `/<robot>/sonar` | `foxglove.SceneUpdate` | the newest frame's sonar cones |
 //! | `/<robot>/true_path`, `/<robot>/estimate_path` | `foxglove.PosesInFrame` | the paths, once a second |
 //!
-//! Particles are not shown: localizers publish only their mean and
-//! covariance to the map server.
+//! | `/<robot>/particles` | `foxglove.PosesInFrame` | the newest sample of the localizer's particles (a few a second) |
+//! | `/<robot>/kidnaps` | `foxglove.SceneUpdate` | each kidnap seen: a red line from where the robot was to where it was put |
 //!
 //! One task follows the shared state's updates, as a page's connection
 //! does: every 50 ms it builds what changed under the state's lock and
@@ -139,8 +139,14 @@ struct RobotChannels {
     scans: Vec<Arc<Channel<LaserScan>>>,
     true_path: Arc<Channel<PosesInFrame>>,
     estimate_path: Arc<Channel<PosesInFrame>>,
+    particles: Arc<Channel<PosesInFrame>>,
+    kidnaps: Arc<Channel<SceneUpdate>>,
     /// The newest estimate sent: (map, frame sequence).
     estimate_sent: Option<(String, u64)>,
+    /// The newest particle sample sent: (map, frame sequence).
+    particles_sent: Option<(String, u64)>,
+    /// Kidnaps sent: (how many, the newest one's time).
+    kidnaps_sent: (usize, f64),
     had_cones: bool,
     path_sent: Option<Instant>,
 }
@@ -155,7 +161,11 @@ impl RobotChannels {
             scans: Vec::new(),
             true_path: channel(context, &format!("/{robot}/true_path")),
             estimate_path: channel(context, &format!("/{robot}/estimate_path")),
+            particles: channel(context, &format!("/{robot}/particles")),
+            kidnaps: channel(context, &format!("/{robot}/kidnaps")),
             estimate_sent: None,
+            particles_sent: None,
+            kidnaps_sent: (0, f64::NAN),
             had_cones: false,
             path_sent: None,
         }
@@ -245,7 +255,9 @@ impl Publisher {
                     self.map_changed = true;
                 }
             }
-            Update::State(Change::Robot(robot) | Change::Kidnap(robot)) => {
+            Update::State(
+                Change::Robot(robot) | Change::Kidnap(robot) | Change::Particles(robot),
+            ) => {
                 self.changed_robots.insert(robot);
             }
             Update::Maps => {}
@@ -375,6 +387,29 @@ impl RobotChannels {
                     messages::covariance_ellipse(robot, estimate, stamp),
                 ));
             }
+        }
+        if let Some(sample) = &track.particles {
+            let key = (sample.map.clone(), sample.sequence);
+            if everything || self.particles_sent.as_ref() != Some(&key) {
+                self.particles_sent = Some(key);
+                out.push(Outgoing::Path(
+                    Arc::clone(&self.particles),
+                    messages::particle_poses(sample, stamp),
+                ));
+            }
+        }
+        let kidnaps = (
+            track.kidnaps.len(),
+            track.kidnaps.back().map_or(f64::NAN, |k| k.time_s),
+        );
+        let kidnaps_changed = kidnaps.0 != self.kidnaps_sent.0
+            || kidnaps.1.to_bits() != self.kidnaps_sent.1.to_bits();
+        if !track.kidnaps.is_empty() && (everything || kidnaps_changed) {
+            self.kidnaps_sent = kidnaps;
+            out.push(Outgoing::Scene(
+                Arc::clone(&self.kidnaps),
+                messages::kidnap_marks(robot, &track.kidnaps, stamp),
+            ));
         }
         let has_cones = track.beams.iter().any(|b| b.half_angle > 0.0);
         if has_cones || self.had_cones {

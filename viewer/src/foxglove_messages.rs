@@ -9,14 +9,15 @@
 
 use foxglove::bytes::Bytes;
 use foxglove::messages::{
-    Color, FrameTransform, Grid, KeyValuePair, LaserScan, PackedElementField, Point3, Pose,
-    PoseInFrame, PosesInFrame, Quaternion, SceneEntity, SceneUpdate, SpherePrimitive, Timestamp,
-    TriangleListPrimitive, Vector2, Vector3, packed_element_field::NumericType,
+    Color, FrameTransform, Grid, KeyValuePair, LaserScan, LinePrimitive, PackedElementField,
+    Point3, Pose, PoseInFrame, PosesInFrame, Quaternion, SceneEntity, SceneUpdate, SpherePrimitive,
+    TextPrimitive, Timestamp, TriangleListPrimitive, Vector2, Vector3, line_primitive,
+    packed_element_field::NumericType,
 };
 
 use deog_grid::Pose2;
 
-use crate::state::{EstimateView, MapLayer, UNKNOWN_SHADE, WorldBeam};
+use crate::state::{EstimateView, Kidnap, MapLayer, ParticleSample, UNKNOWN_SHADE, WorldBeam};
 
 /// The fixed frame every message is placed in.
 pub const MAP_FRAME: &str = "map";
@@ -406,6 +407,74 @@ pub fn covariance_ellipse(
     }
 }
 
+/// A sample of a localizer's particles as poses in the map frame.
+pub fn particle_poses(sample: &ParticleSample, timestamp: Timestamp) -> PosesInFrame {
+    PosesInFrame {
+        timestamp: Some(timestamp),
+        frame_id: MAP_FRAME.to_string(),
+        poses: sample.poses.iter().map(|p| pose3(*p)).collect(),
+    }
+}
+
+/// A robot's kidnaps, each one entity: a red line from where the robot was
+/// to where it was put, a ball at the arrival, and the time as text.
+pub fn kidnap_marks<'a>(
+    robot: &str,
+    kidnaps: impl IntoIterator<Item = &'a Kidnap>,
+    timestamp: Timestamp,
+) -> SceneUpdate {
+    let red = color(0.85, 0.1, 0.15, 0.9);
+    let point = |p: Pose2| Point3 {
+        x: p.x,
+        y: p.y,
+        z: 0.05,
+    };
+    let entities = kidnaps
+        .into_iter()
+        .enumerate()
+        .map(|(index, kidnap)| SceneEntity {
+            timestamp: Some(timestamp),
+            frame_id: MAP_FRAME.to_string(),
+            id: format!("{robot}/kidnap/{index}"),
+            metadata: vec![KeyValuePair {
+                key: "time_s".to_string(),
+                value: format!("{:.2}", kidnap.time_s),
+            }],
+            lines: vec![LinePrimitive {
+                r#type: line_primitive::Type::LineList as i32,
+                pose: Some(pose3(Pose2::default())),
+                thickness: 3.0,
+                scale_invariant: true,
+                points: vec![point(kidnap.from), point(kidnap.to)],
+                color: Some(red),
+                ..Default::default()
+            }],
+            spheres: vec![SpherePrimitive {
+                pose: Some(pose3(kidnap.to)),
+                size: Some(Vector3 {
+                    x: 0.2,
+                    y: 0.2,
+                    z: 0.2,
+                }),
+                color: Some(red),
+            }],
+            texts: vec![TextPrimitive {
+                pose: Some(pose3(kidnap.to)),
+                billboard: true,
+                font_size: 14.0,
+                scale_invariant: true,
+                color: Some(red),
+                text: format!("{robot} kidnapped at {:.1} s", kidnap.time_s),
+            }],
+            ..Default::default()
+        })
+        .collect();
+    SceneUpdate {
+        deletions: Vec::new(),
+        entities,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use std::collections::HashMap;
@@ -537,6 +606,39 @@ mod tests {
         assert!((minor - 2.0 * 0.01f64.sqrt()).abs() < 1e-12);
         assert!((heading - std::f64::consts::FRAC_PI_4).abs() < 1e-12);
         assert!(ellipse_axes(f64::NAN, 0.0, 1.0).is_none());
+    }
+
+    #[test]
+    fn particles_and_kidnaps_are_placed_in_the_map() {
+        let sample = ParticleSample {
+            map: "m".into(),
+            sequence: 3,
+            time_s: 0.3,
+            poses: vec![Pose2::new(1.0, 2.0, 0.5), Pose2::new(-1.0, 0.0, 3.0)],
+        };
+        let poses = particle_poses(&sample, Timestamp::new(1, 0));
+        assert_eq!(poses.frame_id, MAP_FRAME);
+        assert_eq!(poses.poses.len(), 2);
+        assert_eq!(poses.poses[1].position.as_ref().unwrap().x, -1.0);
+        let kidnaps = [
+            Kidnap {
+                time_s: 10.0,
+                from: Pose2::new(0.0, 0.0, 0.0),
+                to: Pose2::new(3.0, 4.0, 1.0),
+            },
+            Kidnap {
+                time_s: 20.0,
+                from: Pose2::new(3.0, 4.0, 0.0),
+                to: Pose2::new(-2.0, 1.0, 1.0),
+            },
+        ];
+        let scene = kidnap_marks("r1", &kidnaps, Timestamp::new(1, 0));
+        assert_eq!(scene.entities.len(), 2);
+        let second = &scene.entities[1];
+        assert_eq!(second.id, "r1/kidnap/1");
+        let line = &second.lines[0].points;
+        assert_eq!((line[0].x, line[1].x, line[1].y), (3.0, -2.0, 1.0));
+        assert!(second.texts[0].text.contains("20.0 s"));
     }
 
     #[test]

@@ -97,6 +97,27 @@ pub fn kidnap(name: &str, track: &RobotTrack) -> Option<Value> {
     }))
 }
 
+/// The newest sample of a robot's particles: (x, y, theta) each, to the
+/// millimetre and the milliradian.
+pub fn particles(name: &str, track: &RobotTrack) -> Option<Value> {
+    let sample = track.particles.as_ref()?;
+    let milli = |v: f64| {
+        if v.is_finite() {
+            (v * 1e3).round() / 1e3
+        } else {
+            0.0
+        }
+    };
+    Some(json!({
+        "type": "particles",
+        "robot": name,
+        "map": sample.map,
+        "sequence": sample.sequence,
+        "time_s": round(sample.time_s),
+        "poses": sample.poses.iter().map(|p| [milli(p.x), milli(p.y), milli(p.theta)]).collect::<Vec<_>>(),
+    }))
+}
+
 fn robot(name: &str, track: &RobotTrack, history: bool) -> Value {
     let mut value = json!({
         "name": name,

@@ -98,6 +98,22 @@ pub struct EstimateView {
     pub lost_score: f64,
     /// Particles in the filter.
     pub particles: u32,
+    /// A sample of those particles when the localizer sent one with this
+    /// estimate; moved into [`RobotTrack::particles`] when taken.
+    pub particle_sample: Vec<Pose2>,
+}
+
+/// The newest sample of a localizer's particles.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParticleSample {
+    /// The map they are on.
+    pub map: String,
+    /// The frame they follow.
+    pub sequence: u64,
+    /// That frame's time, seconds.
+    pub time_s: f64,
+    /// The particles.
+    pub poses: Vec<Pose2>,
 }
 
 /// How far an estimate is from the truth of the frame it follows.
@@ -148,6 +164,8 @@ pub struct RobotTrack {
     pub beams: Vec<WorldBeam>,
     /// The localizer's newest estimate.
     pub estimate: Option<EstimateView>,
+    /// The newest sample of its particles.
+    pub particles: Option<ParticleSample>,
     /// That estimate against the truth of its frame.
     pub error: Option<EstimateError>,
     /// The true path, oldest first.
@@ -198,6 +216,8 @@ pub enum Change {
     Robot(String),
     /// A robot was kidnapped.
     Kidnap(String),
+    /// A localizer sent a new sample of its particles.
+    Particles(String),
 }
 
 /// The view's state: followed maps and every robot seen.
@@ -326,7 +346,7 @@ impl ViewState {
     }
 
     /// A localizer's estimate.
-    pub fn on_estimate(&mut self, robot: &str, estimate: EstimateView) -> Option<Change> {
+    pub fn on_estimate(&mut self, robot: &str, mut estimate: EstimateView) -> Vec<Change> {
         let limits = self.limits;
         let track = self.robots.entry(robot.to_string()).or_default();
         if track
@@ -334,7 +354,17 @@ impl ViewState {
             .as_ref()
             .is_some_and(|held| held.map == estimate.map && held.sequence > estimate.sequence)
         {
-            return None;
+            return Vec::new();
+        }
+        let mut changes = vec![Change::Robot(robot.to_string())];
+        if !estimate.particle_sample.is_empty() {
+            track.particles = Some(ParticleSample {
+                map: estimate.map.clone(),
+                sequence: estimate.sequence,
+                time_s: estimate.time_s,
+                poses: std::mem::take(&mut estimate.particle_sample),
+            });
+            changes.push(Change::Particles(robot.to_string()));
         }
         track.error = track
             .true_by_sequence
@@ -355,7 +385,7 @@ impl ViewState {
             push_bounded(&mut track.estimate_path, point, limits.path_points);
         }
         track.estimate = Some(estimate);
-        Some(Change::Robot(robot.to_string()))
+        changes
     }
 }
 
@@ -551,17 +581,35 @@ mod tests {
             converged: true,
             lost_score: 0.0,
             particles: 500,
+            particle_sample: Vec::new(),
         };
-        state.on_estimate("r", estimate.clone());
+        assert_eq!(
+            state.on_estimate("r", estimate.clone()),
+            vec![Change::Robot("r".into())]
+        );
         let error = state.robots()["r"].error.unwrap();
         assert!((error.distance_m - 0.05).abs() < 1e-9, "{error:?}");
         assert!((error.heading_deg - 0.1f64.to_degrees()).abs() < 1e-9);
         // An older estimate of the same map arriving late is not shown.
         let older = EstimateView {
             sequence: 2,
+            ..estimate.clone()
+        };
+        assert_eq!(state.on_estimate("r", older), Vec::new());
+        // A sample of particles is kept apart, and said.
+        let sampled = EstimateView {
+            sequence: 5,
+            particle_sample: vec![pose(0.4, 0.0, 0.0), pose(0.5, 0.1, 0.2)],
             ..estimate
         };
-        assert_eq!(state.on_estimate("r", older), None);
+        assert_eq!(
+            state.on_estimate("r", sampled),
+            vec![Change::Robot("r".into()), Change::Particles("r".into())]
+        );
+        let track = &state.robots()["r"];
+        let held = track.particles.as_ref().unwrap();
+        assert_eq!((held.sequence, held.poses.len()), (5, 2));
+        assert!(track.estimate.as_ref().unwrap().particle_sample.is_empty());
     }
 
     #[test]

@@ -120,6 +120,7 @@ struct PageConnection {
     tiles: HashSet<TileKey>,
     robots: BTreeSet<String>,
     kidnaps: Vec<String>,
+    particles: BTreeSet<String>,
     maps_changed: bool,
     cleared: bool,
 }
@@ -134,6 +135,7 @@ impl PageConnection {
             tiles: HashSet::new(),
             robots: BTreeSet::new(),
             kidnaps: Vec::new(),
+            particles: BTreeSet::new(),
             maps_changed: false,
             cleared: false,
         }
@@ -211,6 +213,9 @@ impl PageConnection {
                 self.robots.insert(robot);
             }
             Update::State(Change::Kidnap(robot)) => self.kidnaps.push(robot),
+            Update::State(Change::Particles(robot)) => {
+                self.particles.insert(robot);
+            }
         }
     }
 
@@ -253,6 +258,7 @@ impl PageConnection {
                 self.kidnaps.clear();
                 let all = state.robots().iter().map(|(n, t)| (n.as_str(), t));
                 out.push(text(&protocol::robots(all, true)));
+                self.particles = state.robots().keys().cloned().collect();
             } else if !self.robots.is_empty() {
                 let robots = std::mem::take(&mut self.robots);
                 let changed = robots
@@ -265,6 +271,15 @@ impl PageConnection {
                     .robots()
                     .get(&robot)
                     .and_then(|t| protocol::kidnap(&robot, t))
+                {
+                    out.push(text(&message));
+                }
+            }
+            for robot in std::mem::take(&mut self.particles) {
+                if let Some(message) = state
+                    .robots()
+                    .get(&robot)
+                    .and_then(|t| protocol::particles(&robot, t))
                 {
                     out.push(text(&message));
                 }

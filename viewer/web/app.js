@@ -95,6 +95,11 @@ function onMessage(message) {
     case 'kidnap':
       onKidnap(message);
       break;
+    case 'particles': {
+      const robot = view.robots.get(message.robot);
+      if (robot) robot.particles = message;
+      break;
+    }
   }
 }
 
@@ -419,6 +424,23 @@ function drawKidnaps(robot) {
   }
 }
 
+// A sample of the localizer's particles: small dots in the robot's
+// colour, while the sample is of the shown map and at most 2 s older
+// than the estimate.
+function drawParticles(robot, color) {
+  const sample = robot.particles;
+  const e = robot.data.estimate;
+  if (!sample || !view.map || sample.map !== view.map.name) return;
+  if (e && e.time_s - sample.time_s > 2) return;
+  ctx.fillStyle = color;
+  ctx.globalAlpha = 0.55;
+  for (const [x, y] of sample.poses) {
+    const [sx, sy] = toScreen(x, y);
+    ctx.fillRect(sx - 1.5, sy - 1.5, 3, 3);
+  }
+  ctx.globalAlpha = 1;
+}
+
 // An explorer's goal: a diamond in its colour, a dashed line from the
 // robot to it.
 function drawGoal(robot, color) {
@@ -543,6 +565,7 @@ function frame(now) {
   const robots = [...view.robots.values()];
   for (const robot of robots) drawBeams(robot, colorOf(robot.name));
   for (const robot of robots) drawPaths(robot, colorOf(robot.name));
+  for (const robot of robots) drawParticles(robot, colorOf(robot.name));
   for (const robot of robots) drawKidnaps(robot);
   for (const robot of robots) drawGoal(robot, colorOf(robot.name));
   for (const robot of robots) drawRobot(robot, colorOf(robot.name), dt);
@@ -595,6 +618,7 @@ window.deogView = {
       estimate: r.data.estimate,
       error: r.data.error,
       kidnaps: r.kidnaps.length,
+      particlesShown: r.particles ? r.particles.poses.length : 0,
       truePathPoints: r.truePath.length,
       goal: r.data.goal || null,
       color: colorOf(r.name),

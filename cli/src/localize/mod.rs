@@ -175,6 +175,14 @@ pub struct LocalizeArgs {
     /// the next update slower still.
     #[arg(long, default_value_t = 1.0)]
     pub max_skip_s: f64,
+    /// Particles sent with an estimate for viewers (`deog view`, Foxglove),
+    /// drawn by weight; 0 sends none.
+    #[arg(long, default_value_t = 200)]
+    pub particle_sample: usize,
+    /// Least time between two estimates sent with particles, seconds of
+    /// the frames' time.
+    #[arg(long, default_value_t = 0.25)]
+    pub particle_sample_every_s: f64,
     #[command(flatten)]
     pub connection: ConnectionArgs,
 }
@@ -199,6 +207,16 @@ impl From<PresetChoice> for Preset {
 
 /// Runs `deog localize`.
 pub fn run(args: LocalizeArgs) -> Result<()> {
+    anyhow::ensure!(
+        args.particle_sample <= 5_000,
+        "--particle-sample is at most 5000 (the map server keeps samples small), not {}",
+        args.particle_sample
+    );
+    anyhow::ensure!(
+        args.particle_sample_every_s.is_finite() && args.particle_sample_every_s >= 0.0,
+        "--particle-sample-every-s must be a number of seconds, at least 0, not {}",
+        args.particle_sample_every_s
+    );
     let preset = Preset::from(args.preset).tuning();
     let motion_noise_scale = args.motion_noise_scale.unwrap_or(preset.motion_noise_scale);
     ensure!(
@@ -433,6 +451,8 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     );
     let keep_up = !args.every_frame && args.from == 0 && args.to == 0;
     let (mut processed, mut corrections, mut last_sequence) = (0u64, 0u64, 0u64);
+    // Frame time of the last estimate sent with particles.
+    let mut sampled_at: Option<f64> = None;
     let mut first = Some(first);
     let mut catch_up = CatchUp::new(args.max_skip_s);
     loop {
@@ -496,12 +516,21 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         }
         processed += 1;
         if let Some(estimate) = report.estimate {
+            let sample = if args.particle_sample > 0
+                && sampled_at.is_none_or(|at| frame.time_s - at >= args.particle_sample_every_s)
+            {
+                sampled_at = Some(frame.time_s);
+                localizer.mcl().sample(args.particle_sample, &odometry)
+            } else {
+                Vec::new()
+            };
             runtime
                 .block_on(client.publish_pose(estimate_message(
                     &args.robot,
                     &args.map,
                     &frame,
                     &estimate,
+                    &sample,
                 )))
                 .with_context(|| format!("publishing the estimate of frame {}", frame.sequence))?;
             log_estimate(&frame, &estimate, processed, localizer.map().bytes());

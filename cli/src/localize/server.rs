@@ -1,7 +1,7 @@
 //! The localizer's ends at the map server: the tiles it fetches and the
 //! estimates it publishes (and logs).
 
-use deog_grid::{TileKey, TileSize};
+use deog_grid::{Pose2, TileKey, TileSize};
 use deog_localizer::filter::Estimate;
 use deog_localizer::step::{FetchedTile, TileSource};
 use deog_proto::v1 as pb;
@@ -32,12 +32,14 @@ impl TileSource for ServerTiles<'_> {
     }
 }
 
-/// The wire message of the estimate made after `frame`.
+/// The wire message of the estimate made after `frame`, with `sample`, a
+/// sample of the particles (often empty).
 pub(super) fn estimate_message(
     robot: &str,
     map: &str,
     frame: &pb::SonarFrame,
     estimate: &Estimate,
+    sample: &[Pose2],
 ) -> pb::PoseEstimate {
     pb::PoseEstimate {
         robot: robot.to_string(),
@@ -49,6 +51,10 @@ pub(super) fn estimate_message(
         particle_count: estimate.particle_count as u32,
         converged: estimate.converged,
         lost_score: estimate.lost_score,
+        particle_sample: sample
+            .iter()
+            .flat_map(|p| [p.x as f32, p.y as f32, p.theta as f32])
+            .collect(),
     }
 }
 
