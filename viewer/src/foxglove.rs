@@ -3,7 +3,7 @@
 //!
 //! | topic | type | what |
 //! |---|---|---|
-//! | `/map` | `foxglove.Grid` | the shown map, at most twice a second while its tiles change |
+//! | `/map` | `foxglove.Grid` | the shown map, at most twice a second while its tiles change (all unknown once cleared) |
 //! | `/tf` | `foxglove.FrameTransforms` | `map` → `<robot>/base_link`: the true pose, else the estimate |
 //! | `/<robot>/true_pose` | `foxglove.PoseInFrame` | where the simulator says the robot is |
 //! | `/<robot>/estimate` | `foxglove.PoseInFrame` | the localizer's estimate |
@@ -289,9 +289,7 @@ impl Publisher {
             {
                 self.map_changed = false;
                 self.map_sent = Some(now);
-                if let Some(grid) = messages::occupancy_grid(layer, stamp) {
-                    out.push(Outgoing::Grid(grid));
-                }
+                out.push(Outgoing::Grid(messages::occupancy_grid(layer, stamp)));
             }
             let mut names = std::mem::take(&mut self.changed_robots);
             if all_robots {

@@ -127,16 +127,21 @@ pub fn body_transform(robot: &str, pose: Pose2, timestamp: Timestamp) -> FrameTr
 /// Each cell holds `red`, `green`, `blue`, `alpha` (a grey level: black
 /// occupied, white free, mid grey unknown) and `occupancy` (int8: -1
 /// unknown, else 0 free to 100 occupied, as ROS's occupancy grids).
-/// `None` when the map holds no tile.
-pub fn occupancy_grid(layer: &MapLayer, timestamp: Timestamp) -> Option<Grid> {
+/// A map with no tile (a new map, or one just cleared) is one tile of
+/// unknown cells at the origin, so a cleared map replaces what was shown.
+pub fn occupancy_grid(layer: &MapLayer, timestamp: Timestamp) -> Grid {
     let side = i64::from(layer.tile_size.cells());
-    let (min_x, max_x, min_y, max_y) = layer.tiles.keys().fold(None, |bounds, key| {
-        let (x, y) = (i64::from(key.x), i64::from(key.y));
-        Some(match bounds {
-            None => (x, x, y, y),
-            Some((a, b, c, d)) => (x.min(a), x.max(b), y.min(c), y.max(d)),
+    let (min_x, max_x, min_y, max_y) = layer
+        .tiles
+        .keys()
+        .fold(None, |bounds, key| {
+            let (x, y) = (i64::from(key.x), i64::from(key.y));
+            Some(match bounds {
+                None => (x, x, y, y),
+                Some((a, b, c, d)) => (x.min(a), x.max(b), y.min(c), y.max(d)),
+            })
         })
-    })?;
+        .unwrap_or((0, 0, 0, 0));
     let width = (max_x - min_x + 1) * side;
     let height = (max_y - min_y + 1) * side;
     let max_side = i64::from(MAX_GRID_SIDE);
@@ -175,7 +180,7 @@ pub fn occupancy_grid(layer: &MapLayer, timestamp: Timestamp) -> Option<Grid> {
         offset,
         r#type: kind as i32,
     };
-    Some(Grid {
+    Grid {
         timestamp: Some(timestamp),
         frame_id: MAP_FRAME.to_string(),
         pose: Some(Pose {
@@ -201,7 +206,7 @@ pub fn occupancy_grid(layer: &MapLayer, timestamp: Timestamp) -> Option<Grid> {
             field("occupancy", 4, NumericType::Int8),
         ],
         data: Bytes::from(data),
-    })
+    }
 }
 
 /// One scan per laser of a frame's beams, in the rig's order of sensors.
@@ -508,7 +513,7 @@ mod tests {
             tile_size: size,
             tiles,
         };
-        let grid = occupancy_grid(&layer, Timestamp::new(1, 0)).unwrap();
+        let grid = occupancy_grid(&layer, Timestamp::new(1, 0));
         assert_eq!(grid.column_count, 16);
         assert_eq!(grid.cell_stride, 5);
         assert_eq!(grid.row_stride, 80);
@@ -528,7 +533,12 @@ mod tests {
             tiles: HashMap::new(),
             ..layer
         };
-        assert!(occupancy_grid(&empty, Timestamp::new(1, 0)).is_none());
+        let cleared = occupancy_grid(&empty, Timestamp::new(1, 0));
+        assert_eq!(cleared.column_count, 8);
+        assert!(
+            cleared.data.chunks(5).all(|c| c[4] == 0xff),
+            "a cleared map is all unknown"
+        );
     }
 
     #[test]
@@ -544,7 +554,7 @@ mod tests {
             tile_size: size,
             tiles,
         };
-        let grid = occupancy_grid(&layer, Timestamp::new(1, 0)).unwrap();
+        let grid = occupancy_grid(&layer, Timestamp::new(1, 0));
         // 6400 cells wide: every 7 by 7 cells become one.
         assert_eq!(grid.column_count, 915);
         assert!(grid.column_count <= MAX_GRID_SIDE);
