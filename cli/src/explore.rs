@@ -117,6 +117,13 @@ const ARRIVED_BAR_REACH_M: f64 = 2.5;
 const ARRIVED_BAR_CELL_M: f64 = 0.15;
 /// Blocked this near its goal, metres, the robot counts it reached.
 const BLOCKED_REACHES_M: f64 = 1.0;
+/// Echoes within this bearing of the heading, degrees, are ahead.
+const FRONT_DEG: f64 = 15.0;
+/// Echoes from there to this bearing, degrees, are beside the path ahead...
+const BESIDE_DEG: f64 = 60.0;
+/// ...and count as this much farther, metres: they stop the robot only
+/// within the follower's stop distance less this.
+const BESIDE_ALLOWANCE_M: f64 = 0.3;
 /// Simulated seconds without nearing its goal before it is barred.
 const STALL_S: f64 = 12.0;
 /// Simulated seconds turned in place to look about when the map has
@@ -155,11 +162,22 @@ struct Planner {
     cache: TileCache,
     resolution: Resolution,
     costs: CostParams,
+    /// The costs on the map's own cells, where a narrower margin suffices.
+    fine_costs: CostParams,
     goals: GoalParams,
     follow: FollowParams,
     min_frontier_m: f64,
     /// Map cells merged into a planning cell, per side.
     coarsening: u32,
+}
+
+/// One attempt at a plan, on cells of one size.
+struct Attempt {
+    window: OccupancyWindow,
+    costs: TravelCosts,
+    chosen: Option<Goal>,
+    frontiers: usize,
+    known_nearby: bool,
 }
 
 /// What a plan starts from.
@@ -197,6 +215,12 @@ impl Planner {
             inflation_m: rig.body_radius() + 0.6,
             ..CostParams::default()
         };
+        // On the map's own (5 cm) cells the half-diagonal is smaller, so a
+        // gap 5 cm narrower still lets the robot through.
+        let fine_costs = CostParams {
+            lethal_radius_m: rig.body_radius() + 0.15 - resolution.metres(),
+            ..costs
+        };
         Ok(Self {
             robot: args.robot.clone(),
             map: map.to_string(),
@@ -204,6 +228,7 @@ impl Planner {
             cache: TileCache::new(map, tile_size),
             resolution,
             costs,
+            fine_costs,
             goals: GoalParams::default(),
             follow: follow_params(args)?,
             min_frontier_m: args.min_frontier_m,
@@ -243,39 +268,37 @@ impl Planner {
             cache: &self.cache,
             thresholds: OccupancyThresholds::default(),
         };
-        let window = OccupancyWindow::from_view(&view, region, self.resolution)?
-            .coarsened(self.coarsening)?;
-        let robot = window.resolution().cell_of(pose.x, pose.y)?;
-        let costmap = Costmap::inflate(&window, self.costs);
-        let Some(costs) = TravelCosts::from(&window, &costmap, robot) else {
-            bail!("the robot's cell lies outside its own window");
-        };
-        let known_nearby = window
-            .neighbours(window.index_of(robot).unwrap_or(0))
-            .any(|(i, _)| window.at(i) == Occupancy::Free);
-        let frontiers = find_frontiers(&window, self.min_frontier_m);
-        let chosen = choose_goal_keeping(
-            &window,
-            &frontiers,
-            &costs,
+        let fine = OccupancyWindow::from_view(&view, region, self.resolution)?;
+        let request = (pose, current, blacklist);
+        let mut attempt = self.attempt(
+            fine.coarsened(self.coarsening)?,
+            self.costs,
             &claims,
-            blacklist,
-            current,
-            &self.goals,
-        );
+            request,
+        )?;
+        // Nothing reachable on merged cells may be a gap they close: look
+        // again on the map's own cells before giving up.
+        if attempt.chosen.is_none() && self.coarsening > 1 {
+            attempt = self.attempt(fine, self.fine_costs, &claims, request)?;
+        }
         tracing::debug!(
-            cells = window.len(),
-            frontiers = frontiers.len(),
+            cells = attempt.window.len(),
+            frontiers = attempt.frontiers,
             ms = began.elapsed().as_secs_f64() * 1e3,
             "planned"
         );
+        let Attempt {
+            window,
+            costs,
+            chosen,
+            frontiers,
+            known_nearby,
+        } = attempt;
         let Some(goal) = chosen else {
             if !known_nearby {
                 return Ok(Plan::LookAbout);
             }
-            return Ok(Plan::Nothing {
-                frontiers: frontiers.len(),
-            });
+            return Ok(Plan::Nothing { frontiers });
         };
         let goal_index = window
             .index_of(goal.cell)
@@ -287,6 +310,41 @@ impl Planner {
             .map(|cell| window.centre_of(cell))
             .collect();
         Ok(Plan::Go(goal, PathFollower::new(path, self.follow)?))
+    }
+
+    /// Inflates `window` with `params` and chooses a goal on it.
+    fn attempt(
+        &self,
+        window: OccupancyWindow,
+        params: CostParams,
+        claims: &[(f64, f64)],
+        (pose, current, blacklist): (Pose2, Option<(f64, f64)>, &Blacklist),
+    ) -> Result<Attempt> {
+        let robot = window.resolution().cell_of(pose.x, pose.y)?;
+        let costmap = Costmap::inflate(&window, params);
+        let Some(costs) = TravelCosts::from(&window, &costmap, robot) else {
+            bail!("the robot's cell lies outside its own window");
+        };
+        let known_nearby = window
+            .neighbours(window.index_of(robot).unwrap_or(0))
+            .any(|(i, _)| window.at(i) == Occupancy::Free);
+        let frontiers = find_frontiers(&window, self.min_frontier_m);
+        let chosen = choose_goal_keeping(
+            &window,
+            &frontiers,
+            &costs,
+            claims,
+            blacklist,
+            current,
+            &self.goals,
+        );
+        Ok(Attempt {
+            frontiers: frontiers.len(),
+            window,
+            costs,
+            chosen,
+            known_nearby,
+        })
     }
 
     /// The goals other explorers hold on the map: active, and set within
@@ -402,9 +460,15 @@ impl Explorer {
             let y = beam.mount.y + range * beam.mount.theta.sin();
             let distance = (x.hypot(y) - self.rig.body_radius()).max(0.0);
             let bearing = normalize_angle(y.atan2(x)).to_degrees();
-            let side = if bearing.abs() <= 35.0 {
-                &mut clearance.front
-            } else if (35.0..=120.0).contains(&bearing) {
+            if bearing.abs() <= FRONT_DEG {
+                clearance.front = clearance.front.min(distance);
+            } else if bearing.abs() <= BESIDE_DEG {
+                // A cone beside the heading may have heard something off
+                // to the side (a doorway's jamb, a pillar passed between):
+                // it stops the robot only when that is close.
+                clearance.front = clearance.front.min(distance + BESIDE_ALLOWANCE_M);
+            }
+            let side = if (35.0..=120.0).contains(&bearing) {
                 &mut clearance.left
             } else if (-120.0..=-35.0).contains(&bearing) {
                 &mut clearance.right
@@ -738,6 +802,14 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
         last_goal = Some((p.goal.x, p.goal.y, p.best_distance, p.best_at_s));
         let stalled = now - p.best_at_s > STALL_S;
         let command = p.follower.command(pose, clearance);
+        tracing::trace!(
+            x = pose.x,
+            y = pose.y,
+            theta = pose.theta,
+            front = clearance.front,
+            ?command,
+            "steering"
+        );
         // Stopped by something just short of the goal is as near as the
         // robot gets: as good as there.
         let reached = command == FollowCommand::Arrived
