@@ -117,13 +117,15 @@ const ARRIVED_BAR_REACH_M: f64 = 2.5;
 const ARRIVED_BAR_CELL_M: f64 = 0.15;
 /// Blocked this near its goal, metres, the robot counts it reached.
 const BLOCKED_REACHES_M: f64 = 1.0;
-/// Echoes within this bearing of the heading, degrees, are ahead.
+/// Echoes within this bearing of the heading, degrees, are ahead...
 const FRONT_DEG: f64 = 15.0;
-/// Echoes from there to this bearing, degrees, are beside the path ahead...
+/// ...and those from there to this bearing, degrees, beside the path...
 const BESIDE_DEG: f64 = 60.0;
 /// ...and count as this much farther, metres: they stop the robot only
 /// within the follower's stop distance less this.
 const BESIDE_ALLOWANCE_M: f64 = 0.3;
+/// A tight plan's share of the cruise speed.
+const TIGHT_SPEED_SHARE: f64 = 0.5;
 /// Simulated seconds without nearing its goal before it is barred.
 const STALL_S: f64 = 12.0;
 /// Simulated seconds turned in place to look about when the map has
@@ -144,8 +146,13 @@ impl OccupancyView for CachedMap<'_> {
 
 /// What one plan found.
 enum Plan {
-    /// A goal and the way there.
-    Go(Goal, PathFollower),
+    /// A goal and the way there; `tight` when it was found only on the
+    /// map's own cells, through gaps the merged cells close.
+    Go {
+        goal: Goal,
+        follower: PathFollower,
+        tight: bool,
+    },
     /// Nothing known around the robot yet: look about first.
     LookAbout,
     /// No reachable frontier.
@@ -278,8 +285,10 @@ impl Planner {
         )?;
         // Nothing reachable on merged cells may be a gap they close: look
         // again on the map's own cells before giving up.
+        let mut tight = false;
         if attempt.chosen.is_none() && self.coarsening > 1 {
             attempt = self.attempt(fine, self.fine_costs, &claims, request)?;
+            tight = true;
         }
         tracing::debug!(
             cells = attempt.window.len(),
@@ -309,7 +318,20 @@ impl Planner {
             .into_iter()
             .map(|cell| window.centre_of(cell))
             .collect();
-        Ok(Plan::Go(goal, PathFollower::new(path, self.follow)?))
+        // Through a tight gap the robot goes slower.
+        let follow = if tight {
+            FollowParams {
+                cruise_speed: self.follow.cruise_speed * TIGHT_SPEED_SHARE,
+                ..self.follow
+            }
+        } else {
+            self.follow
+        };
+        Ok(Plan::Go {
+            goal,
+            follower: PathFollower::new(path, follow)?,
+            tight,
+        })
     }
 
     /// Inflates `window` with `params` and chooses a goal on it.
@@ -463,9 +485,9 @@ impl Explorer {
             if bearing.abs() <= FRONT_DEG {
                 clearance.front = clearance.front.min(distance);
             } else if bearing.abs() <= BESIDE_DEG {
-                // A cone beside the heading may have heard something off
-                // to the side (a doorway's jamb, a pillar passed between):
-                // it stops the robot only when that is close.
+                // A cone beside the heading may hear something off to the
+                // side (a door's jamb, a pillar passed between): it stops
+                // the robot only when that is close.
                 clearance.front = clearance.front.min(distance + BESIDE_ALLOWANCE_M);
             }
             let side = if (35.0..=120.0).contains(&bearing) {
@@ -715,7 +737,11 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
                 planning = false;
                 let (request, plan) = answer?;
                 match plan {
-                    Plan::Go(goal, follower) => {
+                    Plan::Go {
+                        goal,
+                        follower,
+                        tight,
+                    } => {
                         empty_plans = 0;
                         // The same goal as the last one, even if the pursuit
                         // was dropped in between (blocked, looking about):
@@ -734,6 +760,7 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
                                     y = goal.y,
                                     frontier_m = goal.frontier_m,
                                     travel_m = goal.travel_m,
+                                    tight,
                                     "new goal"
                                 );
                                 (distance, now)

@@ -19,18 +19,21 @@ pub struct Frontier {
     pub centroid: (f64, f64),
 }
 
-/// Cells of unknown, straight out from a frontier cell, that make it one:
-/// a wall whose inside the sensor never marked, or a sliver between two
-/// readings, is thinner than that and leads nowhere.
-pub const FRONTIER_DEPTH_CELLS: i64 = 3;
+/// Unknown space, metres, straight out from a frontier cell, that makes
+/// it one: a wall whose inside the sensor never marked, or a sliver
+/// between two readings, is thinner than that and leads nowhere.
+pub const FRONTIER_DEPTH_M: f64 = 0.3;
 
 /// Whether the cell at `index` is a frontier cell: free, with unknown
-/// space [`FRONTIER_DEPTH_CELLS`] deep straight out from one of its sides
-/// (beyond the window's edge counts as unknown).
+/// space [`FRONTIER_DEPTH_M`] deep (at least one cell) straight out from
+/// one of its sides (beyond the window's edge counts as unknown).
 pub fn is_frontier_cell(window: &OccupancyWindow, index: usize) -> bool {
     if window.at(index) != Occupancy::Free {
         return false;
     }
+    let depth = ((FRONTIER_DEPTH_M / window.resolution().metres()) - 1e-9)
+        .ceil()
+        .max(1.0) as i64;
     let (width, height) = (window.width() as i64, window.height() as i64);
     let (x, y) = ((index as i64) % width, (index as i64) / width);
     let unknown = |nx: i64, ny: i64| {
@@ -42,7 +45,7 @@ pub fn is_frontier_cell(window: &OccupancyWindow, index: usize) -> bool {
     };
     [(1, 0), (-1, 0), (0, 1), (0, -1)]
         .iter()
-        .any(|&(dx, dy)| (1..=FRONTIER_DEPTH_CELLS).all(|k| unknown(x + k * dx, y + k * dy)))
+        .any(|&(dx, dy)| (1..=depth).all(|k| unknown(x + k * dx, y + k * dy)))
 }
 
 /// The window's frontiers of at least `min_size_m`, 8-connected cells
@@ -141,6 +144,23 @@ mod tests {
         let rows = ["#######", "#..??.#", "#######"];
         let window = OccupancyWindow::from_rows(&rows, CellIndex::new(0, 0), resolution);
         assert!(find_frontiers(&window, 0.0).is_empty());
+    }
+
+    #[test]
+    fn the_unknown_depth_is_in_metres_whatever_the_cells() {
+        // Unknown 0.25 m deep on 5 cm cells (5 cells): a sliver; 0.3 m
+        // (6 cells): a frontier, as 3 cells of 10 cm are.
+        let fine = Resolution::new(0.05).unwrap();
+        let sliver = ["#########", "#..?????#", "#########"];
+        let window = OccupancyWindow::from_rows(&sliver, CellIndex::new(0, 0), fine);
+        assert!(find_frontiers(&window, 0.0).is_empty());
+        let deep = ["##########", "#..??????#", "##########"];
+        let window = OccupancyWindow::from_rows(&deep, CellIndex::new(0, 0), fine);
+        assert_eq!(find_frontiers(&window, 0.0).len(), 1);
+        let coarse = Resolution::new(0.1).unwrap();
+        let three = ["#######", "#..???#", "#######"];
+        let window = OccupancyWindow::from_rows(&three, CellIndex::new(0, 0), coarse);
+        assert_eq!(find_frontiers(&window, 0.0).len(), 1);
     }
 
     #[test]
