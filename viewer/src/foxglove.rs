@@ -11,7 +11,6 @@
 //! | `/<robot>/scan`, `/<robot>/scan_2`, … | `foxglove.LaserScan` | the newest frame's lasers, one topic each |
 //! | `/<robot>/sonar` | `foxglove.SceneUpdate` | the newest frame's sonar cones |
 //! | `/<robot>/true_path`, `/<robot>/estimate_path` | `foxglove.PosesInFrame` | the paths, once a second |
-//!
 //! | `/<robot>/particles` | `foxglove.PosesInFrame` | the newest sample of the localizer's particles (a few a second) |
 //! | `/<robot>/kidnaps` | `foxglove.SceneUpdate` | each kidnap seen: a red line from where the robot was to where it was put |
 //!
