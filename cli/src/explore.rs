@@ -24,7 +24,6 @@ use deog_explore::{
 };
 use deog_grid::{
     CellBox, CellIndex, Occupancy, OccupancyThresholds, OccupancyView, Pose2, Resolution, TileSize,
-    normalize_angle,
 };
 use deog_proto::names::check_robot_name;
 use deog_proto::v1 as pb;
@@ -117,13 +116,6 @@ const ARRIVED_BAR_REACH_M: f64 = 2.5;
 const ARRIVED_BAR_CELL_M: f64 = 0.15;
 /// Blocked this near its goal, metres, the robot counts it reached.
 const BLOCKED_REACHES_M: f64 = 1.0;
-/// Echoes within this bearing of the heading, degrees, are ahead...
-const FRONT_DEG: f64 = 15.0;
-/// ...and those from there to this bearing, degrees, beside the path...
-const BESIDE_DEG: f64 = 60.0;
-/// ...and count as this much farther, metres: they stop the robot only
-/// within the follower's stop distance less this.
-const BESIDE_ALLOWANCE_M: f64 = 0.3;
 /// A tight plan's share of the cruise speed.
 const TIGHT_SPEED_SHARE: f64 = 0.5;
 /// Simulated seconds without nearing its goal before it is barred.
@@ -469,37 +461,19 @@ impl Explorer {
 
     /// What the robot's ranges see around it, metres from its body.
     fn clearance(&self, ranges: &[f64]) -> Clearance {
-        let mut clearance = Clearance {
-            front: f64::INFINITY,
-            left: f64::INFINITY,
-            right: f64::INFINITY,
-        };
-        for (beam, &range) in self.rig.beams().iter().zip(ranges) {
-            let Some(Reading::Echo(range)) = beam.classify(range) else {
-                continue;
-            };
-            let x = beam.mount.x + range * beam.mount.theta.cos();
-            let y = beam.mount.y + range * beam.mount.theta.sin();
-            let distance = (x.hypot(y) - self.rig.body_radius()).max(0.0);
-            let bearing = normalize_angle(y.atan2(x)).to_degrees();
-            if bearing.abs() <= FRONT_DEG {
-                clearance.front = clearance.front.min(distance);
-            } else if bearing.abs() <= BESIDE_DEG {
-                // A cone beside the heading may hear something off to the
-                // side (a door's jamb, a pillar passed between): it stops
-                // the robot only when that is close.
-                clearance.front = clearance.front.min(distance + BESIDE_ALLOWANCE_M);
-            }
-            let side = if (35.0..=120.0).contains(&bearing) {
-                &mut clearance.left
-            } else if (-120.0..=-35.0).contains(&bearing) {
-                &mut clearance.right
-            } else {
-                continue;
-            };
-            *side = side.min(distance);
-        }
-        clearance
+        let echoes = self
+            .rig
+            .beams()
+            .iter()
+            .zip(ranges)
+            .filter_map(|(beam, &range)| match beam.classify(range) {
+                Some(Reading::Echo(range)) => Some((
+                    beam.mount.x + range * beam.mount.theta.cos(),
+                    beam.mount.y + range * beam.mount.theta.sin(),
+                )),
+                _ => None,
+            });
+        Clearance::of_echoes(echoes, self.rig.body_radius())
     }
 }
 

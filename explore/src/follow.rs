@@ -85,6 +85,50 @@ pub struct Clearance {
     pub right: f64,
 }
 
+/// Echoes within this bearing of the heading, degrees, are ahead...
+pub const FRONT_DEG: f64 = 15.0;
+/// ...and those from there to this bearing, degrees, beside the path...
+pub const BESIDE_DEG: f64 = 60.0;
+/// ...and count as this much farther, metres: they stop the robot only
+/// within the follower's stop distance less this.
+pub const BESIDE_ALLOWANCE_M: f64 = 0.3;
+
+impl Clearance {
+    /// What echoes at `points` (metres in the robot's frame, x ahead, y to
+    /// the left) leave around a body of `body_radius_m`: ahead the nearest
+    /// within [`FRONT_DEG`], and those up to [`BESIDE_DEG`] counted
+    /// [`BESIDE_ALLOWANCE_M`] farther; left and right the nearest between
+    /// 35° and 120° off the heading.
+    pub fn of_echoes(points: impl IntoIterator<Item = (f64, f64)>, body_radius_m: f64) -> Self {
+        let mut clearance = Clearance {
+            front: f64::INFINITY,
+            left: f64::INFINITY,
+            right: f64::INFINITY,
+        };
+        for (x, y) in points {
+            let distance = (x.hypot(y) - body_radius_m).max(0.0);
+            let bearing = normalize_angle(y.atan2(x)).to_degrees();
+            if bearing.abs() <= FRONT_DEG {
+                clearance.front = clearance.front.min(distance);
+            } else if bearing.abs() <= BESIDE_DEG {
+                // A cone beside the heading may hear something off to the
+                // side (a door's jamb, a pillar passed between): it stops
+                // the robot only when that is close.
+                clearance.front = clearance.front.min(distance + BESIDE_ALLOWANCE_M);
+            }
+            let side = if (35.0..=120.0).contains(&bearing) {
+                &mut clearance.left
+            } else if (-120.0..=-35.0).contains(&bearing) {
+                &mut clearance.right
+            } else {
+                continue;
+            };
+            *side = side.min(distance);
+        }
+        clearance
+    }
+}
+
 /// The follower's word for the next moment.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum FollowCommand {
@@ -179,6 +223,27 @@ impl PathFollower {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn echoes_beside_the_heading_count_farther_than_those_ahead() {
+        let body = 0.2;
+        // 0.5 m from the body straight ahead; 0.3 m at 40° to the left.
+        let ahead = (0.7, 0.0);
+        let beside = (
+            0.5 * 40f64.to_radians().cos(),
+            0.5 * 40f64.to_radians().sin(),
+        );
+        let c = Clearance::of_echoes([ahead, beside], body);
+        assert!((c.front - 0.5).abs() < 1e-9, "{c:?}");
+        assert!((c.left - 0.3).abs() < 1e-9, "{c:?}");
+        assert!(c.right.is_infinite());
+        // Beside alone: 0.3 m counts as 0.6 m ahead.
+        let c = Clearance::of_echoes([beside], body);
+        assert!((c.front - 0.3 - BESIDE_ALLOWANCE_M).abs() < 1e-9, "{c:?}");
+        // Behind: nothing ahead, nothing to the sides.
+        let c = Clearance::of_echoes([(-0.6, 0.0)], body);
+        assert!(c.front.is_infinite() && c.left.is_infinite() && c.right.is_infinite());
+    }
 
     const OPEN: Clearance = Clearance {
         front: 10.0,
