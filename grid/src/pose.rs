@@ -56,6 +56,18 @@ impl Pose2 {
 
 /// The angle equal to `angle` modulo 2π in (-π, π].
 pub fn normalize_angle(angle: f64) -> f64 {
+    // Most angles are already wrapped or a turn away: no division then.
+    if (-PI..=PI).contains(&angle) {
+        return if angle == -PI { PI } else { angle };
+    }
+    let once = if angle > 0.0 {
+        angle - TAU
+    } else {
+        angle + TAU
+    };
+    if once > -PI && once <= PI {
+        return once;
+    }
     let wrapped = angle.rem_euclid(TAU);
     if wrapped > PI { wrapped - TAU } else { wrapped }
 }
@@ -85,6 +97,16 @@ mod tests {
         assert_relative_eq!(normalize_angle(-PI), PI);
         assert_relative_eq!(normalize_angle(3.0 * PI / 2.0), -PI / 2.0, epsilon = 1e-12);
         assert_relative_eq!(normalize_angle(-7.0 * TAU + 0.25), 0.25, epsilon = 1e-9);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn normalize_agrees_with_the_remainder(angle in -100.0f64..100.0) {
+            let wrapped = normalize_angle(angle);
+            proptest::prop_assert!(wrapped > -PI && wrapped <= PI);
+            let turns = (angle - wrapped) / TAU;
+            proptest::prop_assert!((turns - turns.round()).abs() < 1e-9);
+        }
     }
 
     #[test]

@@ -107,6 +107,9 @@ impl BeamModelParams {
 pub struct BeamModel {
     params: BeamModelParams,
     no_echo_slot: usize,
+    /// Per predicted range slot: `1 / (1 − e^(−λz*))`, the short term's
+    /// normaliser.
+    short_norms: Vec<f64>,
     /// Per measured range in whole centimetres (and no echo, last): its
     /// table, built the first time a frame holds that range. Ranges repeat
     /// from frame to frame, so after a few frames tabulating costs nothing.
@@ -118,8 +121,15 @@ impl BeamModel {
     pub fn new(params: BeamModelParams) -> Result<Self, LocalizerError> {
         let params = params.validate()?;
         let len = table_len(params.max_range);
+        let short_norms = (0..len - 1)
+            .map(|slot| {
+                let expected = slot as f64 / 100.0;
+                1.0 / (1.0 - (-params.short_rate * expected).exp()).max(1e-12)
+            })
+            .collect();
         Ok(Self {
             no_echo_slot: len - 1,
+            short_norms,
             cache: vec![None; len],
             params,
         })
@@ -200,19 +210,61 @@ impl BeamModel {
     /// tables then fit the first-level cache. A measured range at or past
     /// the maximum is no echo; one below zero counts as zero.
     pub fn tabulate(&self, measured: f64, out: &mut Vec<i16>) {
-        let measured = (measured < self.params.max_range).then(|| measured.max(0.0));
         out.clear();
-        let fixed = |likelihood: f64| {
-            (likelihood.ln() * TABLE_SCALE)
-                .round()
-                .clamp(-f64::from(i16::MAX), f64::from(i16::MAX)) as i16
-        };
-        for slot in 0..self.no_echo_slot {
-            let predicted = slot as f64 / 100.0;
-            out.push(fixed(self.likelihood(measured, Some(predicted))));
+        if measured.is_nan() || measured >= self.params.max_range {
+            for slot in 0..self.no_echo_slot {
+                out.push(fixed(self.likelihood(None, Some(slot as f64 / 100.0))));
+            }
+            out.push(fixed(self.likelihood(None, None)));
+            return;
         }
-        out.push(fixed(self.likelihood(measured, None)));
+        // As `likelihood` term by term, with what repeats worked out once: a
+        // hit more than `HIT_REACH` spreads off adds less than the table's
+        // resolution, and below the measured range there is no short term,
+        // so most slots are the random share alone and need no logarithm.
+        const HIT_REACH: f64 = 8.0;
+        const INV_SQRT_TAU: f64 = 0.398_942_280_401_432_7;
+        let p = &self.params;
+        let z = measured.max(0.0);
+        let random = p.weight_random / p.max_range;
+        let random_only = fixed(random);
+        let short_scale = p.weight_short * p.short_rate * (-p.short_rate * z).exp();
+        for slot in 0..self.no_echo_slot {
+            let expected = slot as f64 / 100.0;
+            let sigma = p.hit_sigma_m + p.hit_sigma_per_m * expected;
+            let offset = z - expected;
+            let near = offset.abs() < HIT_REACH * sigma;
+            let short = z < expected && p.weight_short > 0.0;
+            if !near && !short {
+                out.push(random_only);
+                continue;
+            }
+            let mut likelihood = random;
+            if near {
+                let x = offset / sigma;
+                likelihood += p.weight_hit * INV_SQRT_TAU / sigma * (-0.5 * x * x).exp();
+            }
+            if short {
+                likelihood += short_scale * self.short_norms[slot];
+            }
+            out.push(fixed(likelihood));
+        }
+        out.push(fixed(self.likelihood(Some(z), None)));
     }
+}
+
+/// `ln(likelihood)` in thousandths of a nat ([`TABLE_SCALE`]), rounded half
+/// away from zero and held within `i16`.
+fn fixed(likelihood: f64) -> i16 {
+    let scaled = likelihood.ln() * TABLE_SCALE;
+    let limit = f64::from(i16::MAX);
+    if scaled.is_nan() {
+        return -i16::MAX;
+    }
+    // A conversion truncates; with a half added away from zero it rounds
+    // (no call to the library's `round`).
+    let rounded = (scaled + 0.5f64.copysign(scaled)).clamp(-limit, limit);
+    rounded as i16
 }
 
 fn gaussian_density(x: f64, sigma: f64) -> f64 {
@@ -312,6 +364,35 @@ mod tests {
         m.tabulate(20.0, &mut table);
         let best = (0..table.len()).max_by_key(|&a| table[a]).unwrap();
         assert_eq!(best, m.no_echo_slot());
+    }
+
+    #[test]
+    fn tables_match_the_likelihood_slot_by_slot() {
+        for params in [
+            BeamModelParams::default(),
+            BeamModelParams {
+                weight_short: 0.0,
+                hit_sigma_per_m: 0.0,
+                ..BeamModelParams::default()
+            },
+        ] {
+            let m = BeamModel::new(params).unwrap();
+            let mut table = Vec::new();
+            for measured in [
+                0.0, 0.004, 0.37, 1.0, 2.345, 5.5, 10.0, 10.667, 10.668, 30.0,
+            ] {
+                m.tabulate(measured, &mut table);
+                let z = (measured < params.max_range).then_some(measured);
+                for (slot, &value) in table.iter().enumerate() {
+                    let predicted = (slot < m.no_echo_slot()).then(|| slot as f64 / 100.0);
+                    let exact = m.likelihood(z, predicted).ln() * TABLE_SCALE;
+                    assert!(
+                        (f64::from(value) - exact).abs() <= 0.5 + 1e-6,
+                        "measured {measured}, slot {slot}: {value} against {exact}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

@@ -7,6 +7,8 @@ use std::hash::{BuildHasherDefault, Hasher};
 
 use deog_grid::{Pose2, normalize_angle};
 
+use crate::numeric::floor_i64;
+
 /// The size of a histogram bin.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BinSize {
@@ -79,9 +81,9 @@ impl BinSize {
         let h = self.headings();
         let t = (normalize_angle(p.theta) + std::f64::consts::PI) / std::f64::consts::TAU;
         (
-            (p.x / self.xy).floor() as i64,
-            (p.y / self.xy).floor() as i64,
-            ((t * h as f64).floor() as i64).rem_euclid(h),
+            floor_i64(p.x / self.xy),
+            floor_i64(p.y / self.xy),
+            floor_i64(t * h as f64).rem_euclid(h),
         )
     }
 
@@ -203,12 +205,18 @@ pub fn cluster_particles(particles: &[Pose2], weights: &[f64], bins: BinSize) ->
     let mut bin_ids: BinMap<Bin, usize> = BinMap::default();
     let mut particle_bin = Vec::with_capacity(particles.len());
     let mut bin_list: Vec<Bin> = Vec::new();
+    // Particles come sorted by cell, so neighbours often share a bin.
+    let mut last: Option<(Bin, usize)> = None;
     for p in particles {
         let b = bins.bin_of(p);
-        let id = *bin_ids.entry(b).or_insert_with(|| {
-            bin_list.push(b);
-            bin_list.len() - 1
-        });
+        let id = match last {
+            Some((bin, id)) if bin == b => id,
+            _ => *bin_ids.entry(b).or_insert_with(|| {
+                bin_list.push(b);
+                bin_list.len() - 1
+            }),
+        };
+        last = Some((b, id));
         particle_bin.push(id);
     }
     // Union-find over bins; a root is the smallest bin id of its cluster.

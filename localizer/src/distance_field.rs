@@ -19,6 +19,7 @@ use std::collections::HashMap;
 use deog_grid::{CellBox, CellIndex, Resolution, TileKey, TileSize};
 
 use crate::error::{LocalizerError, within};
+use crate::numeric::floor_i64;
 use crate::range_table::OccupancyRaster;
 
 /// The code of the maximum distance and beyond.
@@ -267,14 +268,6 @@ impl FieldCodes for SparseFields<'_> {
             .and_then(|f| f.get(self.cells.index(cx, cy)).copied())
             .unwrap_or(FIELD_UNKNOWN)
     }
-}
-
-/// `v.floor()` as an integer, without the library call `floor` compiles to
-/// on baseline x86-64 (no SSE4.1); saturates far outside the i64 range.
-#[inline(always)]
-fn floor_i64(v: f64) -> i64 {
-    let t = v as i64;
-    t - i64::from((t as f64) > v)
 }
 
 #[cfg(test)]

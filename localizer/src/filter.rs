@@ -55,6 +55,7 @@ use crate::cluster::{
 use crate::error::{LocalizerError, within};
 use crate::local_map::LocalMap;
 use crate::motion::{MotionNoise, OdometryMove};
+use crate::numeric::floor_i64;
 use crate::sampling::{KldSettings, systematic_resample};
 use crate::sensors::{SensorModel, SonarCone};
 
@@ -222,6 +223,8 @@ pub struct Mcl {
     w_fast: f64,
     cluster: Option<ClusterEstimate>,
     scratch_log: Vec<f64>,
+    /// The new weights as [`Self::correct`] works them out.
+    scratch_weights: Vec<f64>,
     scratch_indices: Vec<usize>,
 }
 
@@ -253,6 +256,7 @@ impl Mcl {
             w_fast: 0.0,
             cluster: None,
             scratch_log: Vec::new(),
+            scratch_weights: Vec::new(),
             scratch_indices: Vec::new(),
         })
     }
@@ -339,21 +343,21 @@ impl Mcl {
     /// particle (a new set's weights are set afterwards).
     fn sort_particles(&mut self, res: deog_grid::Resolution) {
         let inv = 1.0 / res.metres();
-        let key = |p: &Pose2| ((p.y * inv).floor() as i64, (p.x * inv).floor() as i64);
-        if self.weights.len() != self.particles.len() {
-            self.particles.sort_unstable_by_key(key);
-            return;
-        }
-        let mut pairs: Vec<(Pose2, f64)> = self
+        // Each particle's cell worked out once, not at every comparison.
+        let key = |p: &Pose2| (floor_i64(p.y * inv), floor_i64(p.x * inv));
+        let paired = self.weights.len() == self.particles.len();
+        let mut keyed: Vec<((i64, i64), Pose2, f64)> = self
             .particles
             .iter()
-            .copied()
-            .zip(self.weights.iter().copied())
+            .enumerate()
+            .map(|(i, p)| (key(p), *p, if paired { self.weights[i] } else { 0.0 }))
             .collect();
-        pairs.sort_unstable_by_key(|(p, _)| key(p));
-        for (i, (p, w)) in pairs.into_iter().enumerate() {
+        keyed.sort_unstable_by_key(|e| e.0);
+        for (i, (_, p, w)) in keyed.into_iter().enumerate() {
             self.particles[i] = p;
-            self.weights[i] = w;
+            if paired {
+                self.weights[i] = w;
+            }
         }
     }
 
@@ -450,16 +454,35 @@ impl Mcl {
         ranges: &[f64],
     ) -> Result<CorrectionReport, LocalizerError> {
         let tables_built = self.score(map, ranges)?;
-        // New weights ∝ old · likelihood, in log space.
-        let mut best = f64::NEG_INFINITY;
-        for (l, w) in self.scratch_log.iter_mut().zip(&self.weights) {
-            *l += w.ln();
-            best = best.max(*l);
-        }
+        // New weights ∝ old · likelihood, the likelihoods scaled by the
+        // best of them so that the exponentials stay in range: one
+        // exponential per particle and no logarithm.
+        let mut best = self
+            .scratch_log
+            .iter()
+            .fold(f64::NEG_INFINITY, |a, &l| a.max(l));
         let mut total = 0.0;
-        for (w, l) in self.weights.iter_mut().zip(&self.scratch_log) {
-            *w = (l - best).exp();
-            total += *w;
+        self.scratch_weights.clear();
+        for (l, w) in self.scratch_log.iter().zip(&self.weights) {
+            let product = w * (l - best).exp();
+            total += product;
+            self.scratch_weights.push(product);
+        }
+        if total > f64::MIN_POSITIVE {
+            std::mem::swap(&mut self.weights, &mut self.scratch_weights);
+        } else {
+            // Every product underflowed (the best fits sat on particles of
+            // next to no weight): again, wholly in log space.
+            best = f64::NEG_INFINITY;
+            for (l, w) in self.scratch_log.iter_mut().zip(&self.weights) {
+                *l += w.ln();
+                best = best.max(*l);
+            }
+            total = 0.0;
+            for (w, l) in self.weights.iter_mut().zip(&self.scratch_log) {
+                *w = (l - best).exp();
+                total += *w;
+            }
         }
         for w in &mut self.weights {
             *w /= total;
@@ -655,10 +678,7 @@ impl Mcl {
                 }
                 pose
             } else {
-                let j = self.rng.random_range(taken..pool);
-                self.scratch_indices.swap(taken, j);
-                taken += 1;
-                let i = self.scratch_indices[taken - 1];
+                let i = self.next_draw(&mut taken, pool);
                 let c = clusters.of[i];
                 drawn[c as usize] += 1;
                 source.push(c);
@@ -669,8 +689,19 @@ impl Mcl {
             }
             next.push(pose);
         }
-        let draws = next.len();
+        let mut draws = next.len();
         self.top_up_clusters(clusters, &mut drawn, &mut next, &mut source)?;
+        // The room kept for top-ups they did not need goes back to the
+        // draw, so that the set never holds fewer than the fewest allowed
+        // (with fewest = most, a fixed count is that count).
+        while next.len() < kld.min_particles && taken < pool {
+            let i = self.next_draw(&mut taken, pool);
+            let c = clusters.of[i];
+            drawn[c as usize] += 1;
+            source.push(c);
+            next.push(self.particles[i]);
+            draws += 1;
+        }
         // Each cluster drawn from keeps its share of the old set's weight,
         // over the clusters drawn from; injected particles get the share
         // of the draws they took.
@@ -704,6 +735,15 @@ impl Mcl {
             self.w_fast = self.w_slow;
         }
         Ok(injected)
+    }
+
+    /// The old particle of the next draw: a random one of the systematic
+    /// sample's `pool` indices not yet taken (`taken` of them are).
+    fn next_draw(&mut self, taken: &mut usize, pool: usize) -> usize {
+        let j = self.rng.random_range(*taken..pool);
+        self.scratch_indices.swap(*taken, j);
+        *taken += 1;
+        self.scratch_indices[*taken - 1]
     }
 
     /// Draws more particles for each cluster of the old set that holds at

@@ -1,18 +1,13 @@
 //! Normal samples and quantiles, without a statistics crate.
 
 use rand::Rng;
+use rand_distr::{Distribution, StandardNormal};
 
-/// One sample of N(0, 1) (Marsaglia's polar method; the second value of
-/// each pair is dropped, which keeps the sampler stateless).
+/// One sample of N(0, 1) (the ziggurat method: most draws cost one random
+/// number and a table lookup, where a polar or Box-Muller draw needs a
+/// logarithm and a square root; the motion model draws three per particle).
 pub fn standard_normal(rng: &mut impl Rng) -> f64 {
-    loop {
-        let u: f64 = rng.random_range(-1.0..1.0);
-        let v: f64 = rng.random_range(-1.0..1.0);
-        let s = u * u + v * v;
-        if s > 0.0 && s < 1.0 {
-            return u * (-2.0 * s.ln() / s).sqrt();
-        }
-    }
+    StandardNormal.sample(rng)
 }
 
 /// One sample of N(0, std²); `std` of 0 gives 0.

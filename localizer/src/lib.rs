@@ -29,7 +29,8 @@
 //! - [`beam_model`]: the likelihood of a measured range given the
 //!   expected one.
 //! - [`sampling`], [`cluster`], [`gaussian`]: resampling and the KLD
-//!   bound, particle clusters and the estimate, normal draws.
+//!   bound, particle clusters and the estimate, normal draws;
+//!   [`numeric`]: small helpers for the hot loops.
 //!
 //! How well it localizes is judged in `deog-evaluation`.
 
@@ -41,6 +42,7 @@ pub mod filter;
 pub mod gaussian;
 pub mod local_map;
 pub mod motion;
+pub mod numeric;
 pub mod preset;
 pub mod range_table;
 pub mod refine;

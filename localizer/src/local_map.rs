@@ -37,6 +37,7 @@ use rand::Rng;
 
 use crate::distance_field::{DistanceField, FieldSpec, FieldWindow};
 use crate::error::LocalizerError;
+use crate::numeric::floor_i64;
 use crate::range_table::{ConeGeometry, NO_ECHO, OccupancyRaster, RangeTable, fill_table};
 
 const UNKNOWN: u8 = 0;
@@ -537,7 +538,7 @@ impl LocalMap {
             headings: self.settings.geometry.headings,
             stride: self.settings.geometry.stride(),
             inv_res: 1.0 / self.settings.resolution.metres(),
-            res: self.settings.resolution.metres(),
+            res_cm: self.settings.resolution.metres() * 100.0,
         }
     }
 
@@ -1114,7 +1115,8 @@ pub struct RangeWindow<'a> {
     headings: usize,
     stride: usize,
     inv_res: f64,
-    res: f64,
+    /// A cell's side, centimetres.
+    res_cm: f64,
 }
 
 impl RangeWindow<'_> {
@@ -1168,7 +1170,8 @@ impl RangeWindow<'_> {
         (cos, sin): (f64, f64),
         no_echo_slot: usize,
     ) -> usize {
-        let (cx, cy) = (floor_i64(x * self.inv_res), floor_i64(y * self.inv_res));
+        let (fx, fy) = (x * self.inv_res, y * self.inv_res);
+        let (cx, cy) = (floor_i64(fx), floor_i64(fy));
         let tx = (cx >> self.shift) - i64::from(self.min.x);
         let ty = (cy >> self.shift) - i64::from(self.min.y);
         if tx < 0 || ty < 0 || tx as usize >= self.width || ty as usize >= self.height {
@@ -1178,10 +1181,11 @@ impl RangeWindow<'_> {
             return 0;
         };
         let index = (((cy & self.mask) << self.shift) + (cx & self.mask)) as usize;
-        let lower = (position as usize).min(self.headings - 1);
+        // A signed conversion: one instruction, where an unsigned one is several.
+        let lower = (position as i32).clamp(0, self.headings as i32 - 1) as usize;
         let frac = position - lower as f64;
         let at = index * self.stride + lower;
-        let (Some(&a), Some(&b)) = (table.get(at), table.get(at + 1)) else {
+        let Some(&[a, b]) = table.get(at..at + 2) else {
             return 0;
         };
         let millimetres = if a.min(b) == 0 {
@@ -1197,19 +1201,10 @@ impl RangeWindow<'_> {
             f64::from(a) + (f64::from(b) - f64::from(a)) * frac
         };
         // The table is for the cell's centre; move to the sensor.
-        let off_x = x - (cx as f64 + 0.5) * self.res;
-        let off_y = y - (cy as f64 + 0.5) * self.res;
-        let centimetres = millimetres * 0.1 - (off_x * cos + off_y * sin) * 100.0;
-        // Rounded by truncating after adding a half; a negative range
-        // saturates to 0 in the conversion.
-        ((centimetres + 0.5) as usize).min(no_echo_slot - 1)
+        let off_x = fx - (cx as f64 + 0.5);
+        let off_y = fy - (cy as f64 + 0.5);
+        let centimetres = millimetres * 0.1 - (off_x * cos + off_y * sin) * self.res_cm;
+        // Rounded by truncating after adding a half, then held in range.
+        ((centimetres + 0.5) as i32).clamp(0, no_echo_slot as i32 - 1) as usize
     }
-}
-
-/// `v.floor()` as an integer, without the library call `floor` compiles to
-/// on baseline x86-64 (no SSE4.1); saturates far outside the i64 range.
-#[inline]
-fn floor_i64(v: f64) -> i64 {
-    let t = v as i64;
-    t - i64::from((t as f64) > v)
 }

@@ -46,6 +46,7 @@ use crate::beam_model::TABLE_SCALE;
 use crate::distance_field::{FIELD_UNKNOWN, FieldCodes, FieldSpec, FieldWindow};
 use crate::error::{LocalizerError, within};
 use crate::local_map::LocalMap;
+use crate::numeric::floor_i64;
 use crate::refine::{InterpolatedField, RefineParams, refine_pose};
 use crate::sensors::SensorModel;
 
@@ -662,12 +663,4 @@ impl TileCounts {
             Self::Map(map) => map.into_iter().map(|(t, n)| (key(t), n)).collect(),
         }
     }
-}
-
-/// `v.floor()` as an integer, without the library call `floor` compiles to
-/// on baseline x86-64 (no SSE4.1); saturates far outside the i64 range.
-#[inline(always)]
-fn floor_i64(v: f64) -> i64 {
-    let t = v as i64;
-    t - i64::from((t as f64) > v)
 }

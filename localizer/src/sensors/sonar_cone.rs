@@ -103,19 +103,29 @@ impl SensorModel for SonarCone {
             .collect();
         let to_nats = self.model.params().tempering / TABLE_SCALE;
         let tables = beam_tables(&self.model, &self.beam_slots)?;
+        let beams = mounts.len();
+        let mut sensors = vec![[0.0f64; 5]; beams];
         for p in particles {
             let (sin, cos) = p.theta.sin_cos();
             let base = window.heading_position(p.theta);
+            // Where each sonar sits and points, in one pass the compiler can
+            // keep in registers, before the table reads.
+            for (sensor, &(mx, my, mc, ms, mp)) in sensors.iter_mut().zip(&mounts) {
+                let position = base + mp;
+                *sensor = [
+                    p.x + cos * mx - sin * my,
+                    p.y + sin * mx + cos * my,
+                    cos * mc - sin * ms,
+                    sin * mc + cos * ms,
+                    if position >= headings {
+                        position - headings
+                    } else {
+                        position
+                    },
+                ];
+            }
             let mut log_likelihood = 0i32;
-            for (&(mx, my, mc, ms, mp), table) in mounts.iter().zip(&tables) {
-                let sx = p.x + cos * mx - sin * my;
-                let sy = p.y + sin * mx + cos * my;
-                let beam_cos = cos * mc - sin * ms;
-                let beam_sin = sin * mc + cos * ms;
-                let mut position = base + mp;
-                if position >= headings {
-                    position -= headings;
-                }
+            for (&[sx, sy, beam_cos, beam_sin, position], table) in sensors.iter().zip(&tables) {
                 let slot = window.expected_slot_at(sx, sy, position, (beam_cos, beam_sin), no_echo);
                 log_likelihood += i32::from(table[slot]);
             }
