@@ -63,13 +63,18 @@ impl Hasher for BinHasher {
     fn write_u32(&mut self, word: u32) {
         self.write_u64(u64::from(word));
     }
+
+    #[inline]
+    fn write_i32(&mut self, word: i32) {
+        self.write_u64(word as u64);
+    }
 }
 
 /// A map keyed by bins (or other small integers) with [`BinHasher`].
 pub type BinMap<K, V> = HashMap<K, V, BuildHasherDefault<BinHasher>>;
 
-/// A set of bins with [`BinHasher`].
-pub type BinSet = HashSet<Bin, BuildHasherDefault<BinHasher>>;
+/// A set of bins (or other small integers) with [`BinHasher`].
+pub type BinSet<K = Bin> = HashSet<K, BuildHasherDefault<BinHasher>>;
 
 impl BinSize {
     fn headings(&self) -> i64 {

@@ -775,13 +775,27 @@ impl Mcl {
                 .total_cmp(&clusters.weights[*a])
                 .then(a.cmp(b))
         });
-        let mut members: BinMap<u32, Vec<usize>> =
-            short.iter().map(|&c| (c as u32, Vec::new())).collect();
+        let heaviest = clusters.heaviest().unwrap_or(0) as u32;
+        let mut members: BinMap<u32, Vec<usize>> = short
+            .iter()
+            .map(|&c| (c as u32, Vec::new()))
+            .chain([(heaviest, Vec::new())])
+            .collect();
         for (i, c) in clusters.of.iter().enumerate() {
             if let Some(m) = members.get_mut(c) {
                 m.push(i);
             }
         }
+        // Once settled, light clusters are moved by a kernel the size of
+        // the heaviest one's spread: the shape a mode of this filter takes,
+        // which the few copies of a light mode cannot show. (A filter still
+        // searching keeps its modes as they are: its heaviest cluster may
+        // be spread over metres.)
+        let spread = if self.settled() {
+            kernel_spread(&self.particles, &self.weights, &members[&heaviest], least)
+        } else {
+            [0.0; 3]
+        };
         let mut weights = Vec::new();
         let mut picks = Vec::new();
         // A settled filter's top-ups at most double the draws: particles
@@ -806,7 +820,17 @@ impl Mcl {
             weights.extend(m.iter().map(|&i| self.weights[i]));
             systematic_resample(&weights, need, &mut self.rng, &mut picks)?;
             for &j in &picks {
-                next.push(self.particles[m[j]]);
+                let p = self.particles[m[j]];
+                if spread == [0.0; 3] {
+                    next.push(p);
+                    source.push(c as u32);
+                    continue;
+                }
+                next.push(Pose2::new(
+                    p.x + crate::gaussian::normal(&mut self.rng, spread[0]),
+                    p.y + crate::gaussian::normal(&mut self.rng, spread[1]),
+                    normalize_angle(p.theta + crate::gaussian::normal(&mut self.rng, spread[2])),
+                ));
                 source.push(c as u32);
             }
             drawn[c] += need;
@@ -879,6 +903,47 @@ impl Mcl {
         }
         sample
     }
+}
+
+/// The spread of the kernel a topped-up cluster's draws are moved by: the
+/// weighted spread per axis (x, y, heading) of the particles `members`
+/// times the bandwidth of a regularized particle filter for `draws`
+/// particles in three dimensions (Musso, Oudjane and Le Gland, 2001). A
+/// light cluster is drawn from a few of its own particles at every
+/// resampling, and without it those few copies would stay where they first
+/// landed: a mode a few centimetres off its peak scores below one on it,
+/// and the true mode of a symmetric room loses to its image.
+fn kernel_spread(
+    particles: &[Pose2],
+    weights: &[f64],
+    members: &[usize],
+    draws: usize,
+) -> [f64; 3] {
+    const DIMENSIONS: f64 = 3.0;
+    let bandwidth =
+        (4.0 / (draws.max(1) as f64 * (DIMENSIONS + 2.0))).powf(1.0 / (DIMENSIONS + 4.0));
+    let (mut sw, mut sx, mut sy) = (0.0, 0.0, 0.0);
+    let (mut sc, mut ss) = (0.0, 0.0);
+    for &i in members {
+        let (p, w) = (particles[i], weights[i]);
+        sw += w;
+        sx += w * p.x;
+        sy += w * p.y;
+        sc += w * p.theta.cos();
+        ss += w * p.theta.sin();
+    }
+    if !(sw > 0.0) {
+        return [0.0; 3];
+    }
+    let (mx, my, mt) = (sx / sw, sy / sw, ss.atan2(sc));
+    let mut var = [0.0; 3];
+    for &i in members {
+        let (p, w) = (particles[i], weights[i]);
+        var[0] += w * (p.x - mx).powi(2);
+        var[1] += w * (p.y - my).powi(2);
+        var[2] += w * normalize_angle(p.theta - mt).powi(2);
+    }
+    var.map(|v| bandwidth * (v / sw).sqrt())
 }
 
 /// A pose uniformly inside `cell`, any heading.

@@ -2,11 +2,11 @@
 //! looked up where the sensor sits (the sonar's range tables) needs for a
 //! frame, whatever the frame reads.
 
-use std::collections::{HashMap, HashSet};
-
 use deog_grid::{Pose2, TileKey};
 
+use crate::cluster::{BinMap, BinSet};
 use crate::local_map::LocalMap;
+use crate::numeric::floor_i64;
 
 /// Up to this many tiles, a correction reads every tile of the particles'
 /// bounding box rather than finding the tiles under each particle. A
@@ -47,29 +47,35 @@ pub fn tiles_within_reach(
                 .collect();
         }
     }
-    // Spread particles: only the tiles under them.
-    let mut keys = HashSet::new();
+    // Spread particles: only the tiles under them, found as the range
+    // window finds a sensor's tile (its cell by one multiply, the tile by a
+    // shift): the same tile at a cell's edge, and no division per corner.
+    let inv_res = 1.0 / res.metres();
+    let shift = map.settings().tile_size.cells().trailing_zeros();
+    let tile_at = |(x, y): (f64, f64)| -> Option<TileKey> {
+        let (cx, cy) = (floor_i64(x * inv_res), floor_i64(y * inv_res));
+        Some(TileKey::new(
+            i32::try_from(cx >> shift).ok()?,
+            i32::try_from(cy >> shift).ok()?,
+        ))
+    };
+    let mut keys: BinSet<TileKey> = BinSet::default();
     let mut last = None;
     for p in particles {
-        for (x, y) in reach_corners(p, reach) {
-            if let Ok(cell) = res.cell_of(x, y) {
-                let key = map.tile_of(cell);
-                if last != Some(key) {
-                    keys.insert(key);
-                    last = Some(key);
-                }
+        for key in reach_corners(p, reach).into_iter().filter_map(tile_at) {
+            if last != Some(key) {
+                keys.insert(key);
+                last = Some(key);
             }
         }
     }
     if keys.len() > capacity {
         // More tables than the cache holds: those under the most
         // particles' sonars.
-        let mut uses: HashMap<TileKey, usize> = HashMap::with_capacity(keys.len());
+        let mut uses: BinMap<TileKey, usize> = BinMap::default();
         for p in particles {
-            for (x, y) in reach_corners(p, reach) {
-                if let Ok(cell) = res.cell_of(x, y) {
-                    *uses.entry(map.tile_of(cell)).or_default() += 1;
-                }
+            for key in reach_corners(p, reach).into_iter().filter_map(tile_at) {
+                *uses.entry(key).or_default() += 1;
             }
         }
         let mut ranked: Vec<(usize, TileKey)> = uses.into_iter().map(|(k, n)| (n, k)).collect();
