@@ -932,7 +932,7 @@ fn kernel_spread(
         sc += w * p.theta.cos();
         ss += w * p.theta.sin();
     }
-    if !(sw > 0.0) {
+    if sw.is_nan() || sw <= 0.0 {
         return [0.0; 3];
     }
     let (mx, my, mt) = (sx / sw, sy / sw, ss.atan2(sc));
