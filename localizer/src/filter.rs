@@ -1064,6 +1064,65 @@ mod tests {
         assert!(best.weight > 0.9, "{best:?}");
     }
 
+    #[test]
+    fn a_fixed_count_is_that_count_after_resampling() {
+        let map = empty_map();
+        let mut mcl = two_modes(40, 0.002);
+        mcl.settings.kld.min_particles = 500;
+        mcl.settings.kld.max_particles = 500;
+        for _ in 0..5 {
+            resample_once(&mut mcl, &map);
+            assert_eq!(mcl.particles.len(), 500);
+        }
+    }
+
+    #[test]
+    fn a_settled_filters_light_mode_is_spread_like_the_heavy_one() {
+        let map = empty_map();
+        // Forty copies of one pose: a light mode drawn from a single
+        // particle, as a mode that lost most of its particles is.
+        let mut mcl = two_modes(40, 0.002);
+        for p in mcl.particles.iter_mut().take(40) {
+            *p = Pose2::new(2.0, 2.0, 0.0);
+        }
+        let clusters = cluster_particles(&mcl.particles, &mcl.weights, mcl.settings.bins).unwrap();
+        mcl.cluster = clusters
+            .heaviest()
+            .map(|c| clusters.summarize(&mcl.particles, &mcl.weights, c));
+        assert!(mcl.settled());
+        mcl.resample(&map, 0.0, &clusters).unwrap();
+        let light: Vec<&Pose2> = mcl.particles.iter().filter(|p| p.x < 4.5).collect();
+        let distinct = light.iter().filter(|p| p.x != 2.0 || p.y != 2.0).count();
+        assert!(
+            distinct > light.len() / 2,
+            "{distinct} of {} moved",
+            light.len()
+        );
+        // The heavy mode spreads ±5 cm (σ ≈ 2.9 cm); the kernel is that
+        // times the bandwidth for 300 draws (0.43): about 1.2 cm.
+        let std_x =
+            (light.iter().map(|p| (p.x - 2.0).powi(2)).sum::<f64>() / light.len() as f64).sqrt();
+        assert!((0.006..0.025).contains(&std_x), "σx {std_x}");
+    }
+
+    #[test]
+    fn the_kernel_is_the_members_spread_times_the_bandwidth() {
+        let particles: Vec<Pose2> = [-0.1, 0.1]
+            .iter()
+            .map(|&d| Pose2::new(1.0 + d, 2.0 - d, d))
+            .collect();
+        let spread = kernel_spread(&particles, &[0.5, 0.5], &[0, 1], 300);
+        let bandwidth = (4.0f64 / 1500.0).powf(1.0 / 7.0);
+        assert_abs_diff_eq!(bandwidth, 0.429, epsilon = 1e-3);
+        for s in spread {
+            assert_abs_diff_eq!(s, 0.1 * bandwidth, epsilon = 1e-12);
+        }
+        assert_eq!(
+            kernel_spread(&particles, &[0.0, 0.0], &[0, 1], 300),
+            [0.0; 3]
+        );
+    }
+
     /// An empty map but for one tile of free space to inject into.
     fn map_with_free_tile() -> LocalMap {
         let mut map = empty_map();
