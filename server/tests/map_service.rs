@@ -519,11 +519,15 @@ async fn a_slow_watcher_gets_one_resync_instead_of_an_unbounded_queue() {
         .collect();
     let (acks, _) = send_batches(&mut client, batches).await;
     assert_eq!(acks.len(), 400);
-    // Then it reads: a bounded number of changes, then a resync.
+    // Then it reads: a bounded number of changes, then a resync. On a
+    // shared database the store's change listener may also ask watchers to
+    // resync (its own queue of notifications can fall behind 400 quick
+    // writes); those say so and are not the one this test is after.
     let mut changes_before_resync = 0;
     let resync = loop {
         match next_event(&mut watch).await {
             pb::tile_event::Event::Changed(_) => changes_before_resync += 1,
+            pb::tile_event::Event::Resync(r) if r.reason.contains("another map server") => {}
             pb::tile_event::Event::Resync(r) => break r,
             other => panic!("unexpected {other:?}"),
         }
@@ -535,8 +539,9 @@ async fn a_slow_watcher_gets_one_resync_instead_of_an_unbounded_queue() {
     // The version when events were dropped: the watcher re-reads from there.
     assert!(
         (1..=400).contains(&resync.map_version),
-        "{}",
-        resync.map_version
+        "{} ({})",
+        resync.map_version,
+        resync.reason
     );
     // After the resync, live events flow again.
     send_batches(
