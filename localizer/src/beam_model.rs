@@ -223,7 +223,6 @@ impl BeamModel {
         // resolution, and below the measured range there is no short term,
         // so most slots are the random share alone and need no logarithm.
         const HIT_REACH: f64 = 8.0;
-        const INV_SQRT_TAU: f64 = 0.398_942_280_401_432_7;
         let p = &self.params;
         let z = measured.max(0.0);
         let random = p.weight_random / p.max_range;
@@ -241,8 +240,7 @@ impl BeamModel {
             }
             let mut likelihood = random;
             if near {
-                let x = offset / sigma;
-                likelihood += p.weight_hit * INV_SQRT_TAU / sigma * (-0.5 * x * x).exp();
+                likelihood += p.weight_hit * gaussian_density(offset, sigma);
             }
             if short {
                 likelihood += short_scale * self.short_norms[slot];
@@ -258,9 +256,6 @@ impl BeamModel {
 fn fixed(likelihood: f64) -> i16 {
     let scaled = likelihood.ln() * TABLE_SCALE;
     let limit = f64::from(i16::MAX);
-    if scaled.is_nan() {
-        return -i16::MAX;
-    }
     // A conversion truncates; with a half added away from zero it rounds
     // (no call to the library's `round`).
     let rounded = (scaled + 0.5f64.copysign(scaled)).clamp(-limit, limit);

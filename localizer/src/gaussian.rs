@@ -1,4 +1,4 @@
-//! Normal samples and quantiles, without a statistics crate.
+//! Normal samples (`rand_distr`'s ziggurat) and the normal quantile.
 
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
