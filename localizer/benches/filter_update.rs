@@ -148,6 +148,17 @@ fn beam_evaluations(c: &mut Criterion) {
             })
         });
     }
+    // Global localization's usual size, the particles spread over the
+    // whole room: the case where the order of the reads matters most.
+    let n = 100_000;
+    let mut mcl = filter_with(&mut map, n, false);
+    group.throughput(Throughput::Elements(n as u64 * 16));
+    group.bench_with_input(BenchmarkId::new("tables_global", n), &n, |b, _| {
+        b.iter(|| {
+            mcl.score(&mut map, black_box(&ranges)).unwrap();
+            black_box(mcl.scores()[0])
+        })
+    });
     group.finish();
 }
 

@@ -167,8 +167,9 @@ impl Clusters {
                 sw += w;
                 sx += w * p.x;
                 sy += w * p.y;
-                sc += w * p.theta.cos();
-                ss += w * p.theta.sin();
+                let (sin, cos) = p.theta.sin_cos();
+                sc += w * cos;
+                ss += w * sin;
             }
         }
         let mean = Pose2::new(sx / sw, sy / sw, ss.atan2(sc));
@@ -210,7 +211,8 @@ pub fn cluster_particles(particles: &[Pose2], weights: &[f64], bins: BinSize) ->
     let mut bin_ids: BinMap<Bin, usize> = BinMap::default();
     let mut particle_bin = Vec::with_capacity(particles.len());
     let mut bin_list: Vec<Bin> = Vec::new();
-    // Particles come sorted by cell, so neighbours often share a bin.
+    // Particles come sorted by place and heading, so neighbours often
+    // share a bin.
     let mut last: Option<(Bin, usize)> = None;
     for p in particles {
         let b = bins.bin_of(p);
@@ -234,17 +236,19 @@ pub fn cluster_particles(particles: &[Pose2], weights: &[f64], bins: BinSize) ->
         i
     }
     let h = bins.headings();
+    // Each pair of touching bins is joined from one side: the 13 offsets
+    // after (0, 0, 0) in their order, whose opposites are the other 13.
+    let forward = (-1..=1)
+        .flat_map(|dx| (-1..=1).flat_map(move |dy| (-1..=1).map(move |dt| (dx, dy, dt))))
+        .filter(|&d| d > (0, 0, 0));
+    let forward: Vec<(i64, i64, i64)> = forward.collect();
     for (id, &(bx, by, bt)) in bin_list.iter().enumerate() {
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                for dt in -1..=1 {
-                    let n = (bx + dx, by + dy, (bt + dt).rem_euclid(h));
-                    if let Some(&other) = bin_ids.get(&n) {
-                        let (a, b) = (root(&mut parent, id), root(&mut parent, other));
-                        if a != b {
-                            parent[a.max(b)] = a.min(b);
-                        }
-                    }
+        for &(dx, dy, dt) in &forward {
+            let n = (bx + dx, by + dy, (bt + dt).rem_euclid(h));
+            if let Some(&other) = bin_ids.get(&n) {
+                let (a, b) = (root(&mut parent, id), root(&mut parent, other));
+                if a != b {
+                    parent[a.max(b)] = a.min(b);
                 }
             }
         }
@@ -320,6 +324,54 @@ mod tests {
         assert_abs_diff_eq!(e.covariance[0], var, epsilon = 1e-12);
         assert_abs_diff_eq!(e.covariance[1], -var, epsilon = 1e-12);
         assert_abs_diff_eq!(e.covariance[8], var, epsilon = 1e-12);
+    }
+
+    proptest::proptest! {
+        /// Two particles share a cluster exactly when a chain of touching
+        /// bins (every axis within one, headings round the turn) joins
+        /// theirs: checked against a search over every pair of bins.
+        #[test]
+        fn clusters_are_the_chains_of_touching_bins(
+            poses in proptest::collection::vec(
+                (-1.5f64..1.5, -1.5f64..1.5, -3.2f64..3.2), 1..40),
+        ) {
+            let bins = BinSize::default();
+            let particles: Vec<Pose2> =
+                poses.iter().map(|&(x, y, t)| Pose2::new(x, y, t)).collect();
+            let weights = vec![1.0; particles.len()];
+            let clusters = cluster_particles(&particles, &weights, bins).unwrap();
+            let of: Vec<Bin> = particles.iter().map(|p| bins.bin_of(p)).collect();
+            let h = bins.headings();
+            let touch = |a: Bin, b: Bin| {
+                let dt = (a.2 - b.2).rem_euclid(h);
+                (a.0 - b.0).abs() <= 1 && (a.1 - b.1).abs() <= 1 && (dt <= 1 || dt == h - 1)
+            };
+            // Components by flooding from each particle's bin.
+            let mut component = vec![usize::MAX; particles.len()];
+            for start in 0..particles.len() {
+                if component[start] != usize::MAX {
+                    continue;
+                }
+                component[start] = start;
+                let mut frontier = vec![start];
+                while let Some(i) = frontier.pop() {
+                    for j in 0..particles.len() {
+                        if component[j] == usize::MAX && touch(of[i], of[j]) {
+                            component[j] = start;
+                            frontier.push(j);
+                        }
+                    }
+                }
+            }
+            for i in 0..particles.len() {
+                for j in 0..particles.len() {
+                    proptest::prop_assert_eq!(
+                        component[i] == component[j],
+                        clusters.of[i] == clusters.of[j]
+                    );
+                }
+            }
+        }
     }
 
     #[test]

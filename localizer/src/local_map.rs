@@ -37,7 +37,7 @@ use rand::Rng;
 
 use crate::distance_field::{DistanceField, FieldSpec, FieldWindow};
 use crate::error::LocalizerError;
-use crate::numeric::floor_i64;
+use crate::numeric::{cell_i32, round_i32};
 use crate::range_table::{ConeGeometry, NO_ECHO, OccupancyRaster, RangeTable, fill_table};
 
 const UNKNOWN: u8 = 0;
@@ -530,11 +530,11 @@ impl LocalMap {
         let side = self.settings.tile_size.cells();
         RangeWindow {
             min,
-            width,
-            height,
+            width: width as u32,
+            height: height as u32,
             tables,
             shift: side.trailing_zeros(),
-            mask: side as i64 - 1,
+            mask: side as i32 - 1,
             headings: self.settings.geometry.headings,
             stride: self.settings.geometry.stride(),
             inv_res: 1.0 / self.settings.resolution.metres(),
@@ -1107,11 +1107,11 @@ fn widen(b: CellBox, by: i32) -> CellBox {
 #[derive(Debug)]
 pub struct RangeWindow<'a> {
     min: TileKey,
-    width: usize,
-    height: usize,
+    width: u32,
+    height: u32,
     tables: Vec<Option<&'a [u16]>>,
     shift: u32,
-    mask: i64,
+    mask: i32,
     headings: usize,
     stride: usize,
     inv_res: f64,
@@ -1171,20 +1171,24 @@ impl RangeWindow<'_> {
         no_echo_slot: usize,
     ) -> usize {
         let (fx, fy) = (x * self.inv_res, y * self.inv_res);
-        let (cx, cy) = (floor_i64(fx), floor_i64(fy));
-        let tx = (cx >> self.shift) - i64::from(self.min.x);
-        let ty = (cy >> self.shift) - i64::from(self.min.y);
-        if tx < 0 || ty < 0 || tx as usize >= self.width || ty as usize >= self.height {
+        // Rounded by the float unit: either cell of a point on their edge
+        // does, since the offset below is taken from the cell chosen.
+        let (cx, cy) = (cell_i32(fx), cell_i32(fy));
+        // Wrapping: a negative tile becomes too large to pass the bounds.
+        let tx = (cx >> self.shift).wrapping_sub(self.min.x) as u32;
+        let ty = (cy >> self.shift).wrapping_sub(self.min.y) as u32;
+        if tx >= self.width || ty >= self.height {
             return 0;
         }
-        let Some(table) = self.tables[ty as usize * self.width + tx as usize] else {
+        let Some(table) = self.tables[(ty * self.width + tx) as usize] else {
             return 0;
         };
         let index = (((cy & self.mask) << self.shift) + (cx & self.mask)) as usize;
-        // A signed conversion: one instruction, where an unsigned one is several.
-        let lower = (position as i32).clamp(0, self.headings as i32 - 1) as usize;
-        let frac = position - lower as f64;
-        let at = index * self.stride + lower;
+        // `position` lies in [0, headings): so does `lower` (a stray one
+        // falls outside the table and reads as 0).
+        let lower = cell_i32(position);
+        let frac = position - f64::from(lower);
+        let at = index * self.stride + lower as u32 as usize;
         let Some(&[a, b]) = table.get(at..at + 2) else {
             return 0;
         };
@@ -1201,10 +1205,9 @@ impl RangeWindow<'_> {
             f64::from(a) + (f64::from(b) - f64::from(a)) * frac
         };
         // The table is for the cell's centre; move to the sensor.
-        let off_x = fx - (cx as f64 + 0.5);
-        let off_y = fy - (cy as f64 + 0.5);
+        let off_x = fx - (f64::from(cx) + 0.5);
+        let off_y = fy - (f64::from(cy) + 0.5);
         let centimetres = millimetres * 0.1 - (off_x * cos + off_y * sin) * self.res_cm;
-        // Rounded by truncating after adding a half, then held in range.
-        ((centimetres + 0.5) as i32).clamp(0, no_echo_slot as i32 - 1) as usize
+        round_i32(centimetres).clamp(0, no_echo_slot as i32 - 1) as usize
     }
 }
