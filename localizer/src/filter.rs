@@ -209,6 +209,10 @@ pub struct CorrectionReport {
     pub tables_built: usize,
 }
 
+/// The most particles a set may hold for [`Mcl::move_uphill`] to move
+/// its modes: a tracking filter's few modes, not a global search.
+const UPHILL_MOST: usize = 5_000;
+
 /// Monte Carlo Localization of one robot.
 #[derive(Debug)]
 pub struct Mcl {
@@ -225,6 +229,9 @@ pub struct Mcl {
     scratch_log: Vec<f64>,
     /// The new weights as [`Self::correct`] works them out.
     scratch_weights: Vec<f64>,
+    /// Indices, in the set the last resampling drew, of the copies that
+    /// topped up light clusters: [`Mcl::move_uphill`] moves them.
+    uphill: Vec<usize>,
     scratch_indices: Vec<usize>,
 }
 
@@ -257,6 +264,7 @@ impl Mcl {
             cluster: None,
             scratch_log: Vec::new(),
             scratch_weights: Vec::new(),
+            uphill: Vec::new(),
             scratch_indices: Vec::new(),
         })
     }
@@ -524,6 +532,8 @@ impl Mcl {
             .map(|best| clusters.summarize(&self.particles, &self.weights, best));
         if ess < self.settings.resample_below * self.particles.len() as f64 || inject > 0.0 {
             report.injected = self.resample(map, inject, &clusters)?;
+            self.move_uphill(map, ranges)?;
+            self.sort_particles(map.settings().resolution);
             report.resampled = true;
         }
         Ok(report)
@@ -711,6 +721,14 @@ impl Mcl {
             next.push(self.particles[i]);
             draws += 1;
         }
+        // A set of a few modes has every mode's particles moved to its peak,
+        // so that the modes are weighed peak against peak.
+        self.uphill.clear();
+        let modes = drawn.iter().filter(|&&n| n > 0).count();
+        if modes >= 2 && next.len() <= UPHILL_MOST {
+            self.uphill
+                .extend((0..next.len()).filter(|&i| source[i] != INJECTED));
+        }
         // Each cluster drawn from keeps its share of the old set's weight,
         // over the clusters drawn from; injected particles get the share
         // of the draws they took.
@@ -737,7 +755,6 @@ impl Mcl {
             *w /= total;
         }
         self.particles = next;
-        self.sort_particles(res);
         if injected > 0 {
             // The injected particles answer the drop; start the averages anew
             // so that one bad stretch does not keep injecting.
@@ -844,6 +861,32 @@ impl Mcl {
             }
             drawn[c] += need;
         }
+        Ok(())
+    }
+
+    /// Moves the copies that topped up light clusters at the last
+    /// resampling towards their mode's peak: a few Metropolis steps of a
+    /// small Gaussian walk, each accepted with the frame's likelihood
+    /// ratio. A light cluster is a few particles copied many times, off
+    /// its peak by as much as their spread; its mean likelihood then
+    /// falls below a heavy cluster's, which sits on its own peak, even
+    /// where the frames favour the light one (resample-move, Gilks and
+    /// Berzuini, 2001). Heavy clusters are left as they are.
+    fn move_uphill(&mut self, map: &mut LocalMap, ranges: &[f64]) -> Result<(), LocalizerError> {
+        if self.uphill.is_empty() {
+            return Ok(());
+        }
+        let mut at: Vec<Pose2> = self.uphill.iter().map(|&i| self.particles[i]).collect();
+        let sensor = &mut self.sensor;
+        metropolis_walk(&mut self.rng, &mut at, |poses, out| {
+            let keys = sensor.tiles_needed(map, poses, ranges);
+            sensor.score_particles(map, &keys, poses, ranges, out)?;
+            Ok(())
+        })?;
+        for (k, &i) in self.uphill.iter().enumerate() {
+            self.particles[i] = at[k];
+        }
+        self.uphill.clear();
         Ok(())
     }
 
@@ -964,6 +1007,45 @@ fn random_pose_in(cell: CellIndex, res: deog_grid::Resolution, rng: &mut impl Rn
         y0 + rng.random_range(0.0..m),
         rng.random_range(-std::f64::consts::PI..std::f64::consts::PI),
     )
+}
+
+/// Steps of the Metropolis walk [`Mcl::move_uphill`] takes, and their
+/// spread: a fraction of the cloud a tracking filter keeps (3 to 5 cm).
+const WALK_STEPS: usize = 4;
+const WALK_STEP_XY: f64 = 0.02;
+const WALK_STEP_THETA: f64 = 0.02;
+
+/// [`WALK_STEPS`] Metropolis steps for each pose of `at`: a Gaussian move,
+/// kept with the probability `min(1, e^(l' - l))` of the log-likelihoods
+/// `score` gives (one per pose, pushed onto its second argument).
+fn metropolis_walk(
+    rng: &mut ChaCha8Rng,
+    at: &mut [Pose2],
+    mut score: impl FnMut(&[Pose2], &mut Vec<f64>) -> Result<(), LocalizerError>,
+) -> Result<(), LocalizerError> {
+    let mut current = Vec::with_capacity(at.len());
+    score(at, &mut current)?;
+    let (mut proposed, mut scores) = (Vec::with_capacity(at.len()), Vec::new());
+    for _ in 0..WALK_STEPS {
+        proposed.clear();
+        for p in at.iter() {
+            proposed.push(Pose2::new(
+                p.x + crate::gaussian::normal(rng, WALK_STEP_XY),
+                p.y + crate::gaussian::normal(rng, WALK_STEP_XY),
+                normalize_angle(p.theta + crate::gaussian::normal(rng, WALK_STEP_THETA)),
+            ));
+        }
+        scores.clear();
+        score(&proposed, &mut scores)?;
+        for (k, p) in at.iter_mut().enumerate() {
+            let gain = scores[k] - current[k];
+            if gain >= 0.0 || rng.random::<f64>() < gain.exp() {
+                *p = proposed[k];
+                current[k] = scores[k];
+            }
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -1113,6 +1195,74 @@ mod tests {
         let std_x =
             (light.iter().map(|p| (p.x - 2.0).powi(2)).sum::<f64>() / light.len() as f64).sqrt();
         assert!((0.006..0.025).contains(&std_x), "σx {std_x}");
+    }
+
+    /// A log-likelihood peaked at (2, 2, 0), `width` metres and radians
+    /// wide.
+    fn peaked(width: f64) -> impl FnMut(&[Pose2], &mut Vec<f64>) -> Result<(), LocalizerError> {
+        move |poses, out| {
+            out.extend(poses.iter().map(|p| {
+                -((p.x - 2.0).powi(2) + (p.y - 2.0).powi(2) + p.theta.powi(2))
+                    / (2.0 * width.powi(2))
+            }));
+            Ok(())
+        }
+    }
+
+    fn mean_distance(poses: &[Pose2]) -> f64 {
+        poses
+            .iter()
+            .map(|p| (p.x - 2.0).hypot(p.y - 2.0))
+            .sum::<f64>()
+            / poses.len() as f64
+    }
+
+    #[test]
+    fn the_walk_climbs_towards_the_peak() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        // Copies of one pose 10 cm and 0.1 rad off a peak 3 cm wide (the
+        // tempered sonar likelihood's, about).
+        let mut at = vec![Pose2::new(2.1, 2.0, 0.1); 1_000];
+        metropolis_walk(&mut rng, &mut at, peaked(0.03)).unwrap();
+        let distance = mean_distance(&at);
+        let heading = at.iter().map(|p| p.theta.abs()).sum::<f64>() / at.len() as f64;
+        // Four steps of 2 cm climb a little: a plain random walk from there
+        // ends farther off, not nearer.
+        assert!(distance < 0.09, "mean distance {distance:.3} m");
+        assert!(heading < 0.09, "mean heading {heading:.3} rad");
+        let mut plain = vec![Pose2::new(2.1, 2.0, 0.1); 1_000];
+        metropolis_walk(&mut rng, &mut plain, |poses, out| {
+            out.extend(std::iter::repeat_n(0.0, poses.len()));
+            Ok(())
+        })
+        .unwrap();
+        assert!(mean_distance(&plain) > 0.1, "{:.3}", mean_distance(&plain));
+        // The copies are copies no longer.
+        let distinct = at.iter().filter(|p| p.x != 2.1).count();
+        assert!(distinct > 900, "{distinct} moved");
+    }
+
+    #[test]
+    fn the_walk_does_not_leave_a_peak_it_is_on() {
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let mut at = vec![Pose2::new(2.0, 2.0, 0.0); 1_000];
+        metropolis_walk(&mut rng, &mut at, peaked(0.01)).unwrap();
+        // The walk samples the peak's own spread (1 cm), not its steps' (2 cm
+        // a step, 4 cm after four).
+        let distance = mean_distance(&at);
+        assert!(distance < 0.015, "mean distance {distance:.3} m");
+        // A flat likelihood accepts every step: a plain random walk.
+        let mut flat = vec![Pose2::new(2.0, 2.0, 0.0); 1_000];
+        metropolis_walk(&mut rng, &mut flat, |poses, out| {
+            out.extend(std::iter::repeat_n(0.0, poses.len()));
+            Ok(())
+        })
+        .unwrap();
+        let spread = mean_distance(&flat);
+        assert!(
+            (0.04..0.06).contains(&spread),
+            "mean distance {spread:.3} m"
+        );
     }
 
     #[test]
