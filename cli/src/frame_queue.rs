@@ -224,27 +224,28 @@ impl CatchUp {
     /// Takes `waiting` behind the kept frames and returns the frame to use
     /// in place of `frame`: the newest within reach, or with `first` (a
     /// filter that has seen no frame has no odometry to carry) the newest
-    /// of all. A follower far slower than its robot keeps only the newest
-    /// [`MOST_PENDING`].
+    /// of all; beside it the newest frame passed over, if any. A follower
+    /// far slower than its robot keeps only the newest [`MOST_PENDING`].
     pub(crate) fn newest_within_reach(
         &mut self,
         mut frame: pb::SonarFrame,
         waiting: Vec<pb::SonarFrame>,
         first: bool,
-    ) -> pb::SonarFrame {
+    ) -> (pb::SonarFrame, Option<pb::SonarFrame>) {
         self.pending.extend(waiting);
         let reach = if first {
             f64::INFINITY
         } else {
             frame.time_s + self.max_skip_s
         };
+        let mut passed = None;
         while self
             .pending
             .front()
             .is_some_and(|next| next.time_s <= reach)
         {
             if let Some(next) = self.pending.pop_front() {
-                frame = next;
+                passed = Some(std::mem::replace(&mut frame, next));
                 self.skipped += 1;
             }
         }
@@ -252,7 +253,7 @@ impl CatchUp {
             self.pending.pop_front();
             self.skipped += 1;
         }
-        frame
+        (frame, passed)
     }
 
     /// Frames passed over so far.
@@ -286,22 +287,19 @@ mod tests {
         let mut catch_up = CatchUp::new(1.0);
         // The first frame goes straight to the newest.
         let waiting: Vec<_> = (2..=40).map(frame).collect();
-        assert_eq!(
-            catch_up
-                .newest_within_reach(frame(1), waiting, true)
-                .sequence,
-            40
-        );
+        let (newest, passed) = catch_up.newest_within_reach(frame(1), waiting, true);
+        assert_eq!(newest.sequence, 40);
+        assert_eq!(passed.map(|f| f.sequence), Some(39));
         assert_eq!(catch_up.skipped(), 39);
         // Later, at most a second (10 frames) beyond the one in hand.
         let waiting: Vec<_> = (42..=70).map(frame).collect();
-        assert_eq!(
-            catch_up
-                .newest_within_reach(frame(41), waiting, false)
-                .sequence,
-            51
-        );
+        let (newest, passed) = catch_up.newest_within_reach(frame(41), waiting, false);
+        assert_eq!(newest.sequence, 51);
+        assert_eq!(passed.map(|f| f.sequence), Some(50));
         assert_eq!(catch_up.next_waiting().map(|f| f.sequence), Some(52));
         assert_eq!(catch_up.skipped(), 49);
+        // Nothing waiting: the frame in hand, nothing passed over.
+        let (newest, passed) = CatchUp::new(1.0).newest_within_reach(frame(5), Vec::new(), false);
+        assert_eq!((newest.sequence, passed), (5, None));
     }
 }

@@ -468,7 +468,31 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         let Some(mut frame) = next? else { break };
         if keep_up {
             let waiting = runtime.block_on(queue.ready());
-            frame = catch_up.newest_within_reach(frame, waiting, processed == 0);
+            let (newest, passed) = catch_up.newest_within_reach(frame, waiting, processed == 0);
+            frame = newest;
+            // While the correction with the newest frame runs, the newest
+            // frame passed over has the estimate of now: the last
+            // correction's, carried by that frame's odometry (as amcl's
+            // pose follows odometry between its filter updates).
+            if let Some(passed) = passed.filter(|p| processed > 0 && p.sequence > last_sequence) {
+                let estimate = passed
+                    .odometry
+                    .map(pose_from_wire)
+                    .and_then(|odometry| localizer.mcl().estimate(&odometry));
+                if let Some(estimate) = estimate {
+                    runtime
+                        .block_on(client.publish_pose(estimate_message(
+                            &args.robot,
+                            &args.map,
+                            &passed,
+                            &estimate,
+                            &[],
+                        )))
+                        .with_context(|| {
+                            format!("publishing the estimate of frame {}", passed.sequence)
+                        })?;
+                }
+            }
         }
         if frame.rig != first_rig_field {
             bail!(
