@@ -229,8 +229,9 @@ pub struct Mcl {
     scratch_log: Vec<f64>,
     /// The new weights as [`Self::correct`] works them out.
     scratch_weights: Vec<f64>,
-    /// Indices, in the set the last resampling drew, of the copies that
-    /// topped up light clusters: [`Mcl::move_uphill`] moves them.
+    /// Indices, in the set the last resampling drew, of the particles
+    /// [`Mcl::move_uphill`] moves: every one drawn from the old set when
+    /// it held two modes or more and the new set is small.
     uphill: Vec<usize>,
     scratch_indices: Vec<usize>,
 }
@@ -864,14 +865,16 @@ impl Mcl {
         Ok(())
     }
 
-    /// Moves the copies that topped up light clusters at the last
-    /// resampling towards their mode's peak: a few Metropolis steps of a
-    /// small Gaussian walk, each accepted with the frame's likelihood
-    /// ratio. A light cluster is a few particles copied many times, off
-    /// its peak by as much as their spread; its mean likelihood then
-    /// falls below a heavy cluster's, which sits on its own peak, even
-    /// where the frames favour the light one (resample-move, Gilks and
-    /// Berzuini, 2001). Heavy clusters are left as they are.
+    /// Moves the particles the last resampling marked (a set of two modes
+    /// or more, at most [`UPHILL_MOST`]) towards their mode's peak: a few
+    /// Metropolis steps of a small Gaussian walk, each accepted with the
+    /// frame's likelihood ratio (resample-move, Gilks and Berzuini, 2001).
+    /// A cluster is weighed by its particles' mean likelihood: a light one,
+    /// a few particles copied many times, sits off its peak by as much as
+    /// their spread and loses weight even where the frames favour it. With
+    /// every mode at its peak, modes are weighed peak against peak. Only
+    /// the light modes were moved at first; that favoured them against a
+    /// heavy mode off its own peak.
     fn move_uphill(&mut self, map: &mut LocalMap, ranges: &[f64]) -> Result<(), LocalizerError> {
         if self.uphill.is_empty() {
             return Ok(());
