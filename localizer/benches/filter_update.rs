@@ -139,27 +139,25 @@ fn beam_evaluations(c: &mut Criterion) {
 
     let mut group = c.benchmark_group("sensor_update_scaling");
     group.sample_size(10);
-    for n in [1_000usize, 10_000, 100_000] {
-        let mut mcl = filter_with(&mut map, n, true);
+    // Tracking clouds of growing size, then global localization's usual
+    // size spread over the whole room: the case where the order of the
+    // reads matters most.
+    let cases = [
+        ("tables", 1_000usize, true),
+        ("tables", 10_000, true),
+        ("tables", 100_000, true),
+        ("tables_global", 100_000, false),
+    ];
+    for (name, n, tracking) in cases {
+        let mut mcl = filter_with(&mut map, n, tracking);
         group.throughput(Throughput::Elements(n as u64 * 16));
-        group.bench_with_input(BenchmarkId::new("tables", n), &n, |b, _| {
+        group.bench_with_input(BenchmarkId::new(name, n), &n, |b, _| {
             b.iter(|| {
                 mcl.score(&mut map, black_box(&ranges)).unwrap();
                 black_box(mcl.scores()[0])
             })
         });
     }
-    // Global localization's usual size, the particles spread over the
-    // whole room: the case where the order of the reads matters most.
-    let n = 100_000;
-    let mut mcl = filter_with(&mut map, n, false);
-    group.throughput(Throughput::Elements(n as u64 * 16));
-    group.bench_with_input(BenchmarkId::new("tables_global", n), &n, |b, _| {
-        b.iter(|| {
-            mcl.score(&mut map, black_box(&ranges)).unwrap();
-            black_box(mcl.scores()[0])
-        })
-    });
     group.finish();
 }
 

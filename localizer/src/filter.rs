@@ -1054,20 +1054,11 @@ fn metropolis_walk(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::local_map::MapSettings;
-    use crate::range_table::ConeGeometry;
     use approx::assert_abs_diff_eq;
-    use deog_grid::{OccupancyThresholds, Resolution, TileSize};
+    use deog_grid::TileSize;
 
     fn empty_map() -> LocalMap {
-        LocalMap::new(MapSettings {
-            resolution: Resolution::DEFAULT,
-            tile_size: TileSize::new(64).unwrap(),
-            thresholds: OccupancyThresholds::default(),
-            geometry: ConeGeometry::default(),
-            budget_bytes: 1 << 20,
-        })
-        .unwrap()
+        LocalMap::empty_for_tests(1 << 20)
     }
 
     #[test]

@@ -144,6 +144,22 @@ pub struct LocalMap {
     field_margin_tiles: i32,
 }
 
+/// An empty map at the default resolution, 64-cell tiles and the default
+/// cone, for the crate's unit tests.
+#[cfg(test)]
+impl LocalMap {
+    pub(crate) fn empty_for_tests(budget_bytes: usize) -> Self {
+        Self::new(MapSettings {
+            resolution: Resolution::DEFAULT,
+            tile_size: deog_grid::TileSize::new(64).expect("64 is a tile size"),
+            thresholds: OccupancyThresholds::default(),
+            geometry: ConeGeometry::default(),
+            budget_bytes,
+        })
+        .expect("the defaults are valid")
+    }
+}
+
 impl LocalMap {
     /// An empty cache.
     pub fn new(settings: MapSettings) -> Result<Self, LocalizerError> {

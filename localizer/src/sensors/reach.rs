@@ -111,20 +111,10 @@ pub fn tiles_within_reach(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::local_map::MapSettings;
-    use crate::range_table::ConeGeometry;
-    use deog_grid::{OccupancyThresholds, Resolution, TileSize};
     use proptest::prelude::*;
 
     fn map() -> LocalMap {
-        LocalMap::new(MapSettings {
-            resolution: Resolution::DEFAULT,
-            tile_size: TileSize::new(64).unwrap(),
-            thresholds: OccupancyThresholds::default(),
-            geometry: ConeGeometry::default(),
-            budget_bytes: 1 << 26,
-        })
-        .unwrap()
+        LocalMap::empty_for_tests(1 << 26)
     }
 
     /// The tile the range window reads for a sensor at `(x, y)`.
