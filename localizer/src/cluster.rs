@@ -157,6 +157,65 @@ impl Clusters {
             .sum()
     }
 
+    /// Weighs the modes peak against peak: each cluster's share of
+    /// `weights` (the particles' weights just after a frame) is set to its
+    /// share of `old` (their weights before the frame) times its best
+    /// particle's likelihood, `log_likelihoods` being the frame's, rather
+    /// than times its particles' mean likelihood, which `weights` carry.
+    /// A mode whose few particles sit off its peak (a light mode, or one
+    /// the first draw of a global search happened to cover thinly) is then
+    /// judged by the best pose it holds, as the mode it stands for; each
+    /// cluster's particles keep their weights relative to one another.
+    /// One cluster, or slices of different lengths: nothing changes.
+    pub fn weigh_by_peak(&mut self, old: &[f64], log_likelihoods: &[f64], weights: &mut [f64]) {
+        let n = self.weights.len();
+        let particles = self.of.len();
+        if n < 2 || old.len() != particles || log_likelihoods.len() != particles {
+            return;
+        }
+        if weights.len() != particles {
+            return;
+        }
+        let mut before = vec![0.0; n];
+        let mut peak = vec![f64::NEG_INFINITY; n];
+        for ((&c, &w), &l) in self.of.iter().zip(old).zip(log_likelihoods) {
+            before[c as usize] += w;
+            peak[c as usize] = peak[c as usize].max(l);
+        }
+        let best = peak.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if !best.is_finite() {
+            return;
+        }
+        let target: Vec<f64> = before
+            .iter()
+            .zip(&peak)
+            .map(|(&b, &p)| b * (p - best).exp())
+            .collect();
+        let total: f64 = target.iter().sum();
+        if total <= 0.0 || !total.is_finite() {
+            return;
+        }
+        let scale: Vec<f64> = target
+            .iter()
+            .zip(&self.weights)
+            .map(|(&t, &w)| if w > 0.0 { t / total / w } else { 0.0 })
+            .collect();
+        for (w, &c) in weights.iter_mut().zip(&self.of) {
+            *w *= scale[c as usize];
+        }
+        let sum: f64 = weights.iter().sum();
+        if sum > 0.0 {
+            for w in weights.iter_mut() {
+                *w /= sum;
+            }
+        }
+        // The clusters' shares, as the weights now hold them.
+        self.weights.iter_mut().for_each(|w| *w = 0.0);
+        for (&c, &w) in self.of.iter().zip(weights.iter()) {
+            self.weights[c as usize] += w;
+        }
+    }
+
     /// The weighted mean and covariance of cluster `c`.
     pub fn summarize(&self, particles: &[Pose2], weights: &[f64], c: usize) -> ClusterEstimate {
         let c = c as u32;
@@ -300,6 +359,85 @@ pub fn heaviest_cluster(
 mod tests {
     use super::*;
     use approx::assert_abs_diff_eq;
+
+    /// Two clusters of 100 particles, half the weight each before a
+    /// frame: A's particles all fit it a little (log-likelihood -1), B
+    /// holds one particle on its peak (0) and 99 far off it (-10).
+    fn two_modes() -> (Clusters, Vec<f64>, Vec<f64>, Vec<f64>) {
+        let of: Vec<u32> = (0..200).map(|i| u32::from(i >= 100)).collect();
+        let old = vec![0.005; 200];
+        let log: Vec<f64> = (0..200)
+            .map(|i| match i {
+                0..100 => -1.0,
+                100 => 0.0,
+                _ => -10.0,
+            })
+            .collect();
+        // The weights after the frame: old times likelihood, normalized.
+        let mut weights: Vec<f64> = old.iter().zip(&log).map(|(w, l)| w * l.exp()).collect();
+        let total: f64 = weights.iter().sum();
+        weights.iter_mut().for_each(|w| *w /= total);
+        let mut shares = vec![0.0; 2];
+        for (&c, &w) in of.iter().zip(&weights) {
+            shares[c as usize] += w;
+        }
+        let clusters = Clusters {
+            of,
+            weights: shares,
+            counts: vec![100, 100],
+        };
+        (clusters, old, log, weights)
+    }
+
+    #[test]
+    fn modes_are_weighed_by_their_best_pose_not_their_mean() {
+        let (mut clusters, old, log, mut weights) = two_modes();
+        // By the mean, A holds nearly all the weight.
+        assert!(clusters.weights[0] > 0.97, "{:?}", clusters.weights);
+        let within_b = weights[101] / weights[100];
+        clusters.weigh_by_peak(&old, &log, &mut weights);
+        // By the peak, B: e⁰ against e⁻¹.
+        let expected_b = 1.0 / (1.0 + (-1.0f64).exp());
+        assert_abs_diff_eq!(clusters.weights[1], expected_b, epsilon = 1e-12);
+        assert_abs_diff_eq!(clusters.weights[0], 1.0 - expected_b, epsilon = 1e-12);
+        assert_abs_diff_eq!(weights.iter().sum::<f64>(), 1.0, epsilon = 1e-12);
+        let b: f64 = weights[100..].iter().sum();
+        assert_abs_diff_eq!(b, expected_b, epsilon = 1e-12);
+        // Within a cluster the particles keep their ratios.
+        assert_abs_diff_eq!(weights[101] / weights[100], within_b, epsilon = 1e-12);
+        assert_abs_diff_eq!(weights[0], weights[99], epsilon = 1e-15);
+        assert_eq!(clusters.heaviest(), Some(1));
+    }
+
+    #[test]
+    fn the_weight_before_the_frame_still_counts() {
+        let (mut clusters, mut old, log, mut weights) = two_modes();
+        // B held a hundredth of A's weight before the frame: one frame's
+        // e¹ does not make up for it.
+        for w in &mut old[100..] {
+            *w /= 100.0;
+        }
+        clusters.weigh_by_peak(&old, &log, &mut weights);
+        let ratio = clusters.weights[1] / clusters.weights[0];
+        assert_abs_diff_eq!(ratio, std::f64::consts::E / 100.0, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn one_cluster_or_mismatched_slices_change_nothing() {
+        let (mut clusters, old, log, mut weights) = two_modes();
+        let before = (clusters.clone(), weights.clone());
+        clusters.weigh_by_peak(&old[1..], &log, &mut weights);
+        assert_eq!((clusters.clone(), weights.clone()), before);
+        let mut one = Clusters {
+            of: vec![0; 200],
+            weights: vec![1.0],
+            counts: vec![200],
+        };
+        let kept = weights.clone();
+        one.weigh_by_peak(&old, &log, &mut weights);
+        assert_eq!(weights, kept);
+        assert_eq!(one.weights, vec![1.0]);
+    }
 
     #[test]
     fn heaviest_of_two_clouds_is_found_with_its_spread() {

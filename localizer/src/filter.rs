@@ -10,8 +10,10 @@
 //! sure the map holds the tiles [`Mcl::tiles_for_frame`] names, and
 //! [`Mcl::correct`] weighs every particle by its sonar frame:
 //! - weights multiply by the tempered beam likelihood (see
-//!   [`crate::beam_model`]), so each cluster's weight multiplies by its
-//!   particles' mean likelihood;
+//!   [`crate::beam_model`]), and each cluster's weight by its best
+//!   particle's ([`Clusters::weigh_by_peak`]): modes are weighed by the
+//!   best pose each holds, not by how well its particles happen to cover
+//!   it;
 //! - the mean per-beam likelihood feeds a slow and a fast average; when the
 //!   fast falls below the slow (the scene no longer fits the map where the
 //!   particles are: kidnapping, or a wrong early convergence), a share
@@ -486,22 +488,28 @@ impl Mcl {
             total += product;
             self.scratch_weights.push(product);
         }
-        if total > f64::MIN_POSITIVE {
-            std::mem::swap(&mut self.weights, &mut self.scratch_weights);
-        } else {
+        if total <= f64::MIN_POSITIVE {
             // Every product underflowed (the best fits sat on particles of
             // next to no weight): again, wholly in log space.
             best = f64::NEG_INFINITY;
-            for (l, w) in self.scratch_log.iter_mut().zip(&self.weights) {
-                *l += w.ln();
-                best = best.max(*l);
+            for ((l, w), p) in self
+                .scratch_log
+                .iter()
+                .zip(&self.weights)
+                .zip(self.scratch_weights.iter_mut())
+            {
+                *p = l + w.ln();
+                best = best.max(*p);
             }
             total = 0.0;
-            for (w, l) in self.weights.iter_mut().zip(&self.scratch_log) {
-                *w = (l - best).exp();
-                total += *w;
+            for p in &mut self.scratch_weights {
+                *p = (*p - best).exp();
+                total += *p;
             }
         }
+        // The weights before the frame stay in the scratch vector, for the
+        // clusters to be weighed peak against peak.
+        std::mem::swap(&mut self.weights, &mut self.scratch_weights);
         for w in &mut self.weights {
             *w /= total;
         }
@@ -516,8 +524,9 @@ impl Mcl {
             self.w_slow += self.settings.alpha_slow * (average - self.w_slow);
             self.w_fast += self.settings.alpha_fast * (average - self.w_fast);
         }
-        let clusters = cluster_particles(&self.particles, &self.weights, self.settings.bins)
+        let mut clusters = cluster_particles(&self.particles, &self.weights, self.settings.bins)
             .ok_or_else(|| LocalizerError::Invalid("the particles have no weight".into()))?;
+        clusters.weigh_by_peak(&self.scratch_weights, &self.scratch_log, &mut self.weights);
         let ess = clusters.effective_sample_size(&self.weights);
         let inject = self.injection_share();
         let mut report = CorrectionReport {
@@ -869,12 +878,13 @@ impl Mcl {
     /// or more, at most [`UPHILL_MOST`]) towards their mode's peak: a few
     /// Metropolis steps of a small Gaussian walk, each accepted with the
     /// frame's likelihood ratio (resample-move, Gilks and Berzuini, 2001).
-    /// A cluster is weighed by its particles' mean likelihood: a light one,
-    /// a few particles copied many times, sits off its peak by as much as
-    /// their spread and loses weight even where the frames favour it. With
-    /// every mode at its peak, modes are weighed peak against peak. Only
-    /// the light modes were moved at first; that favoured them against a
-    /// heavy mode off its own peak.
+    /// The particles' weights follow their likelihoods: a light mode, a
+    /// few particles copied many times, sits off its peak by as much as
+    /// their spread, and its particles lose weight to one another even
+    /// where the frames favour its mode (the clusters' own weights are
+    /// weighed by their peaks, [`Clusters::weigh_by_peak`]). Only the light
+    /// modes were moved at first; that favoured them against a heavy mode
+    /// off its own peak.
     fn move_uphill(&mut self, map: &mut LocalMap, ranges: &[f64]) -> Result<(), LocalizerError> {
         if self.uphill.is_empty() {
             return Ok(());
