@@ -170,10 +170,11 @@ impl Clusters {
     pub fn weigh_by_peak(&mut self, old: &[f64], log_likelihoods: &[f64], weights: &mut [f64]) {
         let n = self.weights.len();
         let particles = self.of.len();
-        if n < 2 || old.len() != particles || log_likelihoods.len() != particles {
-            return;
-        }
-        if weights.len() != particles {
+        if n < 2
+            || [old.len(), log_likelihoods.len(), weights.len()]
+                .iter()
+                .any(|&len| len != particles)
+        {
             return;
         }
         let mut before = vec![0.0; n];
