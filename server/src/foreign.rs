@@ -13,18 +13,23 @@ use std::sync::Arc;
 use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
 
-/// Relays `feed` into `events` until it ends or `stop` is cancelled.
+/// Relays `first`, then `feed`, into `events` until the feed ends or
+/// `stop` is cancelled.
 pub(crate) async fn relay<S: Store>(
     store: Arc<S>,
     events: Arc<Events>,
+    mut first: Option<StoreChange>,
     mut feed: mpsc::Receiver<StoreChange>,
     stop: CancellationToken,
 ) {
     let mut looked = Looked::default();
     loop {
-        let change = tokio::select! {
-            () = stop.cancelled() => break,
-            change = feed.recv() => change,
+        let change = match first.take() {
+            Some(change) => Some(change),
+            None => tokio::select! {
+                () = stop.cancelled() => break,
+                change = feed.recv() => change,
+            },
         };
         let Some(change) = change else {
             break;

@@ -4,7 +4,7 @@ use crate::convert::Limits;
 use crate::events::Events;
 use crate::rigs::RigRegistry;
 use crate::service::{MapServer, ReadStreamLimits, ServiceSettings};
-use crate::store::Store;
+use crate::store::{Store, StoreChange};
 use crate::writer::{StoreHealth, Writer};
 use deog_proto::auth::BearerAuth;
 use deog_proto::connection::{self, ConnectionLimits};
@@ -17,6 +17,10 @@ use thiserror::Error;
 use tokio::net::TcpListener;
 use tokio::sync::watch;
 use tokio_util::sync::CancellationToken;
+
+/// How long the server waits, at start, to hear other servers' changes
+/// before it serves anyway.
+const FIRST_FOREIGN_CHANGE_WAIT: Duration = Duration::from_secs(5);
 
 /// The gRPC name of the map service, as the health service reports it.
 pub const MAP_SERVICE_NAME: &str = "deog.v1.MapService";
@@ -135,10 +139,19 @@ pub async fn serve<S: Store>(
     let events = Arc::new(Events::new(config.event_buffer));
     let writer = Writer::start(store.clone(), events.clone(), config.write_queue)?;
     let stop_streams = CancellationToken::new();
-    if let Some(feed) = store.foreign_changes() {
+    if let Some(mut feed) = store.foreign_changes() {
+        // Serve once other servers' changes are heard: a watcher that came
+        // earlier would be told at once to resync for nothing. The feed's
+        // first resync marks that moment; a store that cannot be reached
+        // yet does not hold the server up for long.
+        let first = match tokio::time::timeout(FIRST_FOREIGN_CHANGE_WAIT, feed.recv()).await {
+            Ok(Some(StoreChange::Resync)) | Err(_) => None,
+            Ok(first) => first,
+        };
         tokio::spawn(crate::foreign::relay(
             store.clone(),
             events.clone(),
+            first,
             feed,
             stop_streams.clone(),
         ));

@@ -394,11 +394,12 @@ async fn listen(
 const POLL_INTERVAL: Duration = Duration::from_secs(1);
 
 async fn poll(sender: mpsc::Sender<StoreChange>) {
+    // The first poll at once: it is the look later ones compare with.
     loop {
-        tokio::time::sleep(POLL_INTERVAL).await;
         if sender.send(StoreChange::Poll).await.is_err() {
             return;
         }
+        tokio::time::sleep(POLL_INTERVAL).await;
     }
 }
 
