@@ -1,7 +1,8 @@
 //! What the status line says while the robots drive: simulated time,
 //! frames, map cells, and each robot's latest position error, with how
 //! far its localizer is behind: the simulated seconds between its robot's
-//! clock and the frame of its latest estimate. Read from the map server
+//! clock (or its newest frame, once it sends no more) and the frame of
+//! its latest estimate. Read from the map server
 //! each tick; a read that fails leaves its figure out rather than stopping
 //! the demo. The largest lag seen goes in report.json (`max_lag_s`).
 
@@ -20,6 +21,8 @@ struct Follow {
     frame_time_s: f64,
     /// That estimate's position error, metres, and the filter's flag.
     error: Option<(f64, bool)>,
+    /// The robot's newest stored frame: its sequence and simulated time.
+    newest_frame: (u64, f64),
     /// Simulated seconds the localizer was behind its robot at this tick.
     lag_s: Option<f64>,
     /// The largest lag seen so far.
@@ -67,9 +70,20 @@ impl Progress {
                 follow.frame_time_s = latest.time_s;
                 follow.error = Some((latest.metres, latest.converged));
             }
+            let newest = listed
+                .iter()
+                .find(|r| &r.robot == name)
+                .map_or(0, |r| r.last_sequence);
+            if newest > follow.newest_frame.0
+                && let Ok(frames) = client.read_frames(name, newest, newest).await
+                && let Some(frame) = frames.first()
+            {
+                follow.newest_frame = (frame.sequence, frame.time_s);
+            }
             let clock = clocks.iter().find(|(robot, _)| robot == name);
             if let (Some((_, clock)), Some(_)) = (clock, follow.error) {
-                follow.note_lag(clock - follow.frame_time_s);
+                let newest = (follow.newest_frame.0 > 0).then_some(follow.newest_frame.1);
+                follow.note_lag(lag_s(*clock, newest, follow.frame_time_s));
             }
             robots.push((name.as_str(), *follow));
         }
@@ -83,6 +97,14 @@ impl Progress {
             .iter()
             .map(|(name, follow)| (name.as_str(), follow.max_lag_s))
     }
+}
+
+/// Simulated seconds between the robot's `clock` and the frame of the
+/// latest estimate (at `estimate_time_s`); a robot that has stopped sending
+/// frames (its `newest_frame_s` behind its clock) leaves nothing to be
+/// behind on, however long the simulator runs on.
+fn lag_s(clock: f64, newest_frame_s: Option<f64>, estimate_time_s: f64) -> f64 {
+    newest_frame_s.map_or(clock, |newest| clock.min(newest)) - estimate_time_s
 }
 
 impl Follow {
@@ -160,6 +182,17 @@ async fn latest_error(client: &MapClient, robot: &str, after: u64) -> Option<Lat
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_lag_runs_to_the_clock_or_to_the_last_frame_of_a_robot_that_stopped() {
+        // Driving: frames come up to the clock.
+        assert!((lag_s(100.0, Some(99.95), 99.2) - 0.75).abs() < 1e-9);
+        assert!((lag_s(100.0, None, 99.2) - 0.8).abs() < 1e-9);
+        // Stopped at 240.3 s, the simulator at 241.2 s: the localizer
+        // has estimated the last frame.
+        assert!(lag_s(241.2, Some(240.3), 240.3).abs() < 1e-9);
+        assert!((lag_s(241.2, Some(240.3), 239.8) - 0.5).abs() < 1e-9);
+    }
 
     #[test]
     fn the_line_names_time_frames_cells_and_each_robots_error_and_lag() {
