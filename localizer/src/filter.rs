@@ -10,10 +10,10 @@
 //! sure the map holds the tiles [`Mcl::tiles_for_frame`] names, and
 //! [`Mcl::correct`] weighs every particle by its sonar frame:
 //! - weights multiply by the tempered beam likelihood (see
-//!   [`crate::beam_model`]), and each cluster's weight by its best
-//!   particle's ([`Clusters::weigh_by_peak`]): modes are weighed by the
-//!   best pose each holds, not by how well its particles happen to cover
-//!   it;
+//!   [`crate::beam_model`]), and each cluster's weight by the likelihood
+//!   at its mean pose, or a small cluster's by its best particle's
+//!   ([`Clusters::evidence`]): modes are weighed by a pose that stands for
+//!   each, not by how well its particles happen to cover it;
 //! - the mean per-beam likelihood feeds a slow and a fast average; when the
 //!   fast falls below the slow (the scene no longer fits the map where the
 //!   particles are: kidnapping, or a wrong early convergence), a share
@@ -526,7 +526,14 @@ impl Mcl {
         }
         let mut clusters = cluster_particles(&self.particles, &self.weights, self.settings.bins)
             .ok_or_else(|| LocalizerError::Invalid("the particles have no weight".into()))?;
-        clusters.weigh_by_peak(&self.scratch_weights, &self.scratch_log, &mut self.weights);
+        if clusters.weights.len() > 1 {
+            let sensor = &mut self.sensor;
+            let evidence =
+                clusters.evidence(&self.particles, &self.weights, &self.scratch_log, |pose| {
+                    sensor.score_pose(map, pose, ranges)
+                })?;
+            clusters.weigh_by(&self.scratch_weights, &evidence, &mut self.weights);
+        }
         let ess = clusters.effective_sample_size(&self.weights);
         let inject = self.injection_share();
         let mut report = CorrectionReport {
@@ -882,7 +889,7 @@ impl Mcl {
     /// few particles copied many times, sits off its peak by as much as
     /// their spread, and its particles lose weight to one another even
     /// where the frames favour its mode (the clusters' own weights are
-    /// weighed by their peaks, [`Clusters::weigh_by_peak`]). Only the light
+    /// weighed by a pose standing for each, [`Clusters::evidence`]). Only the light
     /// modes were moved at first; that favoured them against a heavy mode
     /// off its own peak.
     fn move_uphill(&mut self, map: &mut LocalMap, ranges: &[f64]) -> Result<(), LocalizerError> {
