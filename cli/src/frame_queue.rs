@@ -216,6 +216,11 @@ impl CatchUp {
         }
     }
 
+    /// Keeps `frames` (which came after those kept) for later turns.
+    pub(crate) fn hold(&mut self, frames: Vec<pb::SonarFrame>) {
+        self.pending.extend(frames);
+    }
+
     /// The oldest frame kept from an earlier turn.
     pub(crate) fn next_waiting(&mut self) -> Option<pb::SonarFrame> {
         self.pending.pop_front()

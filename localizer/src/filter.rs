@@ -198,6 +198,31 @@ pub struct Estimate {
     pub lost_score: f64,
 }
 
+/// The filter's estimate at its last correction, with the odometry pose
+/// it was made at: enough to give the estimate for any later odometry
+/// without the filter (as amcl's pose follows odometry between updates).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CarriedEstimate {
+    estimate: Estimate,
+    /// Odometry at the last correction; `None` before the first frame.
+    odometry: Option<Pose2>,
+}
+
+impl CarriedEstimate {
+    /// The estimate for a frame with odometry pose `odometry`: the pose
+    /// moved by the odometry since the correction.
+    pub fn at(&self, odometry: &Pose2) -> Estimate {
+        let pose = match self.odometry {
+            Some(last) => OdometryMove::between(&last, odometry).apply(&self.estimate.pose),
+            None => self.estimate.pose,
+        };
+        Estimate {
+            pose,
+            ..self.estimate
+        }
+    }
+}
+
 /// What one correction did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct CorrectionReport {
@@ -924,18 +949,23 @@ impl Mcl {
     /// The estimate for a frame with odometry pose `odometry`: the heaviest
     /// cluster's mean moved by the odometry since the last correction.
     pub fn estimate(&self, odometry: &Pose2) -> Option<Estimate> {
+        Some(self.carried()?.at(odometry))
+    }
+
+    /// What [`Mcl::estimate`] needs, apart from the filter: a process can
+    /// carry it by odometry to frames that come while the filter is busy.
+    pub fn carried(&self) -> Option<CarriedEstimate> {
         let cluster = self.cluster?;
-        let pose = match self.odometry {
-            Some(last) => OdometryMove::between(&last, odometry).apply(&cluster.pose),
-            None => cluster.pose,
-        };
-        Some(Estimate {
-            pose,
-            covariance: cluster.covariance,
-            particle_count: self.particles.len(),
-            cluster_weight: cluster.weight,
-            converged: self.settled(),
-            lost_score: self.injection_share(),
+        Some(CarriedEstimate {
+            estimate: Estimate {
+                pose: cluster.pose,
+                covariance: cluster.covariance,
+                particle_count: self.particles.len(),
+                cluster_weight: cluster.weight,
+                converged: self.settled(),
+                lost_score: self.injection_share(),
+            },
+            odometry: self.odometry,
         })
     }
 
@@ -1091,6 +1121,42 @@ mod tests {
         assert_eq!(mcl.sample(0, &Pose2::new(0.0, 0.0, 0.0)).len(), 0);
         let all = mcl.sample(1_000_000, &Pose2::new(0.0, 0.0, 0.0));
         assert_eq!(all.len(), mcl.particles().len());
+    }
+
+    #[test]
+    fn a_carried_estimate_moves_as_the_filters_own_does() {
+        let mut mcl = Mcl::new(FilterSettings {
+            seed: 5,
+            ..FilterSettings::default()
+        })
+        .unwrap();
+        mcl.start_at(Pose2::new(3.0, 4.0, 0.5), 0.01, 0.01).unwrap();
+        let before = mcl.carried().unwrap();
+        // Before any frame there is no odometry to carry by.
+        let far = Pose2::new(10.0, -2.0, 1.0);
+        assert_eq!(before.at(&far), mcl.estimate(&far).unwrap());
+        assert_eq!(
+            before.at(&far).pose,
+            before.at(&Pose2::new(0.0, 0.0, 0.0)).pose
+        );
+        mcl.predict(&Pose2::new(1.0, 1.0, 0.0)).unwrap();
+        let carried = mcl.carried().unwrap();
+        let later = Pose2::new(1.5, 1.0, 0.2);
+        let estimate = mcl.estimate(&later).unwrap();
+        assert_eq!(carried.at(&later), estimate);
+        // Half a metre ahead along the heading it was corrected at.
+        let start = carried.at(&Pose2::new(1.0, 1.0, 0.0)).pose;
+        assert_abs_diff_eq!(
+            estimate.pose.x - start.x,
+            0.5 * start.theta.cos(),
+            epsilon = 1e-9
+        );
+        assert_abs_diff_eq!(
+            estimate.pose.y - start.y,
+            0.5 * start.theta.sin(),
+            epsilon = 1e-9
+        );
+        assert_abs_diff_eq!(estimate.pose.theta - start.theta, 0.2, epsilon = 1e-9);
     }
 
     /// A filter holding two tight modes: `light` particles about (2, 2, 0)

@@ -3,8 +3,10 @@
 //! particles need (keeping them current through the watch stream, within a
 //! memory budget), and publishes an estimate per frame.
 
+mod carry;
 mod server;
 
+use carry::{Carrier, worth_carrying};
 use server::{ServerTiles, estimate_message, log_estimate};
 
 use std::time::{Duration, Instant};
@@ -167,7 +169,9 @@ pub struct LocalizeArgs {
     /// falling behind. By default a localizer following new frames (no
     /// --from, no --to) that finds more frames waiting takes the newest
     /// within --max-skip-s and moves its particles by the odometry of
-    /// those it skips, so that its estimate is of now, not of the past.
+    /// those it skips, so that its estimate is of now, not of the past;
+    /// while a slow update runs, the frames that come get the last
+    /// estimate carried by their odometry.
     #[arg(long)]
     pub every_frame: bool,
     /// Most seconds of frames skipped at once to keep up: a longer jump of
@@ -455,6 +459,15 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     let mut sampled_at: Option<f64> = None;
     let mut first = Some(first);
     let mut catch_up = CatchUp::new(args.max_skip_s);
+    let carrier = Carrier {
+        client: &client,
+        robot: &args.robot,
+        map: &args.map,
+    };
+    // How long the last step took, and the most seconds of frames that
+    // came while one ran (how far the filter's evidence fell behind).
+    let mut last_took = Duration::ZERO;
+    let mut filter_lag_s: f64 = 0.0;
     loop {
         let next = match first.take().or_else(|| catch_up.next_waiting()) {
             Some(frame) => Ok(Some(frame)),
@@ -520,10 +533,45 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             .with_context(|| format!("frame {} has no odometry pose", frame.sequence))?;
         let particles = localizer.mcl().particles().len();
         let started = Instant::now();
-        let report = localizer
-            .step(&odometry, &frame.ranges, started, &mut tiles)
-            .with_context(|| format!("frame {}", frame.sequence))?;
+        let carried = localizer
+            .mcl()
+            .carried()
+            .filter(|_| keep_up && worth_carrying(particles, last_took));
+        let report = match carried {
+            Some(carried) => {
+                // The frames that come meanwhile get the estimate of now
+                // from a thread beside the step, then wait their turn.
+                let (report, arrived) = std::thread::scope(|scope| {
+                    let (done, finished) = tokio::sync::oneshot::channel();
+                    let queue = &mut queue;
+                    let (runtime, carrier) = (&runtime, &carrier);
+                    let carrier = scope.spawn(move || {
+                        runtime.block_on(carrier.carry_until(
+                            queue,
+                            carried,
+                            frame.sequence,
+                            finished,
+                        ))
+                    });
+                    let report = localizer.step(&odometry, &frame.ranges, started, &mut tiles);
+                    let _ = done.send(());
+                    let arrived = carrier
+                        .join()
+                        .map_err(|_| anyhow::anyhow!("the estimate carrier panicked"))?;
+                    anyhow::Ok((report, arrived))
+                })?;
+                let arrived = arrived?;
+                if let Some(newest) = arrived.last() {
+                    filter_lag_s = filter_lag_s.max(newest.time_s - frame.time_s);
+                }
+                catch_up.hold(arrived);
+                report
+            }
+            None => localizer.step(&odometry, &frame.ranges, started, &mut tiles),
+        }
+        .with_context(|| format!("frame {}", frame.sequence))?;
         let took = started.elapsed();
+        last_took = took;
         if let Some(correction) = &report.correction {
             corrections += 1;
             if took >= SLOW_STEP {
@@ -568,7 +616,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     progress.finish();
     let map = localizer.map();
     println!(
-        "{} on {}: {processed} frames, {corrections} sensor updates, {} frames skipped to keep up, {} range tables built, cache {:.1} MiB",
+        "{} on {}: {processed} frames, {corrections} sensor updates, {} frames skipped to keep up (the filter at most {filter_lag_s:.2} s of frames behind while carried), {} range tables built, cache {:.1} MiB",
         args.robot,
         args.map,
         catch_up.skipped(),
