@@ -95,6 +95,105 @@ impl Carrier<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use deog_grid::Pose2;
+    use deog_localizer::filter::{FilterSettings, Mcl};
+    use deog_robot_client::ClientConfig;
+    use deog_robot_client::convert::pose_to_wire;
+    use deog_server::{ServerConfig, SledConfig, SledStore};
+    use std::sync::Arc;
+
+    fn frame(sequence: u64) -> pb::SonarFrame {
+        pb::SonarFrame {
+            robot: "r".into(),
+            sequence,
+            time_s: sequence as f64 * 0.1,
+            odometry: Some(pose_to_wire(Pose2::new(0.1 * sequence as f64, 0.0, 0.0))),
+            true_pose: None,
+            ranges: vec![1.0; 16],
+            rig: String::new(),
+            reference_pose: None,
+        }
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn frames_that_come_meanwhile_get_the_carried_estimate_and_are_handed_back() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let store = SledStore::open(&SledConfig::new(dir.path().join("store"))).expect("store");
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+            .await
+            .expect("bind");
+        let addr = listener.local_addr().expect("addr");
+        let (stop, stopped) = oneshot::channel::<()>();
+        let server = tokio::spawn(deog_server::serve(
+            Arc::new(store),
+            listener,
+            ServerConfig::default(),
+            async {
+                let _ = stopped.await;
+            },
+        ));
+        let client = MapClient::connect(ClientConfig::new(addr.to_string()))
+            .await
+            .expect("connect");
+        client
+            .ensure_map(pb::CreateMapRequest {
+                name: "m".into(),
+                ..Default::default()
+            })
+            .await
+            .expect("map");
+        // The filter's estimate at odometry (0, 0, 0): about (2, 3), east.
+        let mut mcl = Mcl::new(FilterSettings {
+            seed: 1,
+            ..FilterSettings::default()
+        })
+        .expect("filter");
+        mcl.start_at(Pose2::new(2.0, 3.0, 0.0), 1e-6, 1e-6)
+            .expect("start");
+        mcl.predict(&Pose2::new(0.0, 0.0, 0.0)).expect("predict");
+        let carried = mcl.carried().expect("an estimate");
+        let mut queue = FrameQueue::follow(&client, "r", 0, 0.0)
+            .await
+            .expect("follow");
+        let carrier = Carrier {
+            client: &client,
+            robot: "r",
+            map: "m",
+        };
+        let (done, finished) = oneshot::channel();
+        let publish_then_wait = async {
+            client
+                .publish_frames((1..=3).map(frame).collect())
+                .await
+                .expect("frames");
+            // Bounded: the carrier looks every 10 ms.
+            for _ in 0..500 {
+                let poses = client.read_poses("r", 3, 3).await.expect("poses");
+                if !poses.is_empty() {
+                    break;
+                }
+                tokio::time::sleep(Duration::from_millis(10)).await;
+            }
+            let _ = done.send(());
+        };
+        let (arrived, ()) = tokio::join!(
+            carrier.carry_until(&mut queue, carried, 0, finished),
+            publish_then_wait
+        );
+        let arrived = arrived.expect("carried");
+        let sequences: Vec<u64> = arrived.iter().map(|f| f.sequence).collect();
+        assert_eq!(sequences, vec![1, 2, 3]);
+        let poses = client.read_poses("r", 1, 3).await.expect("poses");
+        let newest = poses.last().expect("an estimate was published");
+        assert_eq!(newest.frame_sequence, 3);
+        assert_eq!(newest.map, "m");
+        let pose = newest.pose.expect("pose");
+        // 0.3 m of odometry along the heading it was made at.
+        assert!((pose.x - 2.3).abs() < 1e-3, "{pose:?}");
+        assert!((pose.y - 3.0).abs() < 1e-3, "{pose:?}");
+        let _ = stop.send(());
+        let _ = server.await;
+    }
 
     #[test]
     fn searches_and_slow_steps_are_carried_quick_tracking_is_not() {
