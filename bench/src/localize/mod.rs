@@ -154,9 +154,9 @@ pub struct LocalizeOptions {
     /// model's range tables make the prediction: sonar rigs only.
     #[arg(long, value_delimiter = ',')]
     pub beams_between: Option<Vec<f64>>,
-    /// Also score each frame at the true pose and at its image turned 180°
-    /// about this point ("x,y"), and print the sums: how much the map tells
-    /// a symmetric world's two halves apart.
+    /// Also score each frame the filter weighs at the true pose and at its
+    /// image turned 180° about this point ("x,y"), and print the sums: how
+    /// much the map tells a symmetric world's two halves apart.
     #[arg(long, value_delimiter = ',')]
     pub mirror_about: Option<Vec<f64>>,
     /// Print each run's true and estimated pose every this many simulated

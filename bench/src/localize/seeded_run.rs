@@ -97,6 +97,9 @@ pub(super) fn run_once(
     // Each estimate's time and the particles behind it.
     let mut counts: Vec<(f64, usize)> = Vec::new();
     let mut mirror_sums = (0.0, 0.0, 0u64, 0u64);
+    // The frame's scores at the true pose and at its image, until the
+    // step says whether the filter weighed the frame.
+    let mut mirror_scores: Option<(f64, f64)> = None;
     // Particles injected since the last trace line.
     let mut injected_since_trace = 0usize;
     while sim.time_s() < options.seconds {
@@ -121,14 +124,10 @@ pub(super) fn run_once(
             let t = state.true_pose;
             let image = image_of(&t, centre);
             let (mcl, map) = localizer.parts_mut();
-            let here = mcl.score_pose(map, &t, &state.ranges)?;
-            let there = mcl.score_pose(map, &image, &state.ranges)?;
-            mirror_sums.0 += here;
-            mirror_sums.1 += there;
-            if here > there {
-                mirror_sums.2 += 1;
-            }
-            mirror_sums.3 += 1;
+            mirror_scores = Some((
+                mcl.score_pose(map, &t, &state.ranges)?,
+                mcl.score_pose(map, &image, &state.ranges)?,
+            ));
             if sim.time_s() + period >= options.seconds || state.sequence % 100 == 0 {
                 deog_harness::println_above_bars!(
                     "    t {:6.1}  Σ log-likelihood true {:9.1}  image {:9.1}  frames favouring the truth {}/{}",
@@ -154,6 +153,16 @@ pub(super) fn run_once(
         let report = localizer.step(&state.odometry, &state.ranges, Instant::now(), tiles)?;
         if let Some(correction) = report.correction {
             injected_since_trace += correction.injected;
+            // Only the frames the filter weighs count: a robot standing
+            // still would otherwise count one scene many times over.
+            if let Some((here, there)) = mirror_scores.take() {
+                mirror_sums.0 += here;
+                mirror_sums.1 += there;
+                if here > there {
+                    mirror_sums.2 += 1;
+                }
+                mirror_sums.3 += 1;
+            }
         }
         if let Some(e) = report.estimate {
             let mcl = localizer.mcl();
