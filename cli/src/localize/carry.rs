@@ -44,6 +44,31 @@ pub(super) struct Carrier<'a> {
 }
 
 impl Carrier<'_> {
+    /// Runs `step` on this thread while a thread beside it carries
+    /// `carried` to the frames that arrive in `queue` past `after`, on
+    /// `runtime`. Returns what the step returned and the frames taken,
+    /// oldest first.
+    pub(super) fn beside<T>(
+        &self,
+        runtime: &tokio::runtime::Runtime,
+        queue: &mut FrameQueue,
+        carried: CarriedEstimate,
+        after: u64,
+        step: impl FnOnce() -> T,
+    ) -> Result<(T, Vec<pb::SonarFrame>)> {
+        std::thread::scope(|scope| {
+            let (done, finished) = oneshot::channel();
+            let carrier = scope
+                .spawn(move || runtime.block_on(self.carry_until(queue, carried, after, finished)));
+            let stepped = step();
+            let _ = done.send(());
+            let arrived = carrier
+                .join()
+                .map_err(|_| anyhow::anyhow!("the estimate carrier panicked"))??;
+            Ok((stepped, arrived))
+        })
+    }
+
     /// Until `done` fires (or its sender is dropped): takes the frames
     /// that arrive in `queue` and publishes `carried` moved to the newest
     /// of them past `after`. Returns the frames taken, oldest first.

@@ -541,26 +541,10 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             Some(carried) => {
                 // The frames that come meanwhile get the estimate of now
                 // from a thread beside the step, then wait their turn.
-                let (report, arrived) = std::thread::scope(|scope| {
-                    let (done, finished) = tokio::sync::oneshot::channel();
-                    let queue = &mut queue;
-                    let (runtime, carrier) = (&runtime, &carrier);
-                    let carrier = scope.spawn(move || {
-                        runtime.block_on(carrier.carry_until(
-                            queue,
-                            carried,
-                            frame.sequence,
-                            finished,
-                        ))
-                    });
-                    let report = localizer.step(&odometry, &frame.ranges, started, &mut tiles);
-                    let _ = done.send(());
-                    let arrived = carrier
-                        .join()
-                        .map_err(|_| anyhow::anyhow!("the estimate carrier panicked"))?;
-                    anyhow::Ok((report, arrived))
-                })?;
-                let arrived = arrived?;
+                let (report, arrived) =
+                    carrier.beside(&runtime, &mut queue, carried, frame.sequence, || {
+                        localizer.step(&odometry, &frame.ranges, started, &mut tiles)
+                    })?;
                 if let Some(newest) = arrived.last() {
                     filter_lag_s = filter_lag_s.max(newest.time_s - frame.time_s);
                 }
