@@ -9,6 +9,7 @@ use std::path::Path;
 use deog_harness::os;
 use deog_mapping::specular_sonar_mapping;
 
+use crate::options::ExplorePose;
 use crate::plan::{DemoPlan, PlannedRobot};
 use deog_simulator::SonarPreset;
 
@@ -126,12 +127,17 @@ pub(crate) fn view(
 }
 
 /// An explorer that spawns `robot` and drives it to the shared map's
-/// frontiers until none is left or the plan's duration has passed.
+/// frontiers until none is left or the plan's duration has passed, from
+/// the plan's pose.
 pub(crate) fn explore(
     plan: &DemoPlan,
     robot: &PlannedRobot,
     addresses: &Addresses,
 ) -> Vec<OsString> {
+    let pose = match plan.explore_pose {
+        ExplorePose::True => Vec::new(),
+        ExplorePose::Estimate => os(&["--pose", "estimate"]),
+    };
     os(&[
         "explore",
         "--robot",
@@ -146,6 +152,9 @@ pub(crate) fn explore(
         "--server",
         &addresses.server_url(),
     ])
+    .into_iter()
+    .chain(pose)
+    .collect()
 }
 
 /// A wanderer that spawns `robot` and drives it for the plan's duration.
@@ -204,8 +213,10 @@ pub(crate) fn map(plan: &DemoPlan, robot: &PlannedRobot, addresses: &Addresses) 
     .collect()
 }
 
-/// A localizer for `robot` on the shared map, with no initial pose,
-/// expecting no echo past the plan's sonar's specular angle, if any.
+/// A localizer for `robot` on the shared map, with no initial pose
+/// (but for explorers driving from its estimates: their start, within the
+/// localizer's default spread), expecting no echo past the plan's sonar's
+/// specular angle, if any.
 pub(crate) fn localize(
     plan: &DemoPlan,
     robot: &PlannedRobot,
@@ -217,6 +228,12 @@ pub(crate) fn localize(
     };
     if plan.every_frame {
         extra.push("--every-frame".into());
+    }
+    if plan.explore && plan.explore_pose == ExplorePose::Estimate {
+        // A robot that drives from its estimates starts where it is known
+        // to be, within the default spread: on a map that is still empty
+        // there is nothing to find it by.
+        extra.extend(os(&["--initial-pose", "true"]));
     }
     os(&[
         "localize",
@@ -325,6 +342,41 @@ mod tests {
             Ok(_) => panic!("{args:?} must be refused"),
             Err(error) => error.to_string(),
         }
+    }
+
+    #[test]
+    fn explorers_drive_from_the_estimates_when_asked() {
+        let addresses = Addresses {
+            servers: vec!["127.0.0.1:5001".parse().expect("address")],
+            sim: "127.0.0.1:5002".parse().expect("address"),
+        };
+        let by_truth = plan(&["--explore"]).expect("valid");
+        assert_eq!(
+            line(&explore(&by_truth, &by_truth.robots[0], &addresses)),
+            "explore --robot scout-1 --map demo --spawn --duration 240 \
+             --sim http://127.0.0.1:5002 --server http://127.0.0.1:5001"
+        );
+        let by_estimate = plan(&["--explore", "--explore-pose", "estimate"]).expect("valid");
+        let command = line(&explore(&by_estimate, &by_estimate.robots[0], &addresses));
+        assert!(command.ends_with(" --pose estimate"), "{command}");
+        let command = line(&localize(&by_estimate, &by_estimate.robots[0], &addresses));
+        assert!(command.ends_with(" --initial-pose true"), "{command}");
+        let command = line(&localize(&by_truth, &by_truth.robots[0], &addresses));
+        assert!(!command.contains("--initial-pose"), "{command}");
+        // Their localizers start with them, unless told otherwise.
+        assert_eq!(by_estimate.schedule.localize_at_s, 0.0);
+        let later = plan(&[
+            "--explore",
+            "--explore-pose",
+            "estimate",
+            "--localize-at",
+            "20",
+        ])
+        .expect("valid");
+        assert_eq!(later.schedule.localize_at_s, 20.0);
+        let error = plan_error(&["--explore", "--explore-pose", "estimate", "--no-localize"]);
+        assert!(error.contains("--no-localize"), "{error}");
+        assert!(plan(&["--explore-pose", "estimate"]).is_err());
     }
 
     #[test]

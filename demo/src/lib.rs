@@ -56,6 +56,6 @@ mod run;
 mod status_line;
 
 pub use coverage::CoverageSample;
-pub use options::DemoOptions;
+pub use options::{DemoOptions, ExplorePose};
 pub use report::{DemoKidnapRecord, DemoReport};
 pub use run::run;

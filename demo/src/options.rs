@@ -78,6 +78,13 @@ pub struct DemoOptions {
     /// reach is left.
     #[arg(long)]
     pub explore: bool,
+    /// The pose the explorers plan and steer from: `true` (the simulator's)
+    /// or `estimate` (their localizers' converged estimates carried
+    /// forward by odometry; each robot turns on the spot until its
+    /// localizer has found it, and the localizers start at once unless
+    /// --localize-at says otherwise).
+    #[arg(long, value_enum, default_value_t = ExplorePose::True, requires = "explore")]
+    pub explore_pose: ExplorePose,
     /// The localizers correct with every frame, however far behind their
     /// robots they fall (by default one that falls behind skips to the
     /// newest frame within a second): for a machine too slow for the
@@ -98,6 +105,25 @@ pub struct DemoOptions {
     /// replaced.
     #[arg(long, default_value = "demo-out")]
     pub out: PathBuf,
+}
+
+/// Which pose the demo's explorers drive from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ExplorePose {
+    /// The simulator's true pose.
+    True,
+    /// The localizer's converged estimates, carried forward by odometry.
+    Estimate,
+}
+
+impl ExplorePose {
+    /// The flag's value, as report.json records it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::True => "true",
+            Self::Estimate => "estimate",
+        }
+    }
 }
 
 /// The demo's times, checked: when the robots stop, how fast the simulator
@@ -149,11 +175,18 @@ impl DemoOptions {
                 self.speed
             );
         }
+        if self.explore_pose == ExplorePose::Estimate && self.no_localize {
+            bail!(
+                "--explore-pose estimate drives from the localizers' estimates: it cannot go with --no-localize"
+            );
+        }
         let localize_at = match self.localize_at {
             Some(t) if !(t.is_finite() && (0.0..duration).contains(&t)) => {
                 bail!("--localize-at must be within 0 and --duration ({duration} s), got {t}")
             }
             Some(t) => t,
+            // Explorers that drive from their estimates wait for them.
+            None if self.explore_pose == ExplorePose::Estimate => 0.0,
             None => duration / 4.0,
         };
         let kidnap_at = match (self.no_kidnap || self.no_localize, self.kidnap_at) {

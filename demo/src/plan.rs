@@ -10,7 +10,7 @@ use deog_simulator::SonarPreset;
 use deog_simulator::deog_rig::{Rig, load_rig_spec};
 use deog_world::{World, load_world_spec};
 
-use crate::options::{DemoOptions, MAX_ROBOTS, Schedule};
+use crate::options::{DemoOptions, ExplorePose, MAX_ROBOTS, Schedule};
 
 /// One robot of the demo.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -53,6 +53,8 @@ pub(crate) struct DemoPlan {
     pub foxglove: std::net::SocketAddr,
     /// Whether explorers drive the robots rather than wanderers.
     pub explore: bool,
+    /// The pose the explorers drive from.
+    pub explore_pose: ExplorePose,
     /// Whether localizers run.
     pub localize: bool,
     /// The PostgreSQL database the servers share; `None` for a sled store
@@ -109,6 +111,7 @@ impl DemoPlan {
             view: (!options.no_view).then_some(options.view),
             foxglove: options.foxglove,
             explore: options.explore,
+            explore_pose: options.explore_pose,
             localize: !options.no_localize,
             store: options.store.clone(),
             servers: options.servers.max(1) as usize,

@@ -88,6 +88,9 @@ pub struct DemoReport {
     /// Whether explorers drove the robots (`--explore`) rather than
     /// wanderers.
     pub explore: bool,
+    /// The pose the explorers drove from (`--explore-pose`): `true` or
+    /// `estimate`.
+    pub explore_pose: String,
     /// The map's coverage of the world's reachable free space, every 10
     /// simulated seconds and once the robots stopped.
     pub coverage: Vec<CoverageSample>,
@@ -160,6 +163,7 @@ impl DemoReport {
                 to: k.to.into(),
             }),
             explore: plan.explore,
+            explore_pose: plan.explore_pose.name().to_string(),
             coverage: outcome.coverage.clone(),
             coverage_95_s: time_to(&outcome.coverage, 0.95),
             coverage_99_s: time_to(&outcome.coverage, 0.99),
@@ -245,6 +249,7 @@ mod tests {
                 "localize_at_s",
                 "kidnap",
                 "explore",
+                "explore_pose",
                 "coverage",
                 "coverage_95_s",
                 "coverage_99_s",
@@ -254,6 +259,7 @@ mod tests {
             ])
         );
         assert_eq!(json["explore"], false);
+        assert_eq!(json["explore_pose"], "true");
         assert_eq!(
             json["coverage"][1],
             serde_json::json!({"simulated_s": 20.0, "fraction": 0.97})

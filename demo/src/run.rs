@@ -16,7 +16,7 @@ use crate::coverage::CoverageCurve;
 use crate::judge::judge;
 use crate::kidnap::{KidnapDone, kidnap_robot};
 use crate::markdown;
-use crate::options::DemoOptions;
+use crate::options::{DemoOptions, ExplorePose};
 use crate::pacer::Pacer;
 use crate::plan::DemoPlan;
 use crate::progress::Progress;
@@ -269,8 +269,13 @@ impl Demo<'_> {
                     &commands::localize(plan, robot, &self.addresses),
                 )?;
                 localizers_started += 1;
+                let knowing = if plan.explore && plan.explore_pose == ExplorePose::Estimate {
+                    "knowing where the robot started"
+                } else {
+                    "knowing nothing of where the robot is"
+                };
                 self.status.note(&format!(
-                    "{now:.0} s: {}'s localizer started, knowing nothing of where the robot is",
+                    "{now:.0} s: {}'s localizer started, {knowing}",
                     robot.name
                 ));
             }

@@ -240,6 +240,13 @@ pub struct CorrectionReport {
 /// its modes: a tracking filter's few modes, not a global search.
 const UPHILL_MOST: usize = 5_000;
 
+/// The widest a cluster may spread, metres (the root of its position
+/// variances' sum) and radians, and still be a pose the filter tracks:
+/// wider than settled, so that a filter started at a pose given to
+/// within 0.25 m tracks it from its first frame.
+const TRACKED_SPREAD_M: f64 = 1.0;
+const TRACKED_SPREAD_RAD: f64 = 0.5;
+
 /// Monte Carlo Localization of one robot.
 #[derive(Debug)]
 pub struct Mcl {
@@ -253,6 +260,11 @@ pub struct Mcl {
     w_slow: f64,
     w_fast: f64,
     cluster: Option<ClusterEstimate>,
+    /// The tracked cluster's mean ([`Mcl::tracked_pose`]), moved by the
+    /// odometry since it was found: the pose the sensor model judges a
+    /// frame's readings at ([`SensorModel::set_reference`]). `None` while
+    /// searching.
+    reference: Option<Pose2>,
     scratch_log: Vec<f64>,
     /// The new weights as [`Self::correct`] works them out.
     scratch_weights: Vec<f64>,
@@ -290,6 +302,7 @@ impl Mcl {
             w_slow: 0.0,
             w_fast: 0.0,
             cluster: None,
+            reference: None,
             scratch_log: Vec::new(),
             scratch_weights: Vec::new(),
             uphill: Vec::new(),
@@ -413,6 +426,20 @@ impl Mcl {
         self.w_slow = 0.0;
         self.w_fast = 0.0;
         self.cluster = heaviest_cluster(&self.particles, &self.weights, self.settings.bins);
+        self.reference = self.tracked_pose();
+    }
+
+    /// The heaviest cluster's mean, when the filter holds mostly that one
+    /// mode: settled, or gathered about a pose it was started at.
+    fn tracked_pose(&self) -> Option<Pose2> {
+        self.cluster
+            .filter(|cluster| {
+                let c = cluster.covariance;
+                cluster.weight >= self.settings.converged_weight
+                    && (c[0] + c[4]).sqrt() <= TRACKED_SPREAD_M
+                    && c[8].sqrt() <= TRACKED_SPREAD_RAD
+            })
+            .map(|cluster| cluster.pose)
     }
 
     /// Takes the frame's odometry pose. Returns true when a sensor update
@@ -433,6 +460,7 @@ impl Mcl {
         for p in &mut self.particles {
             *p = step.sample(p, &self.settings.motion, &mut self.rng);
         }
+        self.reference = self.reference.map(|pose| step.apply(&pose));
         self.odometry = Some(odometry);
         Ok(true)
     }
@@ -479,6 +507,7 @@ impl Mcl {
         }
         let keys = self.tiles_for_frame(map, ranges);
         self.sensor.set_searching(!self.settled());
+        self.sensor.set_reference(self.reference);
         self.scratch_log.clear();
         self.sensor
             .score_particles(map, &keys, &self.particles, ranges, &mut self.scratch_log)
@@ -572,6 +601,7 @@ impl Mcl {
         self.cluster = clusters
             .heaviest()
             .map(|best| clusters.summarize(&self.particles, &self.weights, best));
+        self.reference = self.tracked_pose();
         if ess < self.settings.resample_below * self.particles.len() as f64 || inject > 0.0 {
             report.injected = self.resample(map, inject, &clusters)?;
             self.move_uphill(map, ranges)?;

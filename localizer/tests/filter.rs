@@ -404,3 +404,51 @@ fn tables_under_a_pose_are_the_tiles_under_its_sensors_built_once() {
     assert_eq!(map.ensure_tables(keys.iter().copied(), &[]).unwrap(), 0);
     assert_eq!(map.tables_under(&ring, &pose).unwrap(), keys);
 }
+
+/// The room with the cells east of `x_seen` never observed: a map still
+/// being built.
+fn room_seen_west_of(x_seen: f64) -> LocalMap {
+    let mut map = LocalMap::new(settings(1 << 30)).unwrap();
+    for ty in -1..=2 {
+        for tx in -1..=3 {
+            let key = TileKey::new(tx, ty);
+            let tile = tile_of(key, |x, y| {
+                if x > x_seen {
+                    i16::MIN
+                } else {
+                    room_log_odds(x, y)
+                }
+            });
+            map.insert_tile(key, 1, Some(&tile)).unwrap();
+        }
+    }
+    map
+}
+
+#[test]
+fn tracking_at_the_edge_of_a_map_being_built_keeps_its_pose() {
+    // The robot circles across the edge of what the map has seen, its
+    // sonars hearing walls in the unseen half; the frames are cast in the
+    // whole room.
+    let whole = room();
+    let mut seen = room_seen_west_of(2.5);
+    let steps = path(240);
+    let mut mcl = filter(5_000, 5);
+    let start = steps[0].0;
+    mcl.start_at(start, 0.1, 0.05).unwrap();
+    let mut errors = Vec::new();
+    for (truth, odometry) in &steps {
+        if mcl.predict(odometry).unwrap() {
+            let ranges = frame(&whole, truth);
+            mcl.correct(&mut seen, &ranges).unwrap();
+        }
+        errors.push(error(&mcl.estimate(odometry).unwrap().pose, truth));
+    }
+    let worst = errors.iter().map(|e| e.0).fold(0.0, f64::max);
+    let mean = errors.iter().map(|e| e.0).sum::<f64>() / errors.len() as f64;
+    assert!(
+        worst < 0.25,
+        "worst position error {worst:.3} m, mean {mean:.3} m"
+    );
+    assert!(mean < 0.08, "mean position error {mean:.3} m");
+}

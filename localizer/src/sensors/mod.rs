@@ -128,6 +128,15 @@ pub trait SensorModel: std::fmt::Debug + Send {
         let _ = searching;
     }
 
+    /// The filter tells the model, before each frame is scored, the pose
+    /// it tracks once it has settled on one (`None` while it searches): a
+    /// model may judge the frame's readings there once. The sonar passes
+    /// over echoes from space the map has not seen ([`sonar_cone`]). By
+    /// default, ignored.
+    fn set_reference(&mut self, reference: Option<Pose2>) {
+        let _ = reference;
+    }
+
     /// Whether [`Self::refine_pose`] may refine a pose: when not, the
     /// localizer skips fetching its tiles.
     fn refines(&self) -> bool {
