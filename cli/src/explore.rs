@@ -240,12 +240,7 @@ impl Planner {
     /// Reads what changed on the map, then plans from the request's pose.
     async fn plan(&mut self, request: &PlanRequest) -> Result<Plan> {
         let began = std::time::Instant::now();
-        let PlanRequest {
-            pose,
-            now_s,
-            current,
-            ref blacklist,
-        } = *request;
+        let PlanRequest { pose, now_s, .. } = *request;
         let info = self.client.map_info(&self.map).await?;
         let robot = self.resolution.cell_of(pose.x, pose.y)?;
         let around = CellBox::new(
@@ -263,6 +258,26 @@ impl Planner {
         };
         self.cache.refresh(&self.client, region).await?;
         let claims = self.claims(now_s).await?;
+        // Planning is seconds of CPU on a large map at fine cells: off the
+        // runtime's workers, or the steering task waiting behind it on the
+        // same worker drives blind on its last command meanwhile.
+        tokio::task::block_in_place(|| self.plan_on_cells(began, region, &claims, request))
+    }
+
+    /// [`Self::plan`]'s work once the map and the claims are read: the
+    /// windows, the costs, the goal and the path to it.
+    fn plan_on_cells(
+        &self,
+        began: std::time::Instant,
+        region: CellBox,
+        claims: &[(f64, f64)],
+        &PlanRequest {
+            pose,
+            current,
+            ref blacklist,
+            ..
+        }: &PlanRequest,
+    ) -> Result<Plan> {
         let view = CachedMap {
             cache: &self.cache,
             thresholds: OccupancyThresholds::default(),
@@ -272,14 +287,14 @@ impl Planner {
         let mut attempt = self.attempt(
             fine.coarsened(self.coarsening)?,
             self.costs,
-            &claims,
+            claims,
             request,
         )?;
         // Nothing reachable on merged cells may be a gap they close: look
         // again on the map's own cells before giving up.
         let mut tight = false;
         if attempt.chosen.is_none() && self.coarsening > 1 {
-            attempt = self.attempt(fine, self.fine_costs, &claims, request)?;
+            attempt = self.attempt(fine, self.fine_costs, claims, request)?;
             tight = true;
         }
         tracing::debug!(
@@ -711,6 +726,17 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
                 planning = false;
                 let (request, plan) = answer?;
                 match plan {
+                    Plan::Go { ref goal, .. }
+                        if explorer.blacklist.bars(
+                            goal.x,
+                            goal.y,
+                            explorer.goals.blacklist_radius_m,
+                        ) =>
+                    {
+                        // Planned before its goal was barred: plan again
+                        // with the blacklist as it is now.
+                        pursuit = None;
+                    }
                     Plan::Go {
                         goal,
                         follower,
