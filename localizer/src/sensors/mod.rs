@@ -129,7 +129,7 @@ pub trait SensorModel: std::fmt::Debug + Send {
     }
 
     /// The filter tells the model, before each frame is scored, the pose
-    /// it tracks once it has settled on one (`None` while it searches): a
+    /// it tracks while it holds mostly one mode (`None` while it searches): a
     /// model may judge the frame's readings there once. The sonar passes
     /// over echoes from space the map has not seen ([`sonar_cone`]). By
     /// default, ignored.

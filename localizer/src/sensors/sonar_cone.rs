@@ -139,11 +139,6 @@ impl SonarCone {
             .map(|(table, (value, flat))| Ok(if value.is_some() { flat } else { table }))
             .collect()
     }
-
-    /// How many beams of the last frame scored were unexplained.
-    pub fn unexplained_beams(&self) -> usize {
-        self.unexplained.iter().filter(|v| v.is_some()).count()
-    }
 }
 
 /// Fractions of the half-angle at which [`echo_from_unseen_space`] casts
