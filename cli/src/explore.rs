@@ -101,9 +101,14 @@ const ESTIMATE_POLL: Duration = Duration::from_millis(250);
 const WINDOW_MARGIN_CELLS: i32 = 40;
 /// Plans in a row that found nothing before the robot is done.
 const EMPTY_PLANS_TO_STOP: u32 = 3;
+/// Simulated seconds a robot keeps looking when frontiers remain but none
+/// can be reached: the map changes under it (a wall thickened by a
+/// sonar's cone thins as more frames come, other robots open the way).
+const UNREACHABLE_PATIENCE_S: f64 = 30.0;
 /// Simulated seconds another explorer's goal counts without news of it.
 const CLAIM_LIFETIME_S: f64 = 120.0;
-/// Simulated seconds a barred goal stays barred.
+/// Simulated seconds a barred goal stays barred the first time; barred
+/// again at the same place, it stays barred as long as a goal reached.
 const BAR_S: f64 = 60.0;
 /// Simulated seconds a goal reached stays barred: for the rest of any
 /// run worth the name (a frontier still there once reached is one nothing
@@ -116,6 +121,8 @@ const ARRIVED_BAR_REACH_M: f64 = 2.5;
 const ARRIVED_BAR_CELL_M: f64 = 0.15;
 /// Blocked this near its goal, metres, the robot counts it reached.
 const BLOCKED_REACHES_M: f64 = 1.0;
+/// The margin past the body's radius of the last attempt at a plan, metres.
+const SQUEEZE_MARGIN_M: f64 = 0.05;
 /// A tight plan's share of the cruise speed.
 const TIGHT_SPEED_SHARE: f64 = 0.5;
 /// Simulated seconds without nearing its goal before it is barred.
@@ -163,6 +170,10 @@ struct Planner {
     costs: CostParams,
     /// The costs on the map's own cells, where a narrower margin suffices.
     fine_costs: CostParams,
+    /// The last resort on the map's own cells: a margin of a few
+    /// centimetres, for gaps a sonar's cones have narrowed on the map
+    /// (the follower's own ranges still stop the robot short of a wall).
+    squeeze_costs: CostParams,
     goals: GoalParams,
     follow: FollowParams,
     min_frontier_m: f64,
@@ -197,6 +208,11 @@ struct Explorer {
     follow: FollowParams,
     goals: GoalParams,
     blacklist: Blacklist,
+    /// Where goals were not neared, so that a second time there bars the
+    /// place for good.
+    stalled_at: Vec<(f64, f64)>,
+    /// When the last bar for a while runs out, simulated seconds.
+    bars_lapse_s: f64,
 }
 
 impl Planner {
@@ -228,6 +244,10 @@ impl Planner {
             resolution,
             costs,
             fine_costs,
+            squeeze_costs: CostParams {
+                lethal_radius_m: rig.body_radius() + SQUEEZE_MARGIN_M,
+                ..costs
+            },
             goals: GoalParams::default(),
             follow: follow_params(args)?,
             min_frontier_m: args.min_frontier_m,
@@ -294,7 +314,12 @@ impl Planner {
         // again on the map's own cells before giving up.
         let mut tight = false;
         if attempt.chosen.is_none() && self.coarsening > 1 {
-            attempt = self.attempt(fine, self.fine_costs, claims, request)?;
+            attempt = self.attempt(fine.clone(), self.fine_costs, claims, request)?;
+            tight = true;
+        }
+        // Still nothing, with frontiers left: squeeze through.
+        if attempt.chosen.is_none() && attempt.frontiers > 0 {
+            attempt = self.attempt(fine, self.squeeze_costs, claims, request)?;
             tight = true;
         }
         tracing::debug!(
@@ -460,6 +485,23 @@ fn follow_params(args: &ExploreArgs) -> Result<FollowParams> {
 impl Explorer {
     /// Tells the other explorers where this one is heading; `active`
     /// false gives the goal up.
+    /// Bars a goal not neared: for a while the first time, as long as a
+    /// goal reached when the robot failed there before.
+    fn bar_stalled(&mut self, x: f64, y: f64, now_s: f64) {
+        let radius = self.goals.blacklist_radius_m;
+        let again = self
+            .stalled_at
+            .iter()
+            .any(|&(sx, sy)| (sx - x).hypot(sy - y) <= radius);
+        if again {
+            self.blacklist.add(x, y, now_s + ARRIVED_BAR_S);
+        } else {
+            self.blacklist.add(x, y, now_s + BAR_S);
+            self.bars_lapse_s = self.bars_lapse_s.max(now_s + BAR_S);
+            self.stalled_at.push((x, y));
+        }
+    }
+
     async fn publish_goal(&self, x: f64, y: f64, time_s: f64, active: bool) -> Result<()> {
         self.client
             .publish_goal(pb::ExplorationGoal {
@@ -497,6 +539,7 @@ struct Pursuit {
     goal: Goal,
     follower: PathFollower,
     planned_at_s: f64,
+    /// The shortest way left along the path so far, metres, and when.
     best_distance: f64,
     best_at_s: f64,
 }
@@ -605,6 +648,8 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
         follow: planner.follow,
         goals: planner.goals,
         blacklist: Blacklist::default(),
+        stalled_at: Vec::new(),
+        bars_lapse_s: f64::NEG_INFINITY,
     };
     let (plan_requests, mut plans) = spawn_planner(planner);
     let mut reckoning = DeadReckoning::new();
@@ -625,6 +670,8 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
     let mut pursuit: Option<Pursuit> = None;
     let mut look_about_until: Option<f64> = None;
     let mut empty_plans = 0;
+    // When the plans began to find frontiers but none in reach.
+    let mut out_of_reach_since: Option<f64> = None;
     let mut last_sequence = 0;
     let mut start_time = None;
     let mut last_pose: Option<Pose2> = None;
@@ -743,6 +790,7 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
                         tight,
                     } => {
                         empty_plans = 0;
+                        out_of_reach_since = None;
                         // The same goal as the last one, even if the pursuit
                         // was dropped in between (blocked, looking about):
                         // its progress carries over, so a goal the robot
@@ -750,7 +798,7 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
                         let same = last_goal.is_some_and(|(x, y, _, _)| {
                             (x - goal.x).hypot(y - goal.y) <= explorer.goals.current_radius_m
                         });
-                        let distance = (goal.x - pose.x).hypot(goal.y - pose.y);
+                        let distance = follower.remaining_length_m(pose);
                         let (best_distance, best_at_s) = match last_goal {
                             Some((_, _, best, at)) if same => (best, at),
                             _ => {
@@ -783,13 +831,24 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
                     Plan::Nothing { frontiers } => {
                         pursuit = None;
                         empty_plans += 1;
+                        let since = *out_of_reach_since.get_or_insert(now);
                         tracing::info!(frontiers, empty_plans, "no reachable frontier");
-                        if empty_plans >= EMPTY_PLANS_TO_STOP {
+                        // Frontiers left out of reach: not done while the
+                        // map may yet open a way or a bar run out.
+                        let hoping = frontiers > 0
+                            && (now - since < UNREACHABLE_PATIENCE_S
+                                || now < explorer.bars_lapse_s);
+                        if empty_plans >= EMPTY_PLANS_TO_STOP && !hoping {
                             summary.finished = true;
                             break 'run;
                         }
-                        // Let the cartographer catch up before looking again.
+                        // Let the cartographer catch up before looking
+                        // again; turn meanwhile, so that the sonars sweep
+                        // what the map holds around the robot.
                         next_plan_s = now + 1.0;
+                        if frontiers > 0 {
+                            look_about_until = Some(now + LOOK_ABOUT_S);
+                        }
                         sim.drive(&args.robot, 0.0, 0.0).await?;
                         continue;
                     }
@@ -822,8 +881,11 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
             continue;
         };
         let distance = (p.goal.x - pose.x).hypot(p.goal.y - pose.y);
-        if distance < p.best_distance - 0.1 {
-            p.best_distance = distance;
+        // Progress is the way left along the path, which falls as the
+        // robot goes round a pillar while the straight distance may not.
+        let way_left = p.follower.remaining_length_m(pose);
+        if way_left < p.best_distance - 0.1 {
+            p.best_distance = way_left;
             p.best_at_s = now;
         }
         last_goal = Some((p.goal.x, p.goal.y, p.best_distance, p.best_at_s));
@@ -866,7 +928,7 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
             FollowCommand::Drive { linear, angular } if !stalled => (linear, angular),
             _ => {
                 if stalled {
-                    explorer.blacklist.add(p.goal.x, p.goal.y, now + BAR_S);
+                    explorer.bar_stalled(p.goal.x, p.goal.y, now);
                     last_goal = None;
                     summary.barred += 1;
                     tracing::info!(

@@ -180,6 +180,23 @@ impl PathFollower {
         &self.path[self.progress..]
     }
 
+    /// The length of the way left from `pose`, metres: to the nearest
+    /// point not yet passed, then along the path from it. Unlike the
+    /// straight distance to the goal, it falls as a robot goes round an
+    /// obstacle.
+    pub fn remaining_length_m(&self, pose: Pose2) -> f64 {
+        let remaining = self.remaining();
+        let distance = |&(x, y): &(f64, f64)| (x - pose.x).hypot(y - pose.y);
+        let nearest = (0..remaining.len())
+            .min_by(|&a, &b| distance(&remaining[a]).total_cmp(&distance(&remaining[b])))
+            .unwrap_or(0);
+        let along: f64 = remaining[nearest..]
+            .windows(2)
+            .map(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1))
+            .sum();
+        distance(&remaining[nearest]) + along
+    }
+
     /// The command at `pose` with `clearance` around it.
     pub fn command(&mut self, pose: Pose2, clearance: Clearance) -> FollowCommand {
         let p = self.params;
@@ -292,6 +309,35 @@ mod tests {
         );
         assert_eq!(last, FollowCommand::Arrived, "{pose:?}");
         assert!((pose.x - 2.0).hypot(pose.y - 2.0) <= 0.3);
+    }
+
+    #[test]
+    fn the_way_left_falls_round_a_corner_where_the_straight_distance_does_not() {
+        // Round a U: out 1 m, across 1 m, back 1 m; the goal lies 1 m from
+        // the start.
+        let path: Vec<(f64, f64)> = (0..=10)
+            .map(|i| (f64::from(i) * 0.1, 0.0))
+            .chain((1..=10).map(|i| (1.0, f64::from(i) * 0.1)))
+            .chain((1..=10).map(|i| (1.0 - f64::from(i) * 0.1, 1.0)))
+            .collect();
+        let follower = PathFollower::new(path, FollowParams::default()).unwrap();
+        let start = Pose2 {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+        };
+        assert!((follower.remaining_length_m(start) - 3.0).abs() < 1e-9);
+        // At the far corner the goal is no nearer in a straight line...
+        let corner = Pose2 {
+            x: 1.0,
+            y: 0.0,
+            theta: std::f64::consts::FRAC_PI_2,
+        };
+        let (gx, gy) = follower.goal();
+        assert!((gx - corner.x).hypot(gy - corner.y) > 1.4);
+        // ...but a third of the way has gone.
+        let left = follower.remaining_length_m(corner);
+        assert!((left - 2.0).abs() < 1e-9, "{left}");
     }
 
     #[test]
