@@ -19,8 +19,9 @@ use std::time::Duration;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use deog_explore::{
-    Blacklist, Clearance, CostParams, Costmap, DeadReckoning, FollowCommand, FollowParams, Goal,
-    GoalParams, OccupancyWindow, PathFollower, TravelCosts, choose_goal_keeping, find_frontiers,
+    Blacklist, Clearance, CostParams, Costmap, DeadReckoning, FollowCommand, FollowParams,
+    Frontier, Goal, GoalParams, OccupancyWindow, PathFollower, TravelCosts, approach_goal,
+    choose_goal_keeping, find_frontiers, find_undecided,
 };
 use deog_grid::{
     CellBox, CellIndex, Occupancy, OccupancyThresholds, OccupancyView, Pose2, Resolution, TileSize,
@@ -121,9 +122,19 @@ const ARRIVED_BAR_REACH_M: f64 = 2.5;
 const ARRIVED_BAR_CELL_M: f64 = 0.15;
 /// Blocked this near its goal, metres, the robot counts it reached.
 const BLOCKED_REACHES_M: f64 = 1.0;
+/// Bands the map has seen but not decided shorter than this, metres, are
+/// not worth a look.
+const UNDECIDED_MIN_M: f64 = 0.3;
+/// A frontier no path reaches is looked at from the reachable cell nearest
+/// it, if one lies within this distance, metres.
+const APPROACH_REACH_M: f64 = 2.0;
+/// A place a frontier was looked at from is not used again within this
+/// distance, metres.
+const APPROACH_BAR_M: f64 = 0.5;
 /// The margin past the body's radius of the last attempt at a plan, metres.
 const SQUEEZE_MARGIN_M: f64 = 0.05;
-/// A tight plan's share of the cruise speed.
+/// A tight plan's share of the cruise speed, and of the distances at
+/// which the robot slows and stops short of an echo.
 const TIGHT_SPEED_SHARE: f64 = 0.5;
 /// Simulated seconds without nearing its goal before it is barred.
 const STALL_S: f64 = 12.0;
@@ -186,7 +197,7 @@ struct Attempt {
     window: OccupancyWindow,
     costs: TravelCosts,
     chosen: Option<Goal>,
-    frontiers: usize,
+    frontiers: Vec<Frontier>,
     known_nearby: bool,
 }
 
@@ -318,13 +329,31 @@ impl Planner {
             tight = true;
         }
         // Still nothing, with frontiers left: squeeze through.
-        if attempt.chosen.is_none() && attempt.frontiers > 0 {
+        if attempt.chosen.is_none() && !attempt.frontiers.is_empty() {
             attempt = self.attempt(fine, self.squeeze_costs, claims, request)?;
+            tight = true;
+        }
+        // Frontiers left, none in reach even so: go and look at one from
+        // as near as the robot can get.
+        if attempt.chosen.is_none() && !attempt.frontiers.is_empty() {
+            attempt.chosen = approach_goal(
+                &attempt.window,
+                &attempt.frontiers,
+                &attempt.costs,
+                blacklist,
+                APPROACH_REACH_M,
+                &self.goals,
+            );
+        }
+        // No frontier at all: look again, from near, at what the map has
+        // seen but not decided.
+        if attempt.chosen.is_none() && attempt.frontiers.is_empty() {
+            attempt.chosen = self.undecided_goal(&attempt, claims, request);
             tight = true;
         }
         tracing::debug!(
             cells = attempt.window.len(),
-            frontiers = attempt.frontiers,
+            frontiers = attempt.frontiers.len(),
             ms = began.elapsed().as_secs_f64() * 1e3,
             "planned"
         );
@@ -339,7 +368,9 @@ impl Planner {
             if !known_nearby {
                 return Ok(Plan::LookAbout);
             }
-            return Ok(Plan::Nothing { frontiers });
+            return Ok(Plan::Nothing {
+                frontiers: frontiers.len(),
+            });
         };
         let goal_index = window
             .index_of(goal.cell)
@@ -350,10 +381,14 @@ impl Planner {
             .into_iter()
             .map(|cell| window.centre_of(cell))
             .collect();
-        // Through a tight gap the robot goes slower.
+        // Through a tight gap the robot goes slower, and so may come
+        // nearer an echo before it stops: between pillars it could not
+        // pass otherwise.
         let follow = if tight {
             FollowParams {
                 cruise_speed: self.follow.cruise_speed * TIGHT_SPEED_SHARE,
+                stop_distance_m: self.follow.stop_distance_m * TIGHT_SPEED_SHARE,
+                slow_distance_m: self.follow.slow_distance_m * TIGHT_SPEED_SHARE,
                 ..self.follow
             }
         } else {
@@ -393,12 +428,50 @@ impl Planner {
             &self.goals,
         );
         Ok(Attempt {
-            frontiers: frontiers.len(),
+            frontiers,
             window,
             costs,
             chosen,
             known_nearby,
         })
+    }
+
+    /// The best of the bands the map has observed but not decided, beside
+    /// free cells, on `attempt`'s window and costs (at the map's own
+    /// cells); `None` if none is reachable or worth a look.
+    fn undecided_goal(
+        &self,
+        attempt: &Attempt,
+        claims: &[(f64, f64)],
+        (_, current, blacklist): (Pose2, Option<(f64, f64)>, &Blacklist),
+    ) -> Option<Goal> {
+        let window = &attempt.window;
+        if window.resolution() != self.resolution {
+            return None;
+        }
+        let thresholds = OccupancyThresholds::default();
+        let undecided: Vec<bool> = (0..window.len())
+            .map(|index| {
+                let belief = self.cache.cell(window.cell_at(index));
+                belief.is_some() && thresholds.classify(belief) == Occupancy::Unknown
+            })
+            .collect();
+        let bands = find_undecided(window, &undecided, UNDECIDED_MIN_M);
+        let goal = choose_goal_keeping(
+            window,
+            &bands,
+            &attempt.costs,
+            claims,
+            blacklist,
+            current,
+            &self.goals,
+        );
+        tracing::debug!(
+            bands = bands.len(),
+            chosen = goal.is_some(),
+            "undecided bands"
+        );
+        goal
     }
 
     /// The goals other explorers hold on the map: active, and set within
@@ -809,6 +882,7 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
                                     frontier_m = goal.frontier_m,
                                     travel_m = goal.travel_m,
                                     tight,
+                                    approach = goal.approach,
                                     "new goal"
                                 );
                                 (distance, now)
@@ -895,7 +969,7 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
             x = pose.x,
             y = pose.y,
             theta = pose.theta,
-            front = clearance.front,
+            front = clearance.front(),
             ?command,
             "steering"
         );
@@ -905,6 +979,21 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
             || (command == FollowCommand::Blocked && distance <= BLOCKED_REACHES_M);
         let (linear, angular) = match command {
             _ if reached => {
+                // A frontier looked at from near: not from here again;
+                // turn, so that the sonars sweep it, then plan (the way
+                // there may have opened).
+                if p.goal.approach {
+                    explorer.blacklist.add_within(
+                        p.goal.x,
+                        p.goal.y,
+                        APPROACH_BAR_M,
+                        now + ARRIVED_BAR_S,
+                    );
+                    look_about_until = Some(now + LOOK_ABOUT_S);
+                    pursuit = None;
+                    sim.drive(&args.robot, 0.0, 0.0).await?;
+                    continue;
+                }
                 // A frontier the robot stands at and still sees as one (a
                 // gap in a wall's line, the far side of furniture) cannot
                 // be seen better from there: bar its cells around the

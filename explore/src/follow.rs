@@ -23,6 +23,9 @@ pub struct FollowParams {
     pub turn_in_place_rad: f64,
     /// Clearance ahead below which the robot stops, metres.
     pub stop_distance_m: f64,
+    /// Clearance beside the path (between [`FRONT_DEG`] and
+    /// [`BESIDE_DEG`] off the heading) below which it stops, metres.
+    pub beside_stop_m: f64,
     /// Clearance ahead below which it slows, metres.
     pub slow_distance_m: f64,
 }
@@ -36,6 +39,7 @@ impl Default for FollowParams {
             goal_tolerance_m: 0.3,
             turn_in_place_rad: 1.0,
             stop_distance_m: 0.45,
+            beside_stop_m: 0.15,
             slow_distance_m: 1.0,
         }
     }
@@ -51,6 +55,7 @@ impl FollowParams {
             ("goal_tolerance_m", self.goal_tolerance_m),
             ("turn_in_place_rad", self.turn_in_place_rad),
             ("stop_distance_m", self.stop_distance_m),
+            ("beside_stop_m", self.beside_stop_m),
         ];
         for (name, value) in positive {
             if !(value.is_finite() && value > 0.0) {
@@ -74,11 +79,14 @@ impl FollowParams {
 }
 
 /// What the robot's own ranges see, metres from its body's edge: ahead
-/// (within a narrow cone of its heading), and to the left and right.
+/// (within a narrow cone of its heading), beside the path, and to the
+/// left and right.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Clearance {
-    /// Ahead.
-    pub front: f64,
+    /// Ahead: within [`FRONT_DEG`] of the heading.
+    pub ahead: f64,
+    /// Beside the path: from [`FRONT_DEG`] to [`BESIDE_DEG`] off it.
+    pub beside: f64,
     /// Left.
     pub left: f64,
     /// Right.
@@ -89,19 +97,28 @@ pub struct Clearance {
 pub const FRONT_DEG: f64 = 15.0;
 /// ...and those from there to this bearing, degrees, beside the path...
 pub const BESIDE_DEG: f64 = 60.0;
-/// ...and count as this much farther, metres: they stop the robot only
-/// within the follower's stop distance less this.
+/// ...and count as this much farther when the robot slows for what lies
+/// ahead, metres.
 pub const BESIDE_ALLOWANCE_M: f64 = 0.3;
 
 impl Clearance {
+    /// The clearance ahead the robot slows for: ahead, or beside the path
+    /// counted [`BESIDE_ALLOWANCE_M`] farther (a cone beside the heading
+    /// may hear something off to the side: a door's jamb, a pillar passed
+    /// between).
+    pub fn front(&self) -> f64 {
+        self.ahead.min(self.beside + BESIDE_ALLOWANCE_M)
+    }
+
     /// What echoes at `points` (metres in the robot's frame, x ahead, y to
     /// the left) leave around a body of `body_radius_m`: ahead the nearest
-    /// within [`FRONT_DEG`], and those up to [`BESIDE_DEG`] counted
-    /// [`BESIDE_ALLOWANCE_M`] farther; left and right the nearest between
-    /// 35° and 120° off the heading.
+    /// within [`FRONT_DEG`], beside the nearest from there to
+    /// [`BESIDE_DEG`]; left and right the nearest between 35° and 120° off
+    /// the heading.
     pub fn of_echoes(points: impl IntoIterator<Item = (f64, f64)>, body_radius_m: f64) -> Self {
         let mut clearance = Clearance {
-            front: f64::INFINITY,
+            ahead: f64::INFINITY,
+            beside: f64::INFINITY,
             left: f64::INFINITY,
             right: f64::INFINITY,
         };
@@ -109,12 +126,9 @@ impl Clearance {
             let distance = (x.hypot(y) - body_radius_m).max(0.0);
             let bearing = normalize_angle(y.atan2(x)).to_degrees();
             if bearing.abs() <= FRONT_DEG {
-                clearance.front = clearance.front.min(distance);
+                clearance.ahead = clearance.ahead.min(distance);
             } else if bearing.abs() <= BESIDE_DEG {
-                // A cone beside the heading may hear something off to the
-                // side (a door's jamb, a pillar passed between): it stops
-                // the robot only when that is close.
-                clearance.front = clearance.front.min(distance + BESIDE_ALLOWANCE_M);
+                clearance.beside = clearance.beside.min(distance);
             }
             let side = if (35.0..=120.0).contains(&bearing) {
                 &mut clearance.left
@@ -222,10 +236,10 @@ impl PathFollower {
                 angular: turn,
             };
         }
-        if clearance.front < p.stop_distance_m {
+        if clearance.ahead < p.stop_distance_m || clearance.beside < p.beside_stop_m {
             return FollowCommand::Blocked;
         }
-        let room = ((clearance.front - p.stop_distance_m)
+        let room = ((clearance.front() - p.stop_distance_m)
             / (p.slow_distance_m - p.stop_distance_m))
             .clamp(0.25, 1.0);
         let linear = p.cruise_speed * room * heading_error.cos().max(0.0);
@@ -251,19 +265,21 @@ mod tests {
             0.5 * 40f64.to_radians().sin(),
         );
         let c = Clearance::of_echoes([ahead, beside], body);
-        assert!((c.front - 0.5).abs() < 1e-9, "{c:?}");
+        assert!((c.front() - 0.5).abs() < 1e-9, "{c:?}");
+        assert!((c.ahead - 0.5).abs() < 1e-9 && (c.beside - 0.3).abs() < 1e-9);
         assert!((c.left - 0.3).abs() < 1e-9, "{c:?}");
         assert!(c.right.is_infinite());
         // Beside alone: 0.3 m counts as 0.6 m ahead.
         let c = Clearance::of_echoes([beside], body);
-        assert!((c.front - 0.3 - BESIDE_ALLOWANCE_M).abs() < 1e-9, "{c:?}");
+        assert!((c.front() - 0.3 - BESIDE_ALLOWANCE_M).abs() < 1e-9, "{c:?}");
         // Behind: nothing ahead, nothing to the sides.
         let c = Clearance::of_echoes([(-0.6, 0.0)], body);
-        assert!(c.front.is_infinite() && c.left.is_infinite() && c.right.is_infinite());
+        assert!(c.front().is_infinite() && c.left.is_infinite() && c.right.is_infinite());
     }
 
     const OPEN: Clearance = Clearance {
-        front: 10.0,
+        ahead: 10.0,
+        beside: 10.0,
         left: 10.0,
         right: 10.0,
     };
@@ -367,13 +383,43 @@ mod tests {
             y: 0.0,
             theta: 0.0,
         };
-        let blocked = Clearance { front: 0.3, ..OPEN };
+        let blocked = Clearance { ahead: 0.3, ..OPEN };
         assert_eq!(follower.command(at, blocked), FollowCommand::Blocked);
+        // Beside the path, only nearer stops it.
+        let beside = Clearance {
+            beside: 0.3,
+            ..OPEN
+        };
+        assert!(matches!(
+            follower.command(at, beside),
+            FollowCommand::Drive { .. }
+        ));
+        let brushing = Clearance {
+            beside: 0.1,
+            ..OPEN
+        };
+        assert_eq!(follower.command(at, brushing), FollowCommand::Blocked);
+        // A robot that stops nearer ahead (squeezing between pillars) is
+        // still stopped by what brushes its side.
+        let mut squeezing = PathFollower::new(
+            vec![(5.0, 0.0)],
+            FollowParams {
+                stop_distance_m: 0.2,
+                slow_distance_m: 0.5,
+                ..FollowParams::default()
+            },
+        )
+        .unwrap();
+        assert!(matches!(
+            squeezing.command(at, blocked),
+            FollowCommand::Drive { .. }
+        ));
+        assert_eq!(squeezing.command(at, brushing), FollowCommand::Blocked);
         let speed = |c: Clearance, f: &mut PathFollower| match f.command(at, c) {
             FollowCommand::Drive { linear, .. } => linear,
             other => panic!("{other:?}"),
         };
-        let near = speed(Clearance { front: 0.6, ..OPEN }, &mut follower);
+        let near = speed(Clearance { ahead: 0.6, ..OPEN }, &mut follower);
         let far = speed(OPEN, &mut follower);
         assert!(near < far && near > 0.0, "{near} {far}");
     }

@@ -51,11 +51,48 @@ pub fn is_frontier_cell(window: &OccupancyWindow, index: usize) -> bool {
 /// The window's frontiers of at least `min_size_m`, 8-connected cells
 /// clustered, largest first.
 pub fn find_frontiers(window: &OccupancyWindow, min_size_m: f64) -> Vec<Frontier> {
+    clusters(window, min_size_m, |index| is_frontier_cell(window, index))
+}
+
+/// Once no frontier is left: the free cells beside cells the map has
+/// observed but not decided (`undecided`, by window index: neither free
+/// nor occupied), clustered as frontiers are, of at least `min_size_m`.
+/// A sonar's cone seen from afar leaves such bands along walls and round
+/// pillars; seen again from near, they settle.
+///
+/// # Panics
+/// If `undecided` is not one flag per cell of the window.
+pub fn find_undecided(
+    window: &OccupancyWindow,
+    undecided: &[bool],
+    min_size_m: f64,
+) -> Vec<Frontier> {
+    assert_eq!(undecided.len(), window.len(), "one flag per cell");
+    let (width, height) = (window.width() as i64, window.height() as i64);
+    clusters(window, min_size_m, |index| {
+        if window.at(index) != Occupancy::Free {
+            return false;
+        }
+        let (x, y) = ((index as i64) % width, (index as i64) / width);
+        [(1, 0), (-1, 0), (0, 1), (0, -1)].iter().any(|&(dx, dy)| {
+            let (nx, ny) = (x + dx, y + dy);
+            nx >= 0 && ny >= 0 && nx < width && ny < height && undecided[(ny * width + nx) as usize]
+        })
+    })
+}
+
+/// The 8-connected clusters of the cells `member` picks, of at least
+/// `min_size_m`, largest first.
+fn clusters(
+    window: &OccupancyWindow,
+    min_size_m: f64,
+    member: impl Fn(usize) -> bool,
+) -> Vec<Frontier> {
     let metres = window.resolution().metres();
     let mut seen = vec![false; window.len()];
     let mut frontiers = Vec::new();
     for start in 0..window.len() {
-        if seen[start] || !is_frontier_cell(window, start) {
+        if seen[start] || !member(start) {
             continue;
         }
         let mut cells = Vec::new();
@@ -64,7 +101,7 @@ pub fn find_frontiers(window: &OccupancyWindow, min_size_m: f64) -> Vec<Frontier
         while let Some(index) = queue.pop_front() {
             cells.push(index);
             for (next, _) in window.neighbours(index) {
-                if !seen[next] && is_frontier_cell(window, next) {
+                if !seen[next] && member(next) {
                     seen[next] = true;
                     queue.push_back(next);
                 }
@@ -161,6 +198,43 @@ mod tests {
         let three = ["#######", "#..???#", "#######"];
         let window = OccupancyWindow::from_rows(&three, CellIndex::new(0, 0), coarse);
         assert_eq!(find_frontiers(&window, 0.0).len(), 1);
+    }
+
+    #[test]
+    fn undecided_bands_beside_free_cells_are_found_once_frontiers_are_gone() {
+        // A closed room; the map is undecided along part of its top wall
+        // (the flags are its unknown cells).
+        let rows = [
+            "##########",
+            "#?????...#",
+            "#........#",
+            "#........#",
+            "##########",
+        ];
+        // 5 cm cells: the band is shallower than a frontier's depth.
+        let resolution = Resolution::new(0.05).unwrap();
+        let window = OccupancyWindow::from_rows(&rows, CellIndex::new(0, 0), resolution);
+        assert!(
+            find_frontiers(&window, 0.0).is_empty(),
+            "a sliver, no frontier"
+        );
+        let undecided: Vec<bool> = (0..window.len())
+            .map(|i| window.at(i) == Occupancy::Unknown)
+            .collect();
+        let bands = find_undecided(&window, &undecided, 0.0);
+        assert_eq!(bands.len(), 1, "{bands:?}");
+        // The five free cells below the band and the one beside its end.
+        assert_eq!(bands[0].cells.len(), 6);
+        assert!(
+            bands[0]
+                .cells
+                .iter()
+                .all(|&i| window.at(i) == Occupancy::Free)
+        );
+        // Too short for the size asked.
+        assert!(find_undecided(&window, &undecided, 0.35).is_empty());
+        // Nothing undecided: nothing to look at again.
+        assert!(find_undecided(&window, &vec![false; window.len()], 0.0).is_empty());
     }
 
     #[test]

@@ -3,7 +3,11 @@
 //! (Burgard, Moors, Stachniss and Schneider, 2005), never one blacklisted
 //! after it could not be reached.
 
+use std::collections::BinaryHeap;
+
 use deog_grid::CellIndex;
+
+use crate::costmap::MinQueued;
 
 use crate::frontier::Frontier;
 use crate::travel::TravelCosts;
@@ -61,6 +65,9 @@ pub struct Goal {
     pub score: f64,
     /// The centres of its frontier's cells, metres.
     pub frontier_cells: Vec<(f64, f64)>,
+    /// Whether it is no frontier cell but the reachable cell nearest an
+    /// unreachable frontier ([`approach_goal`]).
+    pub approach: bool,
 }
 
 /// Places not to drive to, each until a time.
@@ -173,15 +180,85 @@ pub fn choose_goal_keeping(
                 frontier_m: frontier.size_m,
                 travel_m,
                 score,
-                frontier_cells: frontier
-                    .cells
-                    .iter()
-                    .map(|&index| window.centre_of(window.cell_at(index)))
-                    .collect(),
+                frontier_cells: centres(window, frontier),
+                approach: false,
             });
         }
     }
     best
+}
+
+/// When no frontier can be reached: the reachable cell nearest to one in
+/// a straight line (within `reach_m`; the cheaper to reach among equals),
+/// to look at it from near. A sonar's cone seen from afar closes the gap
+/// between two pillars on the map; from near it fits through, and the
+/// way opens. Frontier cells and cells barred by `blacklist` are not
+/// used; `None` if no reachable cell lies within reach.
+pub fn approach_goal(
+    window: &OccupancyWindow,
+    frontiers: &[Frontier],
+    costs: &TravelCosts,
+    blacklist: &Blacklist,
+    reach_m: f64,
+    params: &GoalParams,
+) -> Option<Goal> {
+    let metres = window.resolution().metres();
+    let barred = |index: usize| {
+        let (x, y) = window.centre_of(window.cell_at(index));
+        blacklist.bars(x, y, params.blacklist_radius_m)
+    };
+    // Straight-line distance to the nearest frontier cell, and which
+    // frontier, by a brushfire from every frontier cell not barred.
+    let mut nearest = vec![(f64::INFINITY, usize::MAX); window.len()];
+    let mut queue = BinaryHeap::new();
+    for (which, frontier) in frontiers.iter().enumerate() {
+        for &index in frontier.cells.iter().filter(|&&index| !barred(index)) {
+            nearest[index] = (0.0, which);
+            queue.push(MinQueued(0.0, index));
+        }
+    }
+    while let Some(MinQueued(d, index)) = queue.pop() {
+        if d > nearest[index].0 {
+            continue;
+        }
+        for (next, length) in window.neighbours(index) {
+            let candidate = d + length * metres;
+            if candidate <= reach_m && candidate < nearest[next].0 {
+                nearest[next] = (candidate, nearest[index].1);
+                queue.push(MinQueued(candidate, next));
+            }
+        }
+    }
+    let (index, distance) = (0..window.len())
+        .filter(|&index| nearest[index].0 > 0.0 && nearest[index].0.is_finite())
+        .filter(|&index| costs.reaches(index) && !barred(index))
+        .map(|index| (index, nearest[index].0))
+        .min_by(|a, b| {
+            a.1.total_cmp(&b.1)
+                .then(costs.cost_m(a.0).total_cmp(&costs.cost_m(b.0)))
+        })?;
+    let frontier = &frontiers[nearest[index].1];
+    let cell = window.cell_at(index);
+    let (x, y) = window.centre_of(cell);
+    Some(Goal {
+        cell,
+        x,
+        y,
+        frontier_m: frontier.size_m,
+        travel_m: costs.cost_m(index),
+        score: -distance,
+        frontier_cells: centres(window, frontier),
+        approach: true,
+    })
+}
+
+/// The centres of a frontier's cells, metres.
+fn centres(window: &OccupancyWindow, frontier: &Frontier) -> Vec<(f64, f64)> {
+    frontier
+        .cells
+        .iter()
+        .map(|&index| window.centre_of(window.cell_at(index)))
+        .collect()
 }
 
 #[cfg(test)]
@@ -224,6 +301,49 @@ mod tests {
         let costs = TravelCosts::from(&window, &costmap, CellIndex::new(4, 2)).unwrap();
         let frontiers = find_frontiers(&window, 0.0);
         (window, frontiers, costs)
+    }
+
+    #[test]
+    fn a_frontier_past_a_gap_too_narrow_is_looked_at_from_the_nearest_reachable_cell() {
+        // A room whose right wall has a one-cell gap: too narrow for the
+        // robot's radius, and past it an open space ending in unknown.
+        let rows = [
+            "##############",
+            "#....#......??",
+            "#....#......??",
+            "#...........??",
+            "#....#......??",
+            "#....#......??",
+            "##############",
+        ];
+        let window =
+            OccupancyWindow::from_rows(&rows, CellIndex::new(0, 0), Resolution::new(0.1).unwrap());
+        let costs_params = CostParams {
+            lethal_radius_m: 0.15,
+            inflation_m: 0.3,
+            ..CostParams::default()
+        };
+        let costmap = Costmap::inflate(&window, costs_params);
+        let costs = TravelCosts::from(&window, &costmap, CellIndex::new(2, 3)).unwrap();
+        let frontiers = find_frontiers(&window, 0.0);
+        assert_eq!(frontiers.len(), 1, "{frontiers:?}");
+        let none = Blacklist::default();
+        assert!(choose_goal(&window, &frontiers, &costs, &[], &none, &params()).is_none());
+        let goal = approach_goal(&window, &frontiers, &costs, &none, 2.0, &params()).unwrap();
+        // The reachable cell nearest the frontier in a straight line, the
+        // cheapest of the three as near.
+        assert!(goal.approach);
+        assert_eq!(goal.cell, CellIndex::new(3, 3), "{goal:?}");
+        assert!((goal.score + 0.8).abs() < 1e-9, "{goal:?}");
+        assert_eq!(goal.frontier_cells.len(), frontiers[0].cells.len());
+        // Once looked from there, the next nearest place not barred.
+        let mut barred = Blacklist::default();
+        barred.add_within(goal.x, goal.y, 0.05, 100.0);
+        let next = approach_goal(&window, &frontiers, &costs, &barred, 2.0, &params()).unwrap();
+        assert_eq!(next.cell.x, 3, "{next:?}");
+        assert_ne!(next.cell, goal.cell);
+        // Out of reach: nothing.
+        assert!(approach_goal(&window, &frontiers, &costs, &none, 0.5, &params()).is_none());
     }
 
     #[test]
