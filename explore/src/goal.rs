@@ -75,6 +75,9 @@ pub struct Goal {
 pub struct Blacklist {
     /// (x, y, until, radius: `None` for the caller's).
     entries: Vec<(f64, f64, f64, Option<f64>)>,
+    /// Where goals failed before ([`Blacklist::bar_failure`]), kept when
+    /// their bars run out.
+    failures: Vec<(f64, f64)>,
 }
 
 impl Blacklist {
@@ -87,6 +90,30 @@ impl Blacklist {
     /// Bars the cells within `radius_m` of (x, y) until `until_s`.
     pub fn add_within(&mut self, x: f64, y: f64, radius_m: f64, until_s: f64) {
         self.entries.push((x, y, until_s, Some(radius_m)));
+    }
+
+    /// Bars a goal at (x, y) the robot failed to reach at `now_s`: for
+    /// `first_s` seconds, or for `again_s` when a goal within `radius_m`
+    /// of it failed before (a place tried twice is given up). Returns
+    /// whether it was the first failure there.
+    pub fn bar_failure(
+        &mut self,
+        (x, y): (f64, f64),
+        now_s: f64,
+        (first_s, again_s): (f64, f64),
+        radius_m: f64,
+    ) -> bool {
+        let again = self
+            .failures
+            .iter()
+            .any(|&(fx, fy)| (fx - x).hypot(fy - y) <= radius_m);
+        if again {
+            self.add(x, y, now_s + again_s);
+        } else {
+            self.add(x, y, now_s + first_s);
+            self.failures.push((x, y));
+        }
+        !again
     }
 
     /// Forgets entries that ran out by `now_s`.
@@ -436,5 +463,22 @@ mod tests {
             choose_goal(&window, &frontiers, &costs, &[], &blacklist, &params),
             None
         );
+    }
+
+    #[test]
+    fn a_place_failed_twice_stays_barred_longer() {
+        let mut blacklist = Blacklist::default();
+        let times = (60.0, 3600.0);
+        assert!(blacklist.bar_failure((1.0, 1.0), 0.0, times, 0.6));
+        blacklist.expire(61.0);
+        assert!(blacklist.is_empty(), "the first bar ran out");
+        // Failing again near the same place bars it for the longer time.
+        assert!(!blacklist.bar_failure((1.3, 1.0), 100.0, times, 0.6));
+        blacklist.expire(3000.0);
+        assert!(blacklist.bars(1.3, 1.0, 0.6));
+        // Elsewhere, a first failure again.
+        assert!(blacklist.bar_failure((5.0, 1.0), 100.0, times, 0.6));
+        blacklist.expire(3701.0);
+        assert!(blacklist.is_empty());
     }
 }

@@ -138,9 +138,6 @@ struct Explorer {
     follow: FollowParams,
     goals: GoalParams,
     blacklist: Blacklist,
-    /// Where goals were not neared, so that a second time there bars the
-    /// place for good.
-    stalled_at: Vec<(f64, f64)>,
     /// When the last bar for a while runs out, simulated seconds.
     bars_lapse_s: f64,
 }
@@ -192,17 +189,14 @@ impl Explorer {
     /// Bars a goal not neared: for a while the first time, as long as a
     /// goal reached when the robot failed there before.
     fn bar_stalled(&mut self, x: f64, y: f64, now_s: f64) {
-        let radius = self.goals.blacklist_radius_m;
-        let again = self
-            .stalled_at
-            .iter()
-            .any(|&(sx, sy)| (sx - x).hypot(sy - y) <= radius);
-        if again {
-            self.blacklist.add(x, y, now_s + ARRIVED_BAR_S);
-        } else {
-            self.blacklist.add(x, y, now_s + BAR_S);
+        let first = self.blacklist.bar_failure(
+            (x, y),
+            now_s,
+            (BAR_S, ARRIVED_BAR_S),
+            self.goals.blacklist_radius_m,
+        );
+        if first {
             self.bars_lapse_s = self.bars_lapse_s.max(now_s + BAR_S);
-            self.stalled_at.push((x, y));
         }
     }
 
@@ -354,7 +348,6 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
         follow: planner.follow,
         goals: planner.goals,
         blacklist: Blacklist::default(),
-        stalled_at: Vec::new(),
         bars_lapse_s: f64::NEG_INFINITY,
     };
     let (plan_requests, mut plans) = spawn_planner(planner);
