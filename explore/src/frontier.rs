@@ -58,16 +58,13 @@ pub fn find_frontiers(window: &OccupancyWindow, min_size_m: f64) -> Vec<Frontier
 /// observed but not decided (`undecided`, by window index: neither free
 /// nor occupied), clustered as frontiers are, of at least `min_size_m`.
 /// A sonar's cone seen from afar leaves such bands along walls and round
-/// pillars; seen again from near, they settle.
-///
-/// # Panics
-/// If `undecided` is not one flag per cell of the window.
+/// pillars; seen again from near, they settle. Cells past the end of
+/// `undecided` count as decided.
 pub fn find_undecided(
     window: &OccupancyWindow,
     undecided: &[bool],
     min_size_m: f64,
 ) -> Vec<Frontier> {
-    assert_eq!(undecided.len(), window.len(), "one flag per cell");
     let (width, height) = (window.width() as i64, window.height() as i64);
     clusters(window, min_size_m, |index| {
         if window.at(index) != Occupancy::Free {
@@ -76,7 +73,11 @@ pub fn find_undecided(
         let (x, y) = ((index as i64) % width, (index as i64) / width);
         [(1, 0), (-1, 0), (0, 1), (0, -1)].iter().any(|&(dx, dy)| {
             let (nx, ny) = (x + dx, y + dy);
-            nx >= 0 && ny >= 0 && nx < width && ny < height && undecided[(ny * width + nx) as usize]
+            nx >= 0
+                && ny >= 0
+                && nx < width
+                && ny < height
+                && undecided.get((ny * width + nx) as usize) == Some(&true)
         })
     })
 }

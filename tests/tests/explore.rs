@@ -17,6 +17,42 @@ fn field(json: &str, name: &str) -> f64 {
         .unwrap_or_else(|_| panic!("{name} is a number in {json}"))
 }
 
+/// Runs `deog demo --explore --no-localize` at 8x in a temp folder and
+/// returns its report.json, parsed and as text.
+fn explore_demo(world: &str, robots: &str, duration: &str) -> (serde_json::Value, String) {
+    let out = tempfile::tempdir().expect("temp dir");
+    let output = Command::new(deog_binary())
+        .args([
+            "demo",
+            "--explore",
+            "--no-localize",
+            "--no-view",
+            "--world",
+            world,
+            "--robots",
+            robots,
+            "--duration",
+            duration,
+            "--speed",
+            "8",
+            "--out",
+        ])
+        .arg(out.path())
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("run deog demo");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    println!("{stdout}");
+    let text = std::fs::read_to_string(out.path().join("report.json")).expect("report.json");
+    let report = serde_json::from_str(&text).expect("JSON");
+    (report, text)
+}
+
 #[test]
 fn one_explorer_maps_a_room_and_stops_by_itself() {
     let runtime = tokio::runtime::Runtime::new().expect("runtime");
@@ -88,36 +124,7 @@ fn one_explorer_maps_a_room_and_stops_by_itself() {
 
 #[test]
 fn a_demo_of_two_explorers_ends_by_itself_with_the_room_covered() {
-    let out = tempfile::tempdir().expect("temp dir");
-    let output = Command::new(deog_binary())
-        .args([
-            "demo",
-            "--explore",
-            "--no-localize",
-            "--no-view",
-            "--world",
-            "map1",
-            "--robots",
-            "2",
-            "--duration",
-            "900",
-            "--speed",
-            "8",
-            "--out",
-        ])
-        .arg(out.path())
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("run deog demo");
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    assert!(
-        output.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let text = std::fs::read_to_string(out.path().join("report.json")).expect("report.json");
-    let report: serde_json::Value = serde_json::from_str(&text).expect("JSON");
-    println!("{stdout}");
+    let (report, text) = explore_demo("map1", "2", "900");
     assert_eq!(report["explore"], true, "{text}");
     assert_eq!(report["localize"], false, "{text}");
     assert_eq!(
@@ -157,35 +164,7 @@ fn three_explorers_get_between_the_pillars_of_a_world_never_tuned_on() {
         env!("CARGO_MANIFEST_DIR"),
         "/../mapfile/tests/data/turtlebot3_world/map.yaml"
     );
-    let out = tempfile::tempdir().expect("temp dir");
-    let output = Command::new(deog_binary())
-        .args([
-            "demo",
-            "--explore",
-            "--no-localize",
-            "--no-view",
-            "--world",
-            world,
-            "--robots",
-            "3",
-            "--duration",
-            "600",
-            "--speed",
-            "8",
-            "--out",
-        ])
-        .arg(out.path())
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("run deog demo");
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    assert!(
-        output.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let text = std::fs::read_to_string(out.path().join("report.json")).expect("report.json");
-    let report: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+    let (report, text) = explore_demo(world, "3", "600");
     let driven = report["driven_s"].as_f64().expect("driven_s");
     assert!(
         driven < 600.0 - 2.0,
