@@ -1,14 +1,14 @@
 //! Which frontier to drive to: information gain (the frontier's length)
 //! against travel cost, discounted near goals other robots have taken
 //! (Burgard, Moors, Stachniss and Schneider, 2005), never one blacklisted
-//! after it could not be reached.
+//! after it could not be reached; and, when none can be reached, where to
+//! look at one from.
 
 use std::collections::BinaryHeap;
 
 use deog_grid::CellIndex;
 
 use crate::costmap::MinQueued;
-
 use crate::frontier::Frontier;
 use crate::travel::TravelCosts;
 use crate::window::OccupancyWindow;

@@ -8,7 +8,7 @@
 //! centimetres (a sonar's cones narrow gaps on the map). Frontiers left
 //! out of reach even so are looked at from the reachable cell nearest
 //! them; with no frontier left, the bands the map has seen but not decided
-//! are looked at again from near.
+//! are looked at again from near, for a minute.
 
 use anyhow::{Context, Result, bail};
 use deog_explore::{
