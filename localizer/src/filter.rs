@@ -28,6 +28,12 @@
 //!   allowed);
 //! - the particles are clustered (bins that touch, [`crate::cluster`]) and
 //!   the estimate is the heaviest cluster by weight;
+//! - for a few metres after a global start or the start of a search, the
+//!   filter keeps the frames it weighed, and its tight modes share their
+//!   weight by the likelihood of all of them, each mode's mean carried
+//!   back by the odometry ([`Mcl::weigh_by_history`]): a mode's weight
+//!   when it forms is the luck of the first draws, which frame-by-frame
+//!   weighing can only multiply;
 //! - resampling happens only when the effective sample size, counted
 //!   within each cluster and summed, falls below a fraction of the
 //!   particle count, or when particles are to be injected. The new count
@@ -52,7 +58,8 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::beam_model::BeamModelParams;
 use crate::cluster::{
-    BinMap, BinSet, BinSize, ClusterEstimate, Clusters, cluster_particles, heaviest_cluster,
+    BinMap, BinSet, BinSize, ClusterEstimate, Clusters, MEAN_POSE_MIN_PARTICLES, cluster_particles,
+    heaviest_cluster,
 };
 use crate::error::{LocalizerError, within};
 use crate::local_map::LocalMap;
@@ -247,6 +254,29 @@ const UPHILL_MOST: usize = 5_000;
 const TRACKED_SPREAD_M: f64 = 1.0;
 const TRACKED_SPREAD_RAD: f64 = 0.5;
 
+/// The most weighed frames a filter keeps after a global start or the
+/// start of a search to weigh its modes by ([`Mcl::weigh_by_history`]):
+/// a few metres of driving. Past it, the modes' weights carry on frame by
+/// frame. A mode's mean is a few centimetres and tenths of a degree off,
+/// and carried back further its path leaves the robot's: 30 frames and 50
+/// settled map1's global runs better than the weights alone, 100 and 300
+/// worse (BENCHMARKS.md).
+const HISTORY_FRAMES: usize = 50;
+
+/// The most modes weighed by the frames kept, heaviest first.
+const HISTORY_MODES: usize = 8;
+
+/// A weighed frame, kept to judge modes found after it.
+#[derive(Debug, Clone)]
+struct WeighedFrame {
+    /// The odometry pose the frame was weighed at.
+    odometry: Pose2,
+    ranges: Vec<f64>,
+    /// The pose the sensor model judged the frame at
+    /// ([`SensorModel::set_reference`]).
+    reference: Option<Pose2>,
+}
+
 /// Monte Carlo Localization of one robot.
 #[derive(Debug)]
 pub struct Mcl {
@@ -273,6 +303,10 @@ pub struct Mcl {
     /// it held two modes or more and the new set is small.
     uphill: Vec<usize>,
     scratch_indices: Vec<usize>,
+    /// The frames weighed since a global start or the start of a search,
+    /// while fewer than [`HISTORY_FRAMES`]; `None` otherwise (and after a
+    /// start at a given pose, whose modes are not equal a priori).
+    history: Option<Vec<WeighedFrame>>,
 }
 
 impl Mcl {
@@ -307,6 +341,7 @@ impl Mcl {
             scratch_weights: Vec::new(),
             uphill: Vec::new(),
             scratch_indices: Vec::new(),
+            history: None,
         })
     }
 
@@ -353,6 +388,7 @@ impl Mcl {
         }
         self.sort_particles(res);
         self.reset_weights();
+        self.history = Some(Vec::new());
         Ok(())
     }
 
@@ -383,6 +419,7 @@ impl Mcl {
         // Any grid gives the order its locality; the map's is not at hand.
         self.sort_particles(deog_grid::Resolution::DEFAULT);
         self.reset_weights();
+        self.history = None;
         Ok(())
     }
 
@@ -528,6 +565,7 @@ impl Mcl {
         ranges: &[f64],
     ) -> Result<CorrectionReport, LocalizerError> {
         let tables_built = self.score(map, ranges)?;
+        self.keep_frame(ranges);
         // New weights ∝ old · likelihood, the likelihoods scaled by the
         // best of them so that the exponentials stay in range: one
         // exponential per particle and no logarithm.
@@ -587,6 +625,7 @@ impl Mcl {
                     sensor.score_pose(map, pose, ranges)
                 })?;
             clusters.weigh_by(&self.scratch_weights, &evidence, &mut self.weights);
+            self.weigh_by_history(map, &mut clusters)?;
         }
         let ess = clusters.effective_sample_size(&self.weights);
         let inject = self.injection_share();
@@ -831,8 +870,113 @@ impl Mcl {
             // The injected particles answer the drop; start the averages anew
             // so that one bad stretch does not keep injecting.
             self.w_fast = self.w_slow;
+            if inject >= self.settings.search_share {
+                // A search: the modes it finds are judged by the frames
+                // from here on, not by those from before the robot was
+                // lost (or carried off).
+                self.history = Some(Vec::new());
+            }
         }
         Ok(injected)
+    }
+
+    /// Keeps the frame just scored in the history, while there is one;
+    /// past [`HISTORY_FRAMES`] the history ends.
+    fn keep_frame(&mut self, ranges: &[f64]) {
+        let (Some(history), Some(odometry)) = (&mut self.history, self.odometry) else {
+            return;
+        };
+        if history.len() >= HISTORY_FRAMES {
+            self.history = None;
+            return;
+        }
+        history.push(WeighedFrame {
+            odometry,
+            ranges: ranges.to_vec(),
+            reference: self.reference,
+        });
+    }
+
+    /// Weighs the filter's modes by every frame since the global start or
+    /// the search that found them, while the history lasts: each mode's
+    /// mean pose is carried back by the odometry to each frame kept and
+    /// scored there, and the modes share the weight they hold by the
+    /// likelihood of that whole stretch. Weighing frame by frame
+    /// ([`Clusters::weigh_by`]) can only multiply the weight a mode already
+    /// has, and a mode's weight when it forms is the luck of the first
+    /// draws: in a symmetric room the true pose could lead its mirror image
+    /// by several nats over the first half-minute and still hold a
+    /// minority of the weight. Modes are those of at least
+    /// [`MEAN_POSE_MIN_PARTICLES`], no wider than a tracked pose, the
+    /// [`HISTORY_MODES`] heaviest of them; the rest keep their weights.
+    /// Once the history ends the weights this left carry on frame by
+    /// frame.
+    fn weigh_by_history(
+        &mut self,
+        map: &mut LocalMap,
+        clusters: &mut Clusters,
+    ) -> Result<(), LocalizerError> {
+        let (Some(history), Some(now)) = (&self.history, self.odometry) else {
+            return Ok(());
+        };
+        let shapes = clusters.shapes(&self.particles, &self.weights);
+        let mut modes: Vec<usize> = (0..clusters.weights.len())
+            .filter(|&c| {
+                clusters.counts[c] >= MEAN_POSE_MIN_PARTICLES
+                    && clusters.weights[c] >= self.settings.cluster_keep_weight
+                    && clusters.weights[c] > 0.0
+                    && shapes[c].is_some_and(|s| {
+                        s.spread_m <= TRACKED_SPREAD_M && s.spread_rad <= TRACKED_SPREAD_RAD
+                    })
+            })
+            .collect();
+        if modes.len() < 2 {
+            return Ok(());
+        }
+        modes.sort_by(|a, b| {
+            clusters.weights[*b]
+                .total_cmp(&clusters.weights[*a])
+                .then(a.cmp(b))
+        });
+        modes.truncate(HISTORY_MODES);
+        let means: Vec<Pose2> = modes
+            .iter()
+            .filter_map(|&c| shapes[c].map(|s| s.mean))
+            .collect();
+        let mut evidence = vec![0.0; means.len()];
+        let mut poses = Vec::with_capacity(means.len());
+        let mut scores = Vec::with_capacity(means.len());
+        for frame in history {
+            let back = OdometryMove::between(&now, &frame.odometry);
+            poses.clear();
+            poses.extend(means.iter().map(|m| back.apply(m)));
+            self.sensor.set_reference(frame.reference);
+            let keys = self.sensor.tiles_needed(map, &poses, &frame.ranges);
+            scores.clear();
+            self.sensor
+                .score_particles(map, &keys, &poses, &frame.ranges, &mut scores)?;
+            for (e, s) in evidence.iter_mut().zip(&scores) {
+                *e += s;
+            }
+        }
+        self.sensor.set_reference(self.reference);
+        let best = evidence.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let shares: Vec<f64> = evidence.iter().map(|e| (e - best).exp()).collect();
+        let total: f64 = shares.iter().sum();
+        let mass: f64 = modes.iter().map(|&c| clusters.weights[c]).sum();
+        if !best.is_finite() || total <= 0.0 {
+            return Ok(());
+        }
+        let mut scale = vec![1.0; clusters.weights.len()];
+        for (&c, share) in modes.iter().zip(&shares) {
+            let target = mass * share / total;
+            scale[c] = target / clusters.weights[c];
+            clusters.weights[c] = target;
+        }
+        for (w, &c) in self.weights.iter_mut().zip(&clusters.of) {
+            *w *= scale[c as usize];
+        }
+        Ok(())
     }
 
     /// The old particle of the next draw: a random one of the systematic
@@ -1189,6 +1333,126 @@ mod tests {
         assert_abs_diff_eq!(estimate.pose.theta - start.theta, 0.2, epsilon = 1e-9);
     }
 
+    /// A sensor whose frame names the true position, heading 0 (`[x, y,
+    /// lead]`): a pose scores by its squared distance from the truth or
+    /// from the truth's image about (5, 3), turned half a turn, the image
+    /// `lead` nats worse.
+    #[derive(Debug)]
+    struct MirrorSensor;
+
+    impl MirrorSensor {
+        fn score(pose: &Pose2, readings: &[f64]) -> f64 {
+            let (x, y, lead) = (readings[0], readings[1], readings[2]);
+            let near = |px: f64, py: f64, theta: f64| {
+                -((pose.x - px).powi(2) + (pose.y - py).powi(2)) / 0.01
+                    - normalize_angle(pose.theta - theta).powi(2) / 0.01
+            };
+            near(x, y, 0.0).max(near(10.0 - x, 6.0 - y, std::f64::consts::PI) - lead)
+        }
+    }
+
+    impl SensorModel for MirrorSensor {
+        fn readings(&self) -> usize {
+            3
+        }
+        fn reach(&self) -> f64 {
+            0.0
+        }
+        fn observations(&self) -> f64 {
+            3.0
+        }
+        fn score_particles(
+            &mut self,
+            _: &mut LocalMap,
+            _: &[TileKey],
+            particles: &[Pose2],
+            readings: &[f64],
+            out: &mut Vec<f64>,
+        ) -> Result<usize, LocalizerError> {
+            out.extend(particles.iter().map(|p| Self::score(p, readings)));
+            Ok(0)
+        }
+        fn score_pose(
+            &mut self,
+            _: &mut LocalMap,
+            pose: &Pose2,
+            readings: &[f64],
+        ) -> Result<f64, LocalizerError> {
+            Ok(Self::score(pose, readings))
+        }
+    }
+
+    /// A robot driving along x from (1, 1), 10 cm a frame, whose first 10
+    /// frames told its pose from the image by a nat each, and whose filter
+    /// then formed two modes, the truth's with a tenth of the weight; the
+    /// next frame tells them apart not at all.
+    fn mirrored_modes(history: bool) -> (Mcl, Pose2) {
+        let settings = FilterSettings {
+            seed: 3,
+            ..FilterSettings::default()
+        };
+        let mut mcl = Mcl::with_sensor(settings, Box::new(MirrorSensor)).unwrap();
+        let truth_at = |k: usize| Pose2::new(1.0 + 0.1 * k as f64, 1.0, 0.0);
+        let odometry_at = |k: usize| Pose2::new(0.1 * k as f64, 0.0, 0.0);
+        mcl.history = history.then(|| {
+            (0..10)
+                .map(|k| WeighedFrame {
+                    odometry: odometry_at(k),
+                    ranges: vec![truth_at(k).x, truth_at(k).y, 1.0],
+                    reference: None,
+                })
+                .collect()
+        });
+        mcl.odometry = Some(odometry_at(10));
+        let truth = truth_at(10);
+        let image = Pose2::new(10.0 - truth.x, 6.0 - truth.y, std::f64::consts::PI);
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        for (centre, weight) in [(truth, 0.1), (image, 0.9)] {
+            for _ in 0..200 {
+                mcl.particles.push(Pose2::new(
+                    centre.x + rng.random_range(-0.02..0.02),
+                    centre.y + rng.random_range(-0.02..0.02),
+                    normalize_angle(centre.theta + rng.random_range(-0.02..0.02)),
+                ));
+                mcl.weights.push(weight / 200.0);
+            }
+        }
+        (mcl, truth)
+    }
+
+    #[test]
+    fn modes_are_weighed_by_the_frames_since_the_start() {
+        let mut map = empty_map();
+        for history in [true, false] {
+            let (mut mcl, truth) = mirrored_modes(history);
+            mcl.correct(&mut map, &[truth.x, truth.y, 0.0]).unwrap();
+            let best = mcl.cluster.unwrap();
+            let on_truth = (best.pose.x - truth.x).hypot(best.pose.y - truth.y) < 0.1;
+            // With the history the truth leads by 10 nats; without it, the
+            // weight the modes formed with stands.
+            assert_eq!(on_truth, history, "{best:?}");
+            if history {
+                assert!(best.weight > 0.99, "{best:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_history_ends_after_its_frames_and_at_a_start_at_a_pose() {
+        let (mut mcl, truth) = mirrored_modes(true);
+        let mut map = empty_map();
+        for k in 0..HISTORY_FRAMES {
+            mcl.odometry = Some(Pose2::new(1.0 + 0.1 * k as f64, 0.0, 0.0));
+            mcl.correct(&mut map, &[truth.x, truth.y, 0.0]).unwrap();
+        }
+        assert!(mcl.history.is_none());
+        let (mut mcl, _) = mirrored_modes(true);
+        mcl.start_at(truth, 0.1, 0.1).unwrap();
+        assert!(mcl.history.is_none());
+        mcl.start_global(&map_with_free_tile()).unwrap();
+        assert_eq!(mcl.history.as_ref().map(Vec::len), Some(0));
+    }
+
     /// A filter holding two tight modes: `light` particles about (2, 2, 0)
     /// sharing `light_weight` of the weight, 2,000 about (7, 5, π) sharing
     /// the rest.
@@ -1422,11 +1686,14 @@ mod tests {
             mcl.particles.len()
         );
         assert!(drawn < 2_000, "{drawn} drawn");
+        assert!(mcl.history.is_none(), "a trickle is no search");
         // A large drop searches: the injected particles' bins call for
-        // the most particles allowed.
+        // the most particles allowed, and the modes it finds are weighed
+        // by the frames from here on.
         let mut mcl = settled();
         let injected = mcl.resample(&map, 0.6, &clusters).unwrap();
         assert!(injected > 5_000, "{injected} injected");
+        assert_eq!(mcl.history.as_ref().map(Vec::len), Some(0));
     }
 
     #[test]
