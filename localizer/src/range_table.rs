@@ -315,12 +315,16 @@ pub fn fill_table(
     let width = tile.width() as usize;
     let stride = geometry.stride();
     // Direction-major, so that a direction's casts write one run of memory
-    // and each cone's minimum runs over whole rows of cells.
-    let mut strip_ranges: Vec<u16> = Vec::new();
-    let mut nearest: Vec<u16> = Vec::new();
+    // and each cone's minimum runs over whole rows of cells. The cones'
+    // minima are taken over squared gaps and only each heading's nearest
+    // is turned into millimetres: the conversion is monotonic, so that is
+    // the same table with a third of the square roots.
+    let mut strip_squared: Vec<f32> = Vec::new();
+    let mut nearest: Vec<f32> = Vec::new();
+    let mut ranges: Vec<u16> = Vec::new();
     let mut lines: Vec<SharedLine> = Vec::new();
     let mut free: Vec<bool> = Vec::new();
-    let mut squared: Vec<f32> = Vec::new();
+    let mut hits = StripHits::default();
     let mut first_row = tile.min.y;
     while first_row <= tile.max.y {
         let last_row = first_row.saturating_add(STRIP_ROWS - 1).min(tile.max.y);
@@ -331,8 +335,8 @@ pub fn fill_table(
             rows: (last_row - first_row + 1) as usize,
         };
         let cells = strip.width * strip.rows;
-        strip_ranges.clear();
-        strip_ranges.resize(cells * rays, NO_ECHO);
+        strip_squared.clear();
+        strip_squared.resize(cells * rays, f32::INFINITY);
         free.clear();
         free.extend((0..cells).map(|cell| {
             let (x, y) = (cell % strip.width, cell / strip.width);
@@ -340,11 +344,10 @@ pub fn fill_table(
                 .slot(strip.x0 + x as i64, strip.y0 + y as i64)
                 .is_none_or(|s| !raster.occupied[s])
         }));
-        for (dir, ranges) in directions.iter().zip(strip_ranges.chunks_exact_mut(cells)) {
-            squared.clear();
-            squared.resize(cells, f32::INFINITY);
-            cast.along_shared_lines(raster, &strip, &free, *dir, &mut lines, &mut squared);
-            cast.store_gaps(&squared, ranges);
+        hits.centre(&strip);
+        for (dir, squared) in directions.iter().zip(strip_squared.chunks_exact_mut(cells)) {
+            cast.along_shared_lines(raster, &strip, &free, *dir, &mut lines, &mut hits);
+            hits.squared_gaps(squared);
         }
         // A strip spans the tile's width: its cells are consecutive in
         // the table (which may hold fewer).
@@ -352,17 +355,22 @@ pub fn fill_table(
         let strip_table = table.get_mut(first..).unwrap_or_default();
         for h in 0..geometry.headings {
             nearest.clear();
-            nearest.resize(cells, NO_ECHO);
+            nearest.resize(cells, f32::INFINITY);
             let centre = (h * cast.rays_per_heading) as i64;
             let reach = cast.reach.min(rays / 2) as i64;
             for j in centre - reach..=centre + reach {
                 let j = j.rem_euclid(rays as i64) as usize;
-                let ranges = &strip_ranges[j * cells..(j + 1) * cells];
-                for (n, &r) in nearest.iter_mut().zip(ranges) {
-                    *n = (*n).min(r);
+                let squared = &strip_squared[j * cells..(j + 1) * cells];
+                for (n, &q) in nearest.iter_mut().zip(squared) {
+                    // Not `f32::min`, whose care for NaN (there is none
+                    // here) costs the vectorized loop three instructions.
+                    *n = if q < *n { q } else { *n };
                 }
             }
-            for (entry, &range) in strip_table.chunks_exact_mut(stride).zip(&nearest) {
+            ranges.clear();
+            ranges.resize(cells, NO_ECHO);
+            cast.store_gaps(&nearest, &mut ranges);
+            for (entry, &range) in strip_table.chunks_exact_mut(stride).zip(&ranges) {
                 entry[h] = range;
             }
         }
@@ -435,6 +443,57 @@ struct CellRect {
     y0: i64,
     width: usize,
     rows: usize,
+}
+
+/// Per cell of a strip: its centre, and the centre of the occupied cell
+/// its ray in the current direction meets first (infinitely far for no
+/// echo). The casts record the hits one cell at a time, in the lines'
+/// order; the gaps are then worked out for the whole strip in a loop the
+/// compiler vectorizes.
+#[derive(Debug, Default)]
+struct StripHits {
+    centre_x: Vec<f32>,
+    centre_y: Vec<f32>,
+    hit_x: Vec<f32>,
+    hit_y: Vec<f32>,
+}
+
+impl StripHits {
+    /// Sets the cells' centres (raster coordinates) for `strip`, and no
+    /// hits.
+    fn centre(&mut self, strip: &CellRect) {
+        let cells = strip.width * strip.rows;
+        self.centre_x.clear();
+        self.centre_y.clear();
+        for cell in 0..cells {
+            let (x, y) = (cell % strip.width, cell / strip.width);
+            self.centre_x.push((strip.x0 + x as i64) as f32 + 0.5);
+            self.centre_y.push((strip.y0 + y as i64) as f32 + 0.5);
+        }
+        self.hit_x.clear();
+        self.hit_x.resize(cells, f32::INFINITY);
+        self.hit_y.clear();
+        self.hit_y.resize(cells, f32::INFINITY);
+    }
+
+    /// Each cell's squared gap, in cells, from its centre to the nearest
+    /// point of its hit cell. Single precision: exact to a thousandth of a
+    /// millimetre at these ranges, and quicker.
+    fn squared_gaps(&self, squared: &mut [f32]) {
+        let cells = self
+            .centre_x
+            .iter()
+            .zip(&self.centre_y)
+            .zip(self.hit_x.iter().zip(&self.hit_y));
+        for (q, ((&cx, &cy), (&hx, &hy))) in squared.iter_mut().zip(cells) {
+            let (gap_x, gap_y) = ((hx - cx).abs() - 0.5, (hy - cy).abs() - 0.5);
+            // Not `f32::max`: no NaN comes here (a hit is finite or
+            // infinite), and its care for one costs instructions.
+            let gap_x = if gap_x > 0.0 { gap_x } else { 0.0 };
+            let gap_y = if gap_y > 0.0 { gap_y } else { 0.0 };
+            *q = gap_x * gap_x + gap_y * gap_y;
+        }
+    }
 }
 
 /// One line's last march: cells whose projection on the line falls in
@@ -524,7 +583,7 @@ impl Cast {
         free: &[bool],
         dir: (f64, f64),
         lines: &mut Vec<SharedLine>,
-        squared: &mut [f32],
+        hits: &mut StripHits,
     ) {
         let normal = (-dir.1, dir.0);
         let lateral = |x: f64, y: f64| x * normal.0 + y * normal.1;
@@ -567,7 +626,6 @@ impl Cast {
             let sx0 = if step_x > 0 { 0 } else { strip.width - 1 };
             let (rx0, ry) = (strip.x0 + sx0 as i64, strip.y0 + sy as i64);
             let (ox0, oy) = (rx0 as f64 + 0.5, ry as f64 + 0.5);
-            let (mut ox, oy32) = (ox0 as f32, oy as f32);
             // Stepping one cell along the row moves these by fixed amounts.
             let (mut across, mut along) = (lateral(ox0, oy) - low, ox0 * dir.0 + oy * dir.1);
             let (across_step, along_step) =
@@ -580,7 +638,11 @@ impl Cast {
                 };
                 let cell = sy * strip.width + sx;
                 if free[cell] {
-                    let k = ((across * per_spacing) as usize).min(count - 1);
+                    // `across` is never negative: the float unit's rounding
+                    // rather than a saturating cast (a band's edge may go to
+                    // either line, each within a quarter of a cell).
+                    let k = (crate::numeric::cell_i32(across * per_spacing).max(0) as usize)
+                        .min(count - 1);
                     let line = &mut lines[k];
                     if !(line.start <= along && along < line.end) {
                         let centre = low + (k as f64 + 0.5) * LINE_SPACING;
@@ -598,15 +660,11 @@ impl Cast {
                             },
                         };
                     }
-                    // Single precision: exact to a thousandth of a
-                    // millimetre at these ranges, and quicker.
-                    let gap_x = ((line.hit.0 - ox).abs() - 0.5).max(0.0);
-                    let gap_y = ((line.hit.1 - oy32).abs() - 0.5).max(0.0);
-                    squared[cell] = gap_x * gap_x + gap_y * gap_y;
+                    hits.hit_x[cell] = line.hit.0;
+                    hits.hit_y[cell] = line.hit.1;
                 }
                 across += across_step;
                 along += along_step;
-                ox += step_x as f32;
             }
         }
     }
@@ -666,6 +724,11 @@ fn first_hit(
 ) -> (f64, Hit) {
     let mut t = 0.0f64;
     let mut last_free = None;
+    // Per axis: how far along the ray one cell takes it, and the
+    // boundary the ray crosses next (the cell's far side): a multiply a
+    // step rather than a division.
+    let step_x = crossing(dir.0);
+    let step_y = crossing(dir.1);
     loop {
         let (px, py) = (origin.0 + t * dir.0, origin.1 + t * dir.1);
         // Off the raster's low edges the ray has left it; elsewhere a cast
@@ -695,12 +758,52 @@ fn first_hit(
         } else {
             // Step to the next cell boundary the ray crosses, or further
             // where the clearance allows.
-            let to_x = boundary(px, ix as f64, dir.0);
-            let to_y = boundary(py, iy as f64, dir.1);
+            let to_x = step_x.to_boundary(px, ix as f64);
+            let to_y = step_y.to_boundary(py, iy as f64);
             t += (to_x.min(to_y) + 1e-6).max(clear);
         }
         if t > limit {
             return (f64::INFINITY, Hit::Nothing);
+        }
+    }
+}
+
+/// A ray's crossing of one axis's cell boundaries: the inverse of its
+/// component along the axis, and which side of a cell it leaves by.
+#[derive(Debug, Clone, Copy)]
+struct Crossing {
+    inverse: f64,
+    far_side: f64,
+}
+
+fn crossing(dir: f64) -> Crossing {
+    if dir > 1e-12 {
+        Crossing {
+            inverse: 1.0 / dir,
+            far_side: 1.0,
+        }
+    } else if dir < -1e-12 {
+        Crossing {
+            inverse: 1.0 / dir,
+            far_side: 0.0,
+        }
+    } else {
+        Crossing {
+            inverse: f64::INFINITY,
+            far_side: f64::NAN,
+        }
+    }
+}
+
+impl Crossing {
+    /// How far along the ray, from `pos` in cell `cell`, the next
+    /// boundary of this axis lies (infinite along the other axis).
+    #[inline]
+    fn to_boundary(self, pos: f64, cell: f64) -> f64 {
+        if self.inverse.is_finite() {
+            (cell + self.far_side - pos) * self.inverse
+        } else {
+            f64::INFINITY
         }
     }
 }
