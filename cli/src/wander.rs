@@ -141,34 +141,17 @@ pub fn run(args: WanderArgs) -> Result<()> {
         tokio::pin!(shutdown);
         let mut summary = Summary::default();
         let (mut start_time, mut last_control, mut last_pose) = (None, None::<f64>, None::<Pose2>);
-        let mut last_sequence = 0;
         let mut was_bumped = false;
         let mut backlog = Vec::new();
         'run: loop {
-            let first = tokio::select! {
-                () = &mut shutdown => break,
-                state = states.0.recv() => match state {
-                    Some(state) => state,
-                    None => {
-                        states.1.await.context("the state reader panicked")??;
-                        bail!("the simulator ended the state stream");
-                    }
-                },
-            };
             // Everything that queued up while we were busy: each frame is
             // recorded, but only the newest steers, or a busy machine would
             // have the robot react to where it was.
-            backlog.clear();
-            backlog.push(first);
-            while let Ok(state) = states.0.try_recv() {
-                backlog.push(state);
+            if !states.next_batch(shutdown.as_mut(), &mut backlog).await? {
+                break;
             }
             let mut newest = None;
             for state in backlog.drain(..) {
-                if state.sequence == 0 || state.sequence <= last_sequence {
-                    continue;
-                }
-                last_sequence = state.sequence;
                 let true_pose = pose_or_origin(state.true_pose);
                 let start = *start_time.get_or_insert(state.time_s);
                 if let Some(previous) = last_pose {
@@ -259,15 +242,58 @@ pub(crate) async fn sim_rig(sim: &SimClient) -> Result<Rig> {
     }
 }
 
-pub(crate) type StateReader = (
-    mpsc::Receiver<pb::RobotState>,
-    tokio::task::JoinHandle<Result<()>>,
-);
+/// The simulator's state stream of one robot, read into a queue as fast
+/// as it comes ([`spawn_state_reader`]), so that a driving loop can take
+/// everything that arrived at once.
+pub(crate) struct StateReader {
+    queue: mpsc::Receiver<pb::RobotState>,
+    task: tokio::task::JoinHandle<Result<()>>,
+    /// The newest state handed out.
+    last_sequence: u64,
+}
 
-/// Reads the simulator's state stream into a queue as fast as it comes, so
-/// the driving loop can take everything that arrived at once.
+impl StateReader {
+    /// Waits for the next state, then takes it and every state queued
+    /// behind it into `batch` (cleared first), oldest first, leaving out
+    /// any not newer than those handed out before (or without a
+    /// sequence): a busy loop records every frame but steers by the
+    /// newest. `false` once `shutdown` completes; an error when the stream
+    /// fails or ends.
+    pub(crate) async fn next_batch(
+        &mut self,
+        shutdown: std::pin::Pin<&mut impl std::future::Future<Output = ()>>,
+        batch: &mut Vec<pb::RobotState>,
+    ) -> Result<bool> {
+        let first = tokio::select! {
+            () = shutdown => return Ok(false),
+            state = self.queue.recv() => match state {
+                Some(state) => state,
+                None => {
+                    (&mut self.task).await.context("the state reader panicked")??;
+                    bail!("the simulator ended the state stream");
+                }
+            },
+        };
+        batch.clear();
+        batch.push(first);
+        while let Ok(state) = self.queue.try_recv() {
+            batch.push(state);
+        }
+        let last = &mut self.last_sequence;
+        batch.retain(|state| {
+            let fresh = state.sequence != 0 && state.sequence > *last;
+            if fresh {
+                *last = state.sequence;
+            }
+            fresh
+        });
+        Ok(true)
+    }
+}
+
+/// Reads the simulator's state stream into a queue as fast as it comes.
 pub(crate) fn spawn_state_reader(mut stream: tonic::Streaming<pb::RobotState>) -> StateReader {
-    let (tx, rx) = mpsc::channel(4096);
+    let (tx, queue) = mpsc::channel(4096);
     let task = tokio::spawn(async move {
         while let Some(state) = stream
             .message()
@@ -280,7 +306,11 @@ pub(crate) fn spawn_state_reader(mut stream: tonic::Streaming<pb::RobotState>) -
         }
         Ok(())
     });
-    (rx, task)
+    StateReader {
+        queue,
+        task,
+        last_sequence: 0,
+    }
 }
 
 pub(crate) type Publisher = (

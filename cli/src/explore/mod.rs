@@ -371,33 +371,18 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
     let mut empty_plans = 0;
     // When the plans began to find frontiers but none in reach.
     let mut out_of_reach_since: Option<f64> = None;
-    let mut last_sequence = 0;
+    let mut backlog = Vec::new();
     let mut start_time = None;
     let mut last_pose: Option<Pose2> = None;
     let mut last_time_s = 0.0;
     let mut was_bumped = false;
     let mut next_plan_s = f64::NEG_INFINITY;
     'run: loop {
-        let first = tokio::select! {
-            () = &mut shutdown => break,
-            state = states.0.recv() => match state {
-                Some(state) => state,
-                None => {
-                    states.1.await.context("the state reader panicked")??;
-                    bail!("the simulator ended the state stream");
-                }
-            },
-        };
-        let mut newest = None;
-        let mut backlog = vec![first];
-        while let Ok(state) = states.0.try_recv() {
-            backlog.push(state);
+        if !states.next_batch(shutdown.as_mut(), &mut backlog).await? {
+            break;
         }
-        for state in backlog {
-            if state.sequence == 0 || state.sequence <= last_sequence {
-                continue;
-            }
-            last_sequence = state.sequence;
+        let mut newest = None;
+        for state in backlog.drain(..) {
             let truth = pose_or_origin(state.true_pose);
             let start = *start_time.get_or_insert(state.time_s);
             if let Some(previous) = last_pose {
