@@ -291,9 +291,10 @@ impl std::ops::DerefMut for RangeTable {
 const LINE_SPACING: f64 = 0.5;
 
 /// Tile rows whose rays are gathered before their headings are reduced:
-/// the scratch holds rows × width × rays ranges, 2.9 MB for a whole tile
-/// of 64 × 64 cells and 360 rays, three times the table, and freed once it
-/// is built. Longer lines serve more cells: 16 rows took 40 % longer.
+/// the scratch holds rows × width × rays squared gaps, 5.9 MB for a whole
+/// tile of 64 × 64 cells and 360 rays, six times the table, and freed once
+/// it is built (`deog bench localize-memory` stays within its budget).
+/// Longer lines serve more cells: 16 rows took 40 % longer.
 const STRIP_ROWS: i32 = 64;
 
 /// Writes [`build_table`]'s entries into `table` (one [`ConeGeometry::stride`]
