@@ -174,10 +174,11 @@ impl Clusters {
             .sum()
     }
 
-    /// Each cluster's evidence from one frame, as a log-likelihood: for a
-    /// cluster of [`MEAN_POSE_MIN_PARTICLES`] or more, `score_at` its
-    /// weighted mean pose; for a smaller one, its best particle's entry
-    /// of `log_likelihoods` (the frame's, one per particle).
+    /// Each cluster's evidence from one frame, as a log-likelihood: when
+    /// `at_mean`, for a cluster of [`MEAN_POSE_MIN_PARTICLES`] or more,
+    /// `score_at` its weighted mean pose; for a smaller one, or for every
+    /// cluster when not `at_mean`, its best particle's entry of
+    /// `log_likelihoods` (the frame's, one per particle).
     ///
     /// A mode is judged by a pose that stands for it, not by how well its
     /// particles cover it: their mean likelihood favours a tight cluster
@@ -190,12 +191,16 @@ impl Clusters {
         particles: &[Pose2],
         weights: &[f64],
         log_likelihoods: &[f64],
+        at_mean: bool,
         mut score_at: impl FnMut(&Pose2) -> Result<f64, E>,
     ) -> Result<Vec<f64>, E> {
         let n = self.weights.len();
         let mut evidence = vec![f64::NEG_INFINITY; n];
         for (&c, &l) in self.of.iter().zip(log_likelihoods) {
             evidence[c as usize] = evidence[c as usize].max(l);
+        }
+        if !at_mean {
+            return Ok(evidence);
         }
         let means = self.means(particles, weights);
         for ((e, mean), &count) in evidence.iter_mut().zip(&means).zip(&self.counts) {
@@ -564,7 +569,7 @@ mod tests {
             Ok(-((p.x - 1.0).powi(2) + p.y.powi(2) + p.theta.powi(2)))
         };
         let evidence = clusters
-            .evidence(&particles, &weights, &log, score)
+            .evidence(&particles, &weights, &log, true, score)
             .unwrap();
         assert_eq!(asked.len(), 1, "only the large cluster's mean is scored");
         assert_abs_diff_eq!(asked[0].x, 1.0, epsilon = 1e-12);
@@ -574,8 +579,14 @@ mod tests {
         // A scoring error ends the weighing with it.
         let failing = |_: &Pose2| -> Result<f64, &str> { Err("no table") };
         assert_eq!(
-            clusters.evidence(&particles, &weights, &log, failing),
+            clusters.evidence(&particles, &weights, &log, true, failing),
             Err("no table")
+        );
+        // Not at the mean: every cluster by its best particle, none scored.
+        let never = |_: &Pose2| -> Result<f64, &str> { Err("not asked") };
+        assert_eq!(
+            clusters.evidence(&particles, &weights, &log, false, never),
+            Ok(vec![-2.0, -0.5])
         );
     }
 

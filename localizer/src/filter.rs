@@ -620,10 +620,14 @@ impl Mcl {
             .ok_or_else(|| LocalizerError::Invalid("the particles have no weight".into()))?;
         if clusters.weights.len() > 1 {
             let sensor = &mut self.sensor;
-            let evidence =
-                clusters.evidence(&self.particles, &self.weights, &self.scratch_log, |pose| {
-                    sensor.score_pose(map, pose, ranges)
-                })?;
+            let at_mean = sensor.judges_modes_at_mean();
+            let evidence = clusters.evidence(
+                &self.particles,
+                &self.weights,
+                &self.scratch_log,
+                at_mean,
+                |pose| sensor.score_pose(map, pose, ranges),
+            )?;
             clusters.weigh_by(&self.scratch_weights, &evidence, &mut self.weights);
             self.weigh_by_history(map, &mut clusters)?;
         }

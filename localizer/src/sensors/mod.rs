@@ -137,6 +137,17 @@ pub trait SensorModel: std::fmt::Debug + Send {
         let _ = reference;
     }
 
+    /// Whether a mode of many particles is judged by the likelihood at its
+    /// mean pose ([`crate::cluster::Clusters::evidence`]) rather than by
+    /// its best particle. Right when the likelihood's peak is wider than a
+    /// mode's spread, so that the mean lies on it: a sonar's cones. A
+    /// sharp peak (a laser's hundreds of echoes) is missed by the mean of
+    /// a mode spread over a few bins, and one of its many particles stands
+    /// for it better. By default, at the mean.
+    fn judges_modes_at_mean(&self) -> bool {
+        true
+    }
+
     /// Whether [`Self::refine_pose`] may refine a pose: when not, the
     /// localizer skips fetching its tiles.
     fn refines(&self) -> bool {
