@@ -11,7 +11,9 @@ use deog_mapping::specular_sonar_mapping;
 
 use crate::options::ExplorePose;
 use crate::plan::{DemoPlan, PlannedRobot};
+use deog_grid::RingFiring;
 use deog_simulator::SonarPreset;
+use deog_simulator::simulation::SimConfig;
 
 /// The name of the shared map on the server.
 pub(crate) const MAP: &str = "demo";
@@ -179,6 +181,21 @@ pub(crate) fn wander(
     ])
 }
 
+/// `--firing-period` for a cartographer or localizer of frames from
+/// `sonar`, whose ring fires in turn over the simulator's sensor period:
+/// each reading placed where its sonar fired. Nothing for a ring that
+/// fires together.
+fn firing_period(sonar: SonarPreset) -> Vec<OsString> {
+    let config = SimConfig {
+        sonar: sonar.params(),
+        ..SimConfig::default()
+    };
+    match config.ring_firing() {
+        RingFiring::Sequential { period_s } => os(&["--firing-period", &period_s.to_string()]),
+        RingFiring::Together => Vec::new(),
+    }
+}
+
 /// A cartographer adding `robot`'s frames to the shared map; with a
 /// specular sonar, evidence is kept by direction, no-echo readings (mostly
 /// lost echoes) are ignored and empty evidence reaches 2 m, the best sonar
@@ -186,14 +203,17 @@ pub(crate) fn wander(
 pub(crate) fn map(plan: &DemoPlan, robot: &PlannedRobot, addresses: &Addresses) -> Vec<OsString> {
     let specular = if plan.sonar.specular_angle_deg().is_some() {
         let (_, params) = specular_sonar_mapping();
-        os(&[
-            "--sonar-method",
-            "directional",
-            "--no-echo-free-range",
-            &params.no_echo_free_range.to_string(),
-            "--max-free-range",
-            &params.max_free_range.to_string(),
-        ])
+        firing_period(plan.sonar)
+            .into_iter()
+            .chain(os(&[
+                "--sonar-method",
+                "directional",
+                "--no-echo-free-range",
+                &params.no_echo_free_range.to_string(),
+                "--max-free-range",
+                &params.max_free_range.to_string(),
+            ]))
+            .collect()
     } else {
         Vec::new()
     };
@@ -226,6 +246,7 @@ pub(crate) fn localize(
         Some(angle) => os(&["--specular-angle", &angle.to_string()]),
         None => Vec::new(),
     };
+    extra.extend(firing_period(plan.sonar));
     if plan.every_frame {
         extra.push("--every-frame".into());
     }

@@ -147,6 +147,29 @@ impl BeamFrameIntegrator {
         &self.beams
     }
 
+    /// Moves each beam to `mounts[k]`, robot frame, for the frames that
+    /// follow (a ring that fires in turn: where each sensor was when it
+    /// fired, [`crate::RingFiring`]). Fails, changing nothing, for the
+    /// wrong count or a mount that is not finite.
+    pub fn set_mounts(&mut self, mounts: &[Pose2]) -> Result<(), GridError> {
+        if mounts.len() != self.beams.len() {
+            let beams = self.beams.len() as f64;
+            return Err(GridError::OutOfRange {
+                field: "beam mounts (one per beam)",
+                value: mounts.len() as f64,
+                min: beams,
+                max: beams,
+            });
+        }
+        for m in mounts {
+            m.validate("beam mount")?;
+        }
+        for (beam, m) in self.beams.iter_mut().zip(mounts) {
+            beam.mount = *m;
+        }
+        Ok(())
+    }
+
     /// Readings per frame.
     pub fn readings(&self) -> usize {
         self.beams.len()

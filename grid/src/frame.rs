@@ -61,6 +61,12 @@ impl FrameIntegrator {
         &self.ring
     }
 
+    /// Maps the frames that follow with `ring` (a ring that fires in turn,
+    /// as it fired: [`SensorRing::as_fired`]).
+    pub fn set_ring(&mut self, ring: SensorRing) {
+        self.ring = ring;
+    }
+
     /// Integrates the frame taken with the robot at `robot` (world frame),
     /// `ranges[i]` from sensor `i` of the ring, appending one delta per
     /// touched tile to `out`. Fails, appending nothing, if any input is bad.

@@ -10,7 +10,8 @@
 //!   byte encodings.
 //! - [`tile_map`]: an in-memory map of tiles.
 //! - [`pose`]: planar poses and angles.
-//! - [`sensor_ring`]: where a robot's sonars sit (the Scout's 16).
+//! - [`sensor_ring`]: where a robot's sonars sit (the Scout's 16), and
+//!   when they fire within a frame ([`RingFiring`]).
 //! - [`sector`]: rasterising a sonar cone, each cell once.
 //! - [`sonar_model`]: the analytical sonar model (thesis eqs. 3.1 to 3.4).
 //! - [`segment_walk`]: every cell a line segment passes through, in order
@@ -75,7 +76,10 @@ pub use pose::{Pose2, normalize_angle};
 pub use ray_model::{RayModel, RayModelParams};
 pub use raycast::{Occupancy, OccupancyThresholds, OccupancyView, cast_cone, cast_ray};
 pub use segment_walk::SegmentCells;
-pub use sensor_ring::{SCOUT_BODY_RADIUS_M, SCOUT_RING_RADIUS_M, SCOUT_SONAR_COUNT, SensorRing};
+pub use sensor_ring::{
+    FrameMotion, RingFiring, SCOUT_BODY_RADIUS_M, SCOUT_RING_RADIUS_M, SCOUT_SONAR_COUNT,
+    SensorRing,
+};
 pub use sonar_model::{ConeGuard, Region, SonarModel, SonarModelParams};
 pub use tile::{Tile, TileDelta};
 pub use tile_key::{CellOffset, TileKey, TileSize};

@@ -52,7 +52,7 @@
 //!
 //! Deterministic for a given seed: one ChaCha stream drives every draw.
 
-use deog_grid::{CellIndex, Pose2, SensorRing, TileKey, normalize_angle};
+use deog_grid::{CellIndex, FrameMotion, Pose2, RingFiring, SensorRing, TileKey, normalize_angle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -275,6 +275,8 @@ struct WeighedFrame {
     /// The pose the sensor model judged the frame at
     /// ([`SensorModel::set_reference`]).
     reference: Option<Pose2>,
+    /// Where the robot stood at each reading ([`Mcl::note_frame`]).
+    reading_poses: Option<Vec<Pose2>>,
 }
 
 /// Monte Carlo Localization of one robot.
@@ -307,6 +309,13 @@ pub struct Mcl {
     /// while fewer than [`HISTORY_FRAMES`]; `None` otherwise (and after a
     /// start at a given pose, whose modes are not equal a priori).
     history: Option<Vec<WeighedFrame>>,
+    /// When the sensors fire within a frame ([`Self::set_firing`]).
+    firing: RingFiring,
+    /// The robot's pace between the frames noted ([`Self::note_frame`]).
+    frame_motion: FrameMotion,
+    /// Where the robot stood at each reading of the frame noted last, in
+    /// its pose's frame; `None` when they were all taken with the frame.
+    reading_poses: Option<Vec<Pose2>>,
 }
 
 impl Mcl {
@@ -342,6 +351,9 @@ impl Mcl {
             uphill: Vec::new(),
             scratch_indices: Vec::new(),
             history: None,
+            firing: RingFiring::Together,
+            frame_motion: FrameMotion::default(),
+            reading_poses: None,
         })
     }
 
@@ -479,6 +491,26 @@ impl Mcl {
             .map(|cluster| cluster.pose)
     }
 
+    /// When the sensors fire within a frame: a ring that fires in turn
+    /// has its readings scored where the robot stood at each
+    /// ([`Self::note_frame`]). By default, together.
+    pub fn set_firing(&mut self, firing: RingFiring) {
+        self.firing = firing;
+        self.reading_poses = None;
+    }
+
+    /// Notes the next frame's `odometry` and time, before it is predicted
+    /// and corrected: with a ring that fires in turn
+    /// ([`Self::set_firing`]), its readings are then scored where the robot
+    /// stood when each was taken, at the pace odometry shows since the
+    /// frame noted before. Frames not noted are scored as fired together.
+    pub fn note_frame(&mut self, odometry: &Pose2, time_s: f64) {
+        let back = self.frame_motion.observe(odometry, time_s);
+        self.reading_poses = self
+            .firing
+            .robot_at_readings(self.sensor.readings(), back.as_ref());
+    }
+
     /// Takes the frame's odometry pose. Returns true when a sensor update
     /// is due: on the first frame, and once the robot has moved far enough
     /// since the last one (the particles are then moved by that motion).
@@ -545,6 +577,7 @@ impl Mcl {
         let keys = self.tiles_for_frame(map, ranges);
         self.sensor.set_searching(!self.settled());
         self.sensor.set_reference(self.reference);
+        self.sensor.set_reading_poses(self.reading_poses.as_deref());
         self.scratch_log.clear();
         self.sensor
             .score_particles(map, &keys, &self.particles, ranges, &mut self.scratch_log)
@@ -662,6 +695,7 @@ impl Mcl {
         pose: &Pose2,
         ranges: &[f64],
     ) -> Result<f64, LocalizerError> {
+        self.sensor.set_reading_poses(self.reading_poses.as_deref());
         self.sensor.score_pose(map, pose, ranges)
     }
 
@@ -898,6 +932,7 @@ impl Mcl {
             odometry,
             ranges: ranges.to_vec(),
             reference: self.reference,
+            reading_poses: self.reading_poses.clone(),
         });
     }
 
@@ -955,6 +990,8 @@ impl Mcl {
             poses.clear();
             poses.extend(means.iter().map(|m| back.apply(m)));
             self.sensor.set_reference(frame.reference);
+            self.sensor
+                .set_reading_poses(frame.reading_poses.as_deref());
             let keys = self.sensor.tiles_needed(map, &poses, &frame.ranges);
             scores.clear();
             self.sensor
@@ -964,6 +1001,7 @@ impl Mcl {
             }
         }
         self.sensor.set_reference(self.reference);
+        self.sensor.set_reading_poses(self.reading_poses.as_deref());
         let best = evidence.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let shares: Vec<f64> = evidence.iter().map(|e| (e - best).exp()).collect();
         let total: f64 = shares.iter().sum();
@@ -1404,6 +1442,7 @@ mod tests {
                     odometry: odometry_at(k),
                     ranges: vec![truth_at(k).x, truth_at(k).y, 1.0],
                     reference: None,
+                    reading_poses: None,
                 })
                 .collect()
         });

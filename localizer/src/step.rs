@@ -127,6 +127,12 @@ impl Localizer {
         self.map
     }
 
+    /// Notes the next frame's odometry and time before its step, for a
+    /// ring that fires in turn ([`Mcl::note_frame`]).
+    pub fn note_frame(&mut self, odometry: &Pose2, time_s: f64) {
+        self.mcl.note_frame(odometry, time_s);
+    }
+
     /// Global localization: `tiles` (the whole map) go into the cache and
     /// the particles are spread over their known-free cells.
     pub fn start_global(

@@ -6,7 +6,7 @@
 
 use std::collections::HashSet;
 
-use deog_grid::{Pose2, Resolution, SensorRing, TileKey};
+use deog_grid::{Pose2, Resolution, RingFiring, SensorRing, TileKey};
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::LocalMap;
 use deog_localizer::range_table::ConeGeometry;
@@ -451,4 +451,70 @@ fn tracking_at_the_edge_of_a_map_being_built_keeps_its_pose() {
         "worst position error {worst:.3} m, mean {mean:.3} m"
     );
     assert!(mean < 0.08, "mean position error {mean:.3} m");
+}
+
+/// The heading, within 0.2 rad of `truth`'s, at which `mcl` scores
+/// `ranges` best.
+fn best_heading(mcl: &mut Mcl, map: &mut LocalMap, truth: &Pose2, ranges: &[f64]) -> f64 {
+    let mut best = (f64::NEG_INFINITY, truth.theta);
+    for i in -40..=40 {
+        let theta = truth.theta + 0.005 * f64::from(i);
+        let score = mcl
+            .score_pose(map, &Pose2::new(truth.x, truth.y, theta), ranges)
+            .unwrap();
+        if score > best.0 {
+            best = (score, theta);
+        }
+    }
+    best.1
+}
+
+#[test]
+fn a_ring_fired_in_turn_is_scored_where_each_sonar_fired() {
+    let mut map = room();
+    // Turning on the spot at 1.5 rad/s while the ring fires in turn over
+    // 0.1 s: the first sonar fired 0.14 rad before the frame's heading.
+    let firing = RingFiring::over(0.1).unwrap();
+    let back = Pose2::new(0.0, 0.0, -1.5);
+    let at = firing.robot_at_readings(16, Some(&back)).unwrap();
+    let ring = SensorRing::scout().as_fired(&at);
+    let mut plain = filter(1000, 1);
+    let mut fired = filter(1000, 1);
+    fired.set_firing(firing);
+    // The odometry turned 0.15 rad in the 0.1 s between two frames.
+    fired.note_frame(&Pose2::new(1.0, 1.0, 0.0), 10.0);
+    fired.note_frame(&Pose2::new(1.0, 1.0, 0.15), 10.1);
+    let mut misses = (0.0, 0.0);
+    for (x, y, theta) in [(3.5, 3.0, 0.3), (1.0, 4.0, -2.0), (6.5, 1.5, 2.5)] {
+        let truth = Pose2::new(x, y, theta);
+        let ranges = frame_of(&ring, &map, &truth);
+        misses.0 += (best_heading(&mut plain, &mut map, &truth, &ranges) - theta).abs();
+        misses.1 += (best_heading(&mut fired, &mut map, &truth, &ranges) - theta).abs();
+    }
+    assert!(
+        misses.1 <= 0.015,
+        "placed where they fired, the readings fit the true heading: {misses:?}"
+    );
+    assert!(
+        misses.0 >= 2.0 * misses.1 + 0.03,
+        "as if fired together, they fit a heading behind: {misses:?}"
+    );
+    // The particles are scored as a pose alone is.
+    let truth = Pose2::new(3.5, 3.0, 0.3);
+    let ranges = frame_of(&ring, &map, &truth);
+    fired.start_at(truth, 0.05, 0.05).unwrap();
+    fired.score(&mut map, &ranges).unwrap();
+    let (particles, scores) = (fired.particles().to_vec(), fired.scores().to_vec());
+    for (p, s) in particles.iter().zip(&scores).take(20) {
+        let alone = fired.score_pose(&mut map, p, &ranges).unwrap();
+        assert!((alone - s).abs() < 1e-9, "{alone} against {s}");
+    }
+    // A gap between frames gives no pace: read as fired together.
+    fired.note_frame(&Pose2::new(1.0, 1.0, 0.3), 15.0);
+    let truth = Pose2::new(3.5, 3.0, 0.3);
+    let ranges = frame_of(&ring, &map, &truth);
+    assert_eq!(
+        best_heading(&mut fired, &mut map, &truth, &ranges),
+        best_heading(&mut plain, &mut map, &truth, &ranges)
+    );
 }

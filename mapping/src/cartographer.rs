@@ -3,8 +3,8 @@
 //! simulator's true pose; a real robot has only its odometry).
 
 use deog_grid::{
-    GridError, Pose2, RayModelParams, Resolution, SensorRing, SonarModelParams, TileDelta, TileKey,
-    TileSize,
+    GridError, Pose2, RayModelParams, Resolution, RingFiring, SensorRing, SonarModelParams,
+    TileDelta, TileKey, TileSize,
 };
 use deog_rig::Rig;
 
@@ -89,6 +89,12 @@ impl PoseChoice {
 pub struct FrameInput<'a> {
     /// Sequence number, for messages.
     pub sequence: u64,
+    /// The robot's pace at the frame: its pose a second earlier seen from
+    /// this frame's ([`deog_grid::FrameMotion::observe`] over a robot's
+    /// odometry and frame times). With a ring that fires in turn
+    /// ([`Cartographer::with_firing`]) it places each reading; `None`:
+    /// every reading at the frame's pose.
+    pub pace: Option<Pose2>,
     /// The true pose, if the frame has one.
     pub true_pose: Option<Pose2>,
     /// The odometry pose.
@@ -135,6 +141,8 @@ pub struct Cartographer {
     /// With [`SonarMethod::Directional`]: the beliefs by direction, and
     /// the plain deltas of the frame being mapped.
     directional: Option<Directional>,
+    /// When the sensors fire within a frame ([`Self::with_firing`]).
+    firing: RingFiring,
 }
 
 /// What [`SonarMethod::Directional`] keeps between frames.
@@ -191,7 +199,17 @@ impl Cartographer {
             pose,
             guard: None,
             directional: None,
+            firing: RingFiring::Together,
         }
+    }
+
+    /// Maps a ring that fires in turn while the robot moves: each reading
+    /// from where the robot stood when its sensor fired, at the frame's
+    /// [`FrameInput::pace`]. By default, every reading at the frame's
+    /// pose.
+    pub fn with_firing(mut self, firing: RingFiring) -> Self {
+        self.firing = firing;
+        self
     }
 
     /// Guards every sonar cone with `view`, the map being written
@@ -291,6 +309,12 @@ impl Cartographer {
         out: &mut Vec<TileDelta>,
     ) -> Result<usize, MappingError> {
         let pose = self.pose_of(frame)?;
+        if self.firing != RingFiring::Together {
+            let at = self
+                .firing
+                .robot_at_readings(self.sensor.readings(), frame.pace.as_ref());
+            self.sensor.set_reading_poses(at.as_deref());
+        }
         let start = out.len();
         let invalid = |e: GridError| {
             MappingError::invalid(format!("frame {}", frame.sequence), e.to_string())
@@ -346,6 +370,63 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_ring_fired_in_turn_is_mapped_where_each_sonar_fired() {
+        let (res, size) = (Resolution::DEFAULT, TileSize::DEFAULT);
+        let params = mapping_sonar_model();
+        let firing = RingFiring::over(0.1).expect("firing");
+        // Driving at 0.4 m/s and turning at 1.2 rad/s.
+        let pace = Pose2::new(-0.4, 0.0, -1.2);
+        let at = firing
+            .robot_at_readings(16, Some(&pace))
+            .expect("moving");
+        let ranges: Vec<f64> = (0..16).map(|k| 1.0 + 0.1 * k as f64).collect();
+        let frame = |pace: Option<Pose2>| FrameInput {
+            sequence: 1,
+            pace,
+            true_pose: Some(Pose2::new(1.0, 2.0, 0.5)),
+            odometry: Pose2::new(0.0, 0.0, 0.0),
+            reference_pose: None,
+            estimate: None,
+            ranges: &ranges,
+        };
+        let deltas = |c: &mut Cartographer, pace: Option<Pose2>| {
+            let mut out = Vec::new();
+            c.integrate(&frame(pace), &mut out).expect("integrate");
+            out
+        };
+        let as_fired = SonarCone::new(SensorRing::scout().as_fired(&at), params, res, size)
+            .expect("cones");
+        let expected = deltas(
+            &mut Cartographer::with_sensor(PoseChoice::True, Box::new(as_fired)),
+            None,
+        );
+        let plain = deltas(
+            &mut Cartographer::with_model(res, size, PoseChoice::True, params).expect("c"),
+            None,
+        );
+        assert_ne!(expected, plain, "the motion moves the cones");
+        // The Scout's own path and any rig's path alike.
+        let mut scout = Cartographer::with_model(res, size, PoseChoice::True, params)
+            .expect("c")
+            .with_firing(firing);
+        assert_eq!(deltas(&mut scout, Some(pace)), expected);
+        let mut by_rig = Cartographer::for_rig(
+            &deog_rig::scout(),
+            PoseChoice::True,
+            params,
+            RayModelParams::default(),
+            res,
+            size,
+        )
+        .expect("c")
+        .with_firing(firing);
+        assert_eq!(deltas(&mut by_rig, Some(pace)), expected);
+        // No pace (a first frame, a gap): every cone at the frame's pose.
+        assert_eq!(deltas(&mut scout, None), plain);
+        assert_eq!(deltas(&mut by_rig, None), plain);
+    }
+
+    #[test]
     fn the_chosen_pose_places_the_cells() {
         let mut by_true =
             Cartographer::new(Resolution::DEFAULT, TileSize::DEFAULT, PoseChoice::True)
@@ -356,6 +437,7 @@ mod tests {
         let ranges = [2.0; 16];
         let frame = FrameInput {
             sequence: 1,
+            pace: None,
             true_pose: Some(Pose2::new(0.0, 0.0, 0.0)),
             odometry: Pose2::new(10.0, 0.0, 0.0),
             reference_pose: None,
@@ -377,6 +459,7 @@ mod tests {
         let mut out = Vec::new();
         let no_true = FrameInput {
             sequence: 7,
+            pace: None,
             true_pose: None,
             odometry: Pose2::new(0.0, 0.0, 0.0),
             reference_pose: None,
@@ -388,6 +471,7 @@ mod tests {
         let short = [2.0; 15];
         let bad = FrameInput {
             sequence: 8,
+            pace: None,
             true_pose: Some(Pose2::new(0.0, 0.0, 0.0)),
             odometry: Pose2::new(0.0, 0.0, 0.0),
             reference_pose: None,
@@ -437,6 +521,7 @@ mod tests {
             for (sequence, (pose, ranges)) in scout_frames().iter().enumerate() {
                 let frame = FrameInput {
                     sequence: sequence as u64,
+                    pace: None,
                     true_pose: None,
                     odometry: *pose,
                     reference_pose: None,
@@ -468,6 +553,7 @@ mod tests {
         let ranges = [2.0; 179];
         let frame = FrameInput {
             sequence: 4,
+            pace: None,
             true_pose: None,
             odometry: Pose2::default(),
             reference_pose: None,
@@ -529,6 +615,7 @@ mod tests {
         let mut out = Vec::new();
         let frame = FrameInput {
             sequence: 3,
+            pace: None,
             true_pose: None,
             odometry: Pose2::new(1.0, -1.0, 0.0),
             reference_pose: None,
@@ -579,6 +666,7 @@ mod tests {
             for (pose, ranges, sequence) in frames {
                 let frame = FrameInput {
                     sequence,
+                    pace: None,
                     true_pose: Some(pose),
                     odometry: pose,
                     reference_pose: None,

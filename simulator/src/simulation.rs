@@ -68,6 +68,19 @@ impl Default for SimConfig {
 }
 
 impl SimConfig {
+    /// When a frame's sonars fire, as a localizer or cartographer places
+    /// their readings: in turn over the sensor period when the sonar fires
+    /// sequentially (each firing falls on the physics step nearest its
+    /// time, within half a step of this), together otherwise.
+    pub fn ring_firing(&self) -> deog_grid::RingFiring {
+        match self.sonar.firing {
+            SonarFiring::Sequential => deog_grid::RingFiring::Sequential {
+                period_s: self.sonar_period_s,
+            },
+            SonarFiring::Together => deog_grid::RingFiring::Together,
+        }
+    }
+
     /// A robot's body and drive figures: `scout`'s limits with the rig's
     /// body radius.
     pub fn robot_params(&self) -> ScoutParams {

@@ -22,8 +22,10 @@ async fn bad_options_and_unknown_maps_are_clear_errors() {
         args.extend_from_slice(extra);
         failure(&run_deog(&args, &env))
     };
-    let cases: [(&[&str], &str); 9] = [
+    let cases: [(&[&str], &str); 11] = [
         (&[], "does not exist"),
+        (&["--firing-period", "20"], "--firing-period"),
+        (&["--firing-period", "NaN"], "--firing-period"),
         (&["--cache-mb", "4"], "--cache-mb"),
         (&["--specular-angle", "120"], "--specular-angle"),
         (&["--surface-depth", "2"], "--surface-depth"),

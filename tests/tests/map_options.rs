@@ -26,3 +26,23 @@ fn bad_sonar_model_options_are_refused_before_connecting() {
         assert!(!stderr.contains("panicked"), "{extra:?}: {stderr}");
     }
 }
+
+#[test]
+fn a_bad_firing_period_is_refused_before_connecting() {
+    let env = [("DEOG_SERVER", "127.0.0.1:9".to_string())];
+    for period in ["NaN", "20", "inf"] {
+        let args = [
+            "map",
+            "--robot",
+            "scout",
+            "--map",
+            "m",
+            "--firing-period",
+            period,
+        ];
+        let stderr = failure(&run_deog(&args, &env));
+        assert!(stderr.contains("--firing-period"), "{period}: {stderr}");
+        assert!(!stderr.contains("connecting"), "{period}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{period}: {stderr}");
+    }
+}

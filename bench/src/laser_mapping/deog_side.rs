@@ -83,6 +83,7 @@ pub(super) fn map_log(
         for (sequence, scan) in log.scans.iter().enumerate() {
             let frame = FrameInput {
                 sequence: sequence as u64,
+                pace: None,
                 true_pose: None,
                 odometry: scan.pose,
                 reference_pose: Some(scan.pose),

@@ -47,7 +47,7 @@ pub(crate) fn build_map(
     };
     // The Scout's own path for the Scout (as `deog map` takes it): the
     // same deltas, a little faster.
-    let mut cartographer = if config.rig == deog_rig::scout() {
+    let cartographer = if config.rig == deog_rig::scout() {
         Cartographer::with_model(res, size, PoseChoice::True, params)?
     } else {
         Cartographer::for_rig(
@@ -67,6 +67,8 @@ pub(crate) fn build_map(
         res,
         size,
     )?;
+    let mut cartographer = cartographer.with_firing(config.ring_firing());
+    let mut frame_motion = deog_grid::FrameMotion::default();
     let mut tiles = TileMap::new(res, size, ClampLimits::default());
     let mut deltas = Vec::new();
     let mut fired = Vec::new();
@@ -83,6 +85,7 @@ pub(crate) fn build_map(
         cartographer.integrate(
             &FrameInput {
                 sequence: state.sequence,
+                pace: frame_motion.observe(&state.odometry, state.time_s),
                 true_pose: Some(state.true_pose),
                 odometry: state.odometry,
                 reference_pose: None,

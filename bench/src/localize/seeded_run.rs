@@ -79,7 +79,8 @@ pub(super) fn run_once(
     let model = sensor
         .build(rig, settings.beam, LikelihoodFieldParams::default())
         .with_context(|| format!("the {sensor} model for rig {}", rig.name()))?;
-    let mcl = Mcl::with_sensor(settings, model)?;
+    let mut mcl = Mcl::with_sensor(settings, model)?;
+    mcl.set_firing(config.ring_firing());
     // No change is ever reported: the map in memory is the whole map.
     let mut localizer = Localizer::new(mcl, map, Duration::MAX, Instant::now());
     let whole = tiles
@@ -117,6 +118,7 @@ pub(super) fn run_once(
             sim.advance(period, &mut fired)?;
         }
         state = fired.pop().context("a firing")?;
+        localizer.note_frame(&state.odometry, state.time_s);
         if kidnapped_at.is_some() && kidnap_frame.is_none() {
             kidnap_frame = Some(state.sequence);
         }

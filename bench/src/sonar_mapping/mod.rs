@@ -286,6 +286,8 @@ struct OptionsRecord {
 /// A frame as recorded: where the robot really was, what it read.
 struct RecordedFrame {
     sequence: u64,
+    /// The robot's pace by its odometry ([`deog_mapping::FrameInput::pace`]).
+    pace: Option<Pose2>,
     true_pose: Pose2,
     ranges: Vec<f64>,
 }
@@ -461,6 +463,7 @@ fn record(
     }
     let mut frames = Vec::new();
     let mut fired = Vec::new();
+    let mut motions = vec![deog_grid::FrameMotion::default(); robots];
     while sim.time_s() < options.minutes * 60.0 {
         for (state, wanderer) in latest.iter().zip(&mut wanderers) {
             let (v, w) = wanderer.command(&state.ranges, state.bumper, period)?;
@@ -469,8 +472,13 @@ fn record(
         fired.clear();
         sim.advance(period, &mut fired)?;
         for state in fired.drain(..) {
+            let motion = &mut motions[latest
+                .iter()
+                .position(|s| s.name == state.name)
+                .unwrap_or(0)];
             frames.push(RecordedFrame {
                 sequence: frames.len() as u64 + 1,
+                pace: motion.observe(&state.odometry, state.time_s),
                 true_pose: state.true_pose,
                 ranges: state.ranges.clone(),
             });
@@ -521,8 +529,15 @@ fn build(
         ..MapViewSettings::default()
     };
     // The Scout's own ring path (as `deog map` takes it for the Scout).
+    // Each reading where its sonar fired, as `deog map --firing-period`.
+    let firing = SimConfig {
+        sonar: options.sonar.params(),
+        ..SimConfig::default()
+    }
+    .ring_firing();
     let mut cartographer = Cartographer::with_model(res, size, PoseChoice::True, params)?
-        .with_sonar_method(sonar_method, &rig, &params, view, res, size)?;
+        .with_sonar_method(sonar_method, &rig, &params, view, res, size)?
+        .with_firing(firing);
     let mut map = TileMap::new(res, size, ClampLimits::default());
     let mut deltas = Vec::new();
     let mut cell_updates = 0;
@@ -532,6 +547,7 @@ fn build(
         cell_updates += cartographer.integrate(
             &FrameInput {
                 sequence: frame.sequence,
+                pace: frame.pace,
                 true_pose: Some(frame.true_pose),
                 odometry: frame.true_pose,
                 reference_pose: None,
@@ -752,6 +768,7 @@ mod tests {
         ranges[12] = 7.0;
         let frames = [RecordedFrame {
             sequence: 1,
+            pace: None,
             true_pose: Pose2::new(0.01, 0.01, 0.0),
             ranges,
         }];

@@ -280,6 +280,7 @@ mod tests {
         }
         RecordedFrame {
             sequence: 1,
+            pace: None,
             true_pose: pose,
             ranges,
         }

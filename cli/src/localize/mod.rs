@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail, ensure};
 use clap::{Args, ValueEnum};
-use deog_grid::{CellBox, CellIndex, OccupancyThresholds, Resolution, TileSize};
+use deog_grid::{CellBox, CellIndex, OccupancyThresholds, Resolution, RingFiring, TileSize};
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::preset::Preset;
@@ -102,6 +102,13 @@ pub struct LocalizeArgs {
     /// --specular lost --specular-angle`). Unset: every wall echoes.
     #[arg(long)]
     pub specular_angle: Option<f64>,
+    /// The sonars fire one after another in ring order over this many
+    /// seconds, ending with the frame (as `deog sim --sonar realistic`'s,
+    /// over its 0.1 s period): each reading is scored where the robot
+    /// stood when its sonar fired, at the pace its odometry shows between
+    /// frames. 0: all fire with the frame.
+    #[arg(long, default_value_t = 0.0)]
+    pub firing_period: f64,
     /// How far past the near face of the first occupied cell a sonar's
     /// echo is expected, metres: 0.05 for maps the cartographer built
     /// (their occupied cells stand about a cell in front of the walls);
@@ -233,6 +240,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         "--refresh-s must be zero or positive, got {}",
         args.refresh_s
     );
+    RingFiring::over(args.firing_period).context("--firing-period (seconds)")?;
     if let Some(angle) = args.specular_angle {
         ensure!(
             angle.is_finite() && (0.0..=90.0).contains(&angle),
@@ -362,6 +370,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         .with_context(|| format!("the {choice} model for rig {}", rig.name()))?;
     tracing::info!(rig = rig.name(), readings = rig.readings(), sensor = %choice, "localizing with the frames' rig");
     let mut mcl = Mcl::with_sensor(settings, sensor).context("the filter's settings")?;
+    mcl.set_firing(RingFiring::over(args.firing_period).context("--firing-period (seconds)")?);
     let resolution = Resolution::new(info.resolution_m)?;
     let tile_size = TileSize::new(info.tile_size)?;
     let map = LocalMap::new(MapSettings {
@@ -531,6 +540,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             .odometry
             .map(pose_from_wire)
             .with_context(|| format!("frame {} has no odometry pose", frame.sequence))?;
+        localizer.note_frame(&odometry, frame.time_s);
         let particles = localizer.mcl().particles().len();
         let started = Instant::now();
         let carried = localizer

@@ -3,7 +3,7 @@
 //! and rebuilt if the robot's rig changes.
 
 use anyhow::{Context, Result, bail};
-use deog_grid::{RayModelParams, Resolution, SonarModelParams, TileSize};
+use deog_grid::{RayModelParams, Resolution, RingFiring, SonarModelParams, TileSize};
 use deog_mapping::{Cartographer, MapViewSettings, PoseChoice, SonarMethod};
 use deog_proto::rig::frame_rig_name;
 use deog_rig::Rig;
@@ -26,6 +26,8 @@ pub struct ModelSettings {
     pub method: SonarMethod,
     /// With [`SonarMethod::KeepWalls`], the view of the map cones stop in.
     pub view: MapViewSettings,
+    /// When a frame's sensors fire.
+    pub firing: RingFiring,
 }
 
 /// One cartographer, for the rig of the frames seen last.
@@ -87,6 +89,7 @@ fn build(rig: &Rig, s: &ModelSettings) -> Result<Cartographer> {
     } else {
         Cartographer::for_rig(rig, s.pose, s.sonar, s.ray, s.resolution, s.tile_size)
     }
-    .and_then(|c| c.with_sonar_method(s.method, rig, &s.sonar, s.view, s.resolution, s.tile_size));
+    .and_then(|c| c.with_sonar_method(s.method, rig, &s.sonar, s.view, s.resolution, s.tile_size))
+    .map(|c| c.with_firing(s.firing));
     cartographer.with_context(|| format!("the sensor models for rig {}", rig.name()))
 }

@@ -10,7 +10,9 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
-use deog_grid::{RayModelParams, Resolution, SonarModelParams, TileKey, TileSize};
+use deog_grid::{
+    FrameMotion, RayModelParams, Resolution, RingFiring, SonarModelParams, TileKey, TileSize,
+};
 use deog_mapping::{
     DirectionalSettings, FrameInput, MapView, MapViewSettings, PoseChoice, SonarMethod,
     mapping_sonar_model,
@@ -137,6 +139,13 @@ pub struct MapArgs {
     /// frees its ray out to here and adds no hit.
     #[arg(long, default_value_t = RayModelParams::default().max_mapped_range)]
     pub ray_max_mapped_range: f64,
+    /// The sonars fire one after another in ring order over this many
+    /// seconds, ending with the frame (as `deog sim --sonar realistic`'s,
+    /// over its 0.1 s period): each reading is mapped from where the robot
+    /// stood when its sonar fired, at the pace its odometry shows between
+    /// frames. 0: all fire with the frame.
+    #[arg(long, default_value_t = 0.0)]
+    pub firing_period: f64,
     /// How sonar readings become evidence: `thesis` (the thesis's model
     /// alone), `directional` (evidence kept per direction of the surface
     /// normal, so that a reading that glanced off a wall cannot erase the
@@ -207,6 +216,7 @@ pub fn run(args: MapArgs) -> Result<()> {
             args.estimate_wait
         );
     }
+    let firing = RingFiring::over(args.firing_period).context("--firing-period (seconds)")?;
     let params = SonarModelParams {
         max_occupied: args.max_occupied,
         max_empty: args.max_empty,
@@ -279,6 +289,7 @@ pub fn run(args: MapArgs) -> Result<()> {
             tile_size,
             method: SonarMethod::from(args.sonar_method),
             view,
+            firing,
         };
         let mut cartographers = CartographerByRig::new(client.clone(), settings, expected_rig);
         let mut sender = client
@@ -325,6 +336,7 @@ pub fn run(args: MapArgs) -> Result<()> {
         let mut worked_until = Instant::now();
         let (mut integrated, mut cells, mut last) = (0u64, 0u64, 0u64);
         let mut deltas = Vec::new();
+        let mut frame_motion = FrameMotion::default();
         let mut batch = Vec::new();
         let mut view_read = Instant::now();
         'follow: loop {
@@ -367,8 +379,10 @@ pub fn run(args: MapArgs) -> Result<()> {
                     },
                     None => None,
                 };
+                let pace = frame_motion.observe(&pose_or_origin(frame.odometry), frame.time_s);
                 let input = FrameInput {
                     sequence: frame.sequence,
+                    pace,
                     true_pose: frame.true_pose.map(pose_from_wire),
                     odometry: pose_or_origin(frame.odometry),
                     reference_pose: frame.reference_pose.map(pose_from_wire),

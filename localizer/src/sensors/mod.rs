@@ -137,6 +137,16 @@ pub trait SensorModel: std::fmt::Debug + Send {
         let _ = reference;
     }
 
+    /// The filter tells the model, before each frame is scored, where the
+    /// robot stood when each reading was taken, in the frame pose's own
+    /// frame (a ring that fires in turn while the robot moves;
+    /// [`deog_grid::RingFiring`]), or `None` for readings taken with the
+    /// frame. The sonar scores each where it was taken. By default,
+    /// ignored.
+    fn set_reading_poses(&mut self, robot_at: Option<&[Pose2]>) {
+        let _ = robot_at;
+    }
+
     /// Whether a mode of many particles is judged by the likelihood at its
     /// mean pose ([`crate::cluster::Clusters::evidence`]) rather than by
     /// its best particle. Right when the likelihood's peak is wider than a

@@ -29,7 +29,11 @@ use crate::sensors::SensorModel;
 /// The sonar ring's sensor model.
 #[derive(Debug, Clone)]
 pub struct SonarCone {
+    /// The sonars' mounts.
     ring: SensorRing,
+    /// The mounts where the current frame's readings were taken
+    /// ([`SensorModel::set_reading_poses`]).
+    fired: SensorRing,
     model: BeamModel,
     /// The current frame's measured-range slot per beam.
     beam_slots: Vec<usize>,
@@ -59,6 +63,7 @@ impl SonarCone {
             unexplained: Vec::with_capacity(ring.len()),
             unexplained_for: Vec::with_capacity(ring.len()),
             flat_tables: vec![Vec::new(); ring.len()],
+            fired: ring.clone(),
             ring,
         })
     }
@@ -101,7 +106,7 @@ impl SonarCone {
         let mut short = Vec::new();
         {
             let window = map.window(tiles);
-            for (k, sensor) in self.ring.sensor_poses(&reference).enumerate() {
+            for (k, sensor) in self.fired.sensor_poses(&reference).enumerate() {
                 let measured = self.beam_slots[k];
                 if measured >= no_echo {
                     continue;
@@ -179,7 +184,7 @@ fn echo_from_unseen_space(
 
 impl SensorModel for SonarCone {
     fn readings(&self) -> usize {
-        self.ring.len()
+        self.fired.len()
     }
 
     fn reach(&self) -> f64 {
@@ -191,11 +196,18 @@ impl SensorModel for SonarCone {
     }
 
     fn observations(&self) -> f64 {
-        self.ring.len() as f64 * self.model.params().tempering
+        self.fired.len() as f64 * self.model.params().tempering
     }
 
     fn set_reference(&mut self, reference: Option<Pose2>) {
         self.reference = reference;
+    }
+
+    fn set_reading_poses(&mut self, robot_at: Option<&[Pose2]>) {
+        self.fired = match robot_at {
+            Some(at) => self.ring.as_fired(at),
+            None => self.ring.clone(),
+        };
     }
 
     fn score_particles(
@@ -215,7 +227,7 @@ impl SensorModel for SonarCone {
         // heading as a position among the table's stored headings.
         let headings = window.headings() as f64;
         let mounts: Vec<(f64, f64, f64, f64, f64)> = self
-            .ring
+            .fired
             .mounts()
             .iter()
             .map(|m| {
@@ -271,12 +283,12 @@ impl SensorModel for SonarCone {
             self.unexplained.clear();
             self.unexplained.resize(ranges.len(), None);
         }
-        let keys = map.tables_under(&self.ring, pose)?;
+        let keys = map.tables_under(&self.fired, pose)?;
         let no_echo = self.model.no_echo_slot();
         let mut total = 0i32;
         let tables = self.frame_tables()?;
         let window = map.window(&keys);
-        for (sensor, table) in self.ring.sensor_poses(pose).zip(&tables) {
+        for (sensor, table) in self.fired.sensor_poses(pose).zip(&tables) {
             let (sin, cos) = sensor.theta.sin_cos();
             let slot = window.expected_slot(sensor.x, sensor.y, sensor.theta, (cos, sin), no_echo);
             total += i32::from(table[slot]);

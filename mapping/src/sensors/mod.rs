@@ -36,6 +36,14 @@ pub trait InverseSensorModel: std::fmt::Debug + Send {
         out: &mut Vec<TileDelta>,
     ) -> Result<usize, GridError>;
 
+    /// Where the robot stood when each reading of the frames that follow
+    /// was taken, in the frame pose's own frame (a ring that fires in
+    /// turn while the robot moves, [`deog_grid::RingFiring`]), or `None`
+    /// for readings taken with the frame. By default, ignored.
+    fn set_reading_poses(&mut self, robot_at: Option<&[Pose2]>) {
+        let _ = robot_at;
+    }
+
     /// [`Self::integrate`] guarded by the map being written: a sensor
     /// whose evidence should stop at known walls (a sonar cone) stops
     /// there; by default the guard is ignored.

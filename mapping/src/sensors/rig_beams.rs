@@ -129,6 +129,21 @@ impl InverseSensorModel for RigBeams {
         self.rig.readings()
     }
 
+    fn set_reading_poses(&mut self, robot_at: Option<&[Pose2]>) {
+        let beams = self.rig.beams();
+        let mounts: Vec<Pose2> = match robot_at {
+            Some(at) if at.len() == beams.len() => beams
+                .iter()
+                .zip(at)
+                .map(|(b, at)| at.compose(&b.mount))
+                .collect(),
+            _ => beams.iter().map(|b| b.mount).collect(),
+        };
+        // The rig's mounts are finite, and so are poses composed from them
+        // with finite motion: the count is the rig's own.
+        let _ = self.integrator.set_mounts(&mounts);
+    }
+
     fn integrate(
         &mut self,
         robot: &Pose2,

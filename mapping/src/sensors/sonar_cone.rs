@@ -13,6 +13,8 @@ use crate::sensors::InverseSensorModel;
 #[derive(Debug, Clone)]
 pub struct SonarCone {
     integrator: FrameIntegrator,
+    /// The sonars' mounts, as built.
+    mounts: SensorRing,
 }
 
 impl SonarCone {
@@ -26,6 +28,7 @@ impl SonarCone {
     ) -> Result<Self, GridError> {
         let model = SonarModel::new(params)?;
         Ok(Self {
+            mounts: ring.clone(),
             integrator: FrameIntegrator::new(model, ring, resolution, tile_size),
         })
     }
@@ -34,6 +37,14 @@ impl SonarCone {
 impl InverseSensorModel for SonarCone {
     fn readings(&self) -> usize {
         self.integrator.ring().len()
+    }
+
+    fn set_reading_poses(&mut self, robot_at: Option<&[Pose2]>) {
+        let ring = match robot_at {
+            Some(at) => self.mounts.as_fired(at),
+            None => self.mounts.clone(),
+        };
+        self.integrator.set_ring(ring);
     }
 
     fn integrate(
