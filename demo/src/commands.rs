@@ -429,12 +429,13 @@ mod tests {
         assert_eq!(
             line(&map(&plan, &plan.robots[0], &addresses)),
             "map --robot scout-1 --map demo --idle-exit 3 --server http://127.0.0.1:5001 \
-             --sonar-method directional --no-echo-free-range 0 --max-free-range 2"
+             --firing-period 0.1 --sonar-method directional --no-echo-free-range 0 \
+             --max-free-range 2"
         );
         assert_eq!(
             line(&localize(&plan, &plan.robots[0], &addresses)),
             "localize --robot scout-1 --map demo --idle-exit 3 --seed 1001 \
-             --server http://127.0.0.1:5001 --specular-angle 30"
+             --server http://127.0.0.1:5001 --specular-angle 30 --firing-period 0.1"
         );
     }
 }

@@ -376,9 +376,7 @@ mod tests {
         let firing = RingFiring::over(0.1).expect("firing");
         // Driving at 0.4 m/s and turning at 1.2 rad/s.
         let pace = Pose2::new(-0.4, 0.0, -1.2);
-        let at = firing
-            .robot_at_readings(16, Some(&pace))
-            .expect("moving");
+        let at = firing.robot_at_readings(16, Some(&pace)).expect("moving");
         let ranges: Vec<f64> = (0..16).map(|k| 1.0 + 0.1 * k as f64).collect();
         let frame = |pace: Option<Pose2>| FrameInput {
             sequence: 1,
@@ -394,8 +392,8 @@ mod tests {
             c.integrate(&frame(pace), &mut out).expect("integrate");
             out
         };
-        let as_fired = SonarCone::new(SensorRing::scout().as_fired(&at), params, res, size)
-            .expect("cones");
+        let as_fired =
+            SonarCone::new(SensorRing::scout().as_fired(&at), params, res, size).expect("cones");
         let expected = deltas(
             &mut Cartographer::with_sensor(PoseChoice::True, Box::new(as_fired)),
             None,

@@ -233,3 +233,53 @@ async fn directional_a_reading_that_swept_along_the_wall_does_not_erase_it() {
     drop(client);
     drop(server);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_ring_fired_in_turn_is_mapped_where_its_sonar_fired() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let server = ServerProcess::start(&dir.path().join("data"), &[]).await;
+    let client = MapClient::connect(ClientConfig::new(server.addr.to_string()))
+        .await
+        .expect("client");
+    // Turning on the spot at 2 rad/s, 0.2 rad a frame; in frame 5
+    // (heading 1.0) the front sonar, which fired first of the ring
+    // 0.09375 s before the frame, at heading 0.8125, heard a wall 2 m off.
+    let frames: Vec<_> = (1..=8)
+        .map(|k| {
+            let front = if k == 5 { 2.0 } else { 10.668 };
+            front_reading("r", k, (0.0, 0.0, 0.2 * k as f64), front)
+        })
+        .collect();
+    client.publish_frames(frames).await.expect("publish");
+    let quiet = ["--no-echo-free-range", "0"];
+    map_robot_r(
+        &server,
+        "fired",
+        &[&quiet[..], &["--firing-period", "0.1"]].concat(),
+    );
+    map_robot_r(&server, "together", &quiet);
+    let belief = |map: &str, heading: f64| {
+        let client = client.clone();
+        let map = map.to_owned();
+        async move {
+            let (_, tiles) = client.download(&map).await.expect("download");
+            // The sonar sits 0.2 m out on the ring: its echo 2.2 m from the centre.
+            let (x, y) = (2.2 * heading.cos(), 2.2 * heading.sin());
+            let cell = tiles.resolution().cell_of(x, y).expect("cell");
+            tiles.get(cell).map_or(0.5, |b| b.probability())
+        }
+    };
+    let (fired_at, frame_at) = (0.8125, 1.0);
+    let fired = (
+        belief("fired", fired_at).await,
+        belief("fired", frame_at).await,
+    );
+    let together = (
+        belief("together", fired_at).await,
+        belief("together", frame_at).await,
+    );
+    assert!(fired.0 > fired.1, "placed where it fired: {fired:?}");
+    assert!(together.1 > together.0, "placed at the frame: {together:?}");
+    drop(client);
+    drop(server);
+}
