@@ -503,7 +503,9 @@ impl Mcl {
     /// and corrected: with a ring that fires in turn
     /// ([`Self::set_firing`]), its readings are then scored where the robot
     /// stood when each was taken, at the pace odometry shows since the
-    /// frame noted before. Frames not noted are scored as fired together.
+    /// frame noted before. The placement holds until the next frame is
+    /// noted: note every frame stepped (frames skipped between two noted
+    /// ones only widen the step the pace is taken over).
     pub fn note_frame(&mut self, odometry: &Pose2, time_s: f64) {
         let back = self.frame_motion.observe(odometry, time_s);
         self.reading_poses = self
