@@ -260,6 +260,7 @@ impl Cartographer {
                     wall_probability: settings.wall_probability,
                     max_tiles: settings.max_tiles,
                     limits: settings.limits,
+                    enclosure_period: settings.enclosure_period,
                 },
             )?;
             return Ok(self.by_direction(view));

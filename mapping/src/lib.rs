@@ -36,7 +36,7 @@ pub use cartographer::{
     Cartographer, FrameInput, PoseChoice, SPECULAR_MAX_FREE_RANGE, SonarMethod,
     mapping_sonar_model, specular_sonar_mapping,
 };
-pub use directional::{DirectionalSettings, DirectionalView};
+pub use directional::{DEFAULT_ENCLOSURE_PERIOD, DirectionalSettings, DirectionalView};
 pub use error::MappingError;
 pub use estimates::{EstimateBook, EstimateLookup};
 pub use map_export::{ExportCounts, MapExport, export_map};

@@ -33,6 +33,10 @@ pub struct MapViewSettings {
     /// The map's clamp limits, applied to the cartographer's own deltas as
     /// the server applies them.
     pub limits: ClampLimits,
+    /// With [`crate::SonarMethod::Directional`]: frames between two
+    /// judgements of the space no robot could have seen
+    /// ([`crate::DirectionalSettings::enclosure_period`]); 0: never.
+    pub enclosure_period: u32,
 }
 
 impl Default for MapViewSettings {
@@ -45,6 +49,7 @@ impl Default for MapViewSettings {
             shadow_probability: 0.7,
             max_tiles: 4096,
             limits: ClampLimits::default(),
+            enclosure_period: crate::directional::DEFAULT_ENCLOSURE_PERIOD,
         }
     }
 }

@@ -17,12 +17,16 @@
 //! - `keep-walls-no-echo-ignored`: the same with no-echo readings
 //!   ignored (what `deog demo` runs with a specular sonar);
 //! - `directional`: evidence kept per direction of the surface normal
-//!   ([`SonarMethod::Directional`], `deog map --sonar-method directional`);
+//!   ([`SonarMethod::Directional`], `deog map --sonar-method directional`,
+//!   with its default judgement of enclosed space);
 //! - `directional-no-echo-ignored`: the same with no-echo readings
 //!   ignored;
 //! - `directional-specular`: what `deog demo` maps a specular sonar with
 //!   ([`specular_sonar_mapping`]: directional, no-echo readings ignored,
-//!   empty evidence out to 2 m whatever `--max-free-range` says);
+//!   empty evidence out to 2 m whatever `--max-free-range` says, the
+//!   space no robot could have seen sent as walls every 50 frames);
+//! - `directional-specular-no-enclosure`: the same without the judgement
+//!   of enclosed space (`deog map --enclosure-period 0`);
 //! - `octomap`: OctoMap, with one ray per reading with an echo, from its
 //!   transducer along its axis to the range read, no-echo readings left
 //!   out, OctoMap's default probabilities (hit 0.7, miss 0.4, clamping
@@ -81,7 +85,7 @@ use crate::option_error::{OptionError, require};
 use octomap_method::{OctomapDetails, OctomapRecord, OctomapSide};
 
 /// The methods compared, in the order the table lists them.
-pub const METHODS: [&str; 8] = [
+pub const METHODS: [&str; 9] = [
     "thesis",
     "thesis-no-echo-ignored",
     "keep-walls",
@@ -89,6 +93,7 @@ pub const METHODS: [&str; 8] = [
     "directional",
     "directional-no-echo-ignored",
     "directional-specular",
+    "directional-specular-no-enclosure",
     "octomap",
 ];
 
@@ -506,7 +511,7 @@ fn build(
         bail!("the octomap method is OctoMap's side, not deog's");
     }
     let rig = deog_rig::scout();
-    let (sonar_method, params) = if method == "directional-specular" {
+    let (sonar_method, params) = if method.starts_with("directional-specular") {
         specular_sonar_mapping()
     } else {
         let mut params = mapping_sonar_model();
@@ -526,6 +531,11 @@ fn build(
     let view = MapViewSettings {
         wall_probability: options.wall_probability,
         shadow_probability: options.wall_probability,
+        enclosure_period: if method.ends_with("no-enclosure") {
+            0
+        } else {
+            MapViewSettings::default().enclosure_period
+        },
         ..MapViewSettings::default()
     };
     // The Scout's own ring path (as `deog map` takes it for the Scout).
@@ -682,7 +692,7 @@ mod tests {
         assert!(!options.octomap && !options.no_octomap);
 
         let options = parse(&["--no-octomap"]);
-        assert_eq!(options.chosen_methods(), &METHODS[..7]);
+        assert_eq!(options.chosen_methods(), &METHODS[..METHODS.len() - 1]);
         assert!(options.validate().is_ok());
         let options = parse(&["--octomap", "--python", "/opt/py/bin/python3"]);
         assert!(options.octomap && options.validate().is_ok());

@@ -164,6 +164,14 @@ pub struct MapArgs {
     /// directional: 96 KiB each, 1,024 by default).
     #[arg(long)]
     pub view_tiles: Option<usize>,
+    /// With --sonar-method directional: every this many frames, the
+    /// observed cells that no path from where the robot stood reaches
+    /// without crossing a wall (the inside of an obstacle, the space past
+    /// an outer wall, freed through a face the sonar met at a grazing
+    /// angle) are sent as walls, and sent back as they were if a later
+    /// path reaches them. 0: never.
+    #[arg(long, default_value_t = MapViewSettings::default().enclosure_period)]
+    pub enclosure_period: u32,
     /// With --sonar-method keep-walls: how often the tiles kept are read
     /// again from the map server, seconds, so that other robots' walls
     /// count too.
@@ -250,6 +258,7 @@ pub fn run(args: MapArgs) -> Result<()> {
             SonarMethodChoice::Directional => DirectionalSettings::default().max_tiles,
             _ => MapViewSettings::default().max_tiles,
         }),
+        enclosure_period: args.enclosure_period,
         ..MapViewSettings::default()
     }
     .validate()

@@ -1,0 +1,641 @@
+//! Sonar evidence kept by direction ([`crate::SonarMethod::Directional`]),
+//! after the idea of Konolige's MURIEL (1997): a sonar hears a surface
+//! only when it meets it within the critical angle of its normal, so a
+//! reading says something only about surfaces facing back at the sensor.
+//! A wall swept at a grazing angle returns nothing, and the readings that
+//! pass it say "no surface facing this way here", which is true, and must
+//! not erase the echoes that the wall returned from straight ahead.
+//!
+//! Each cell of the view keeps one belief per direction of the surface
+//! normal ([`DIRECTIONS`] bins of 30°, the Polaroid transducer's critical
+//! angle). A cell's evidence from a frame goes to the two bins nearest to
+//! the direction back at the robot. The cell's belief in the map is its
+//! most occupied observed bin: a cell is a wall if it faces some way as a
+//! wall, and free once every way it was seen from says free. What goes to
+//! the map server is the change of that belief, so the server's map (and
+//! every reader of it) stays one belief per cell.
+//!
+//! The view also guards the cones it maps: a cell it believes a wall hides
+//! what lies behind it, so a reading that passed a known wall (a specular
+//! miss, a multipath echo) frees nothing beyond it. It holds a bounded
+//! number of tiles and forgets the least recently used; a forgotten tile
+//! starts again from nothing (the server keeps what it was sent).
+//!
+//! Space no robot could have seen ([`enclosure`]): every
+//! [`DirectionalSettings::enclosure_period`] frames the view floods from
+//! the cells the robots stood on through every cell it does not hold as
+//! occupied; an observed cell the flood does not reach is walled off from
+//! every path, so the free evidence it got came through a grazed face,
+//! and the map is sent it as a wall ([`DirectionalSettings::wall_probability`]).
+//! The judgement is undone, as a change sent like any other, when a later
+//! flood reaches the cell again.
+//!
+//! Directions are taken from the robot's centre, not from each sensor:
+//! the evidence of one frame arrives merged over its cones. At 1 m the
+//! Scout's sensors (0.2 m off centre) see a cell up to 12° from where the
+//! centre does, well within a bin.
+
+use std::collections::HashMap;
+
+use deog_grid::{
+    CellIndex, CellOffset, ClampLimits, ConeGuard, LogOdds, Pose2, Resolution, TileDelta, TileKey,
+    TileSize,
+};
+
+use crate::error::MappingError;
+use crate::map_view::{check_view, evict_least_recent};
+
+mod enclosure;
+
+/// Directions of the surface normal a cell keeps a belief for.
+pub const DIRECTIONS: usize = 12;
+
+/// The raw value of a bin that has received no evidence.
+const UNSEEN: i16 = LogOdds::UNKNOWN_RAW;
+
+/// How big a directional view is and what it calls a wall.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DirectionalSettings {
+    /// A cell at or above this probability of occupancy (its most occupied
+    /// direction) hides what lies behind it from later cones.
+    pub wall_probability: f64,
+    /// Tiles held at most.
+    pub max_tiles: usize,
+    /// Each direction's belief is clamped as the map clamps a cell, so
+    /// that a direction can change its mind (a door opens).
+    pub limits: ClampLimits,
+    /// Frames between two judgements of the space no robot could have
+    /// seen ([`enclosure`]); 0: never judged.
+    pub enclosure_period: u32,
+}
+
+impl Default for DirectionalSettings {
+    /// Walls at 0.7, as [`crate::MapViewSettings`]; 1,024 tiles (96 MiB
+    /// of 64-cell tiles, twelve beliefs a cell); enclosed space judged
+    /// every 50 frames (5 s of a Scout's).
+    fn default() -> Self {
+        Self {
+            wall_probability: 0.7,
+            max_tiles: 1024,
+            limits: ClampLimits::default(),
+            enclosure_period: DEFAULT_ENCLOSURE_PERIOD,
+        }
+    }
+}
+
+impl DirectionalSettings {
+    /// Checks the figures.
+    pub fn validate(self) -> Result<Self, MappingError> {
+        check_view(self.wall_probability, self.max_tiles)?;
+        Ok(self)
+    }
+}
+
+/// Frames between two judgements of enclosed space by default.
+pub const DEFAULT_ENCLOSURE_PERIOD: u32 = 50;
+
+/// How far from a robot's centre the cells it stands on reach, metres:
+/// well inside any robot's body.
+const TREAD_RADIUS_M: f64 = 0.1;
+
+/// How far from a robot's centre unobserved cells still let the flood of
+/// [`enclosure`] through, metres: the sonar cones begin at the body's
+/// edge, a little beyond it.
+const NEAR_PATH_M: f64 = 0.4;
+
+/// Judgements of enclosed space a tile stays judged after its last use:
+/// the flood keeps to the tiles held, and a tile long unused may have
+/// lost the path that joined it to a robot.
+const JUDGED_FOR_PERIODS: u64 = 10;
+
+/// A tile's beliefs, [`DIRECTIONS`] per cell, which cells a robot stood
+/// on and which are judged enclosed, and when it was last used.
+#[derive(Debug, Clone)]
+struct DirectionalTile {
+    bins: Box<[i16]>,
+    trodden: Box<[bool]>,
+    near_path: Box<[bool]>,
+    enclosed: Box<[bool]>,
+    used: u64,
+}
+
+impl DirectionalTile {
+    fn new(area: usize) -> Self {
+        Self {
+            bins: vec![UNSEEN; area * DIRECTIONS].into_boxed_slice(),
+            trodden: vec![false; area].into_boxed_slice(),
+            near_path: vec![false; area].into_boxed_slice(),
+            enclosed: vec![false; area].into_boxed_slice(),
+            used: 0,
+        }
+    }
+
+    /// The belief the map holds for cell `index`: its directions'
+    /// ([`combined`]), or a wall's if it is judged enclosed.
+    fn held(&self, index: usize, wall: i16) -> i16 {
+        let belief = combined(&self.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS]);
+        if self.enclosed[index] && belief != UNSEEN {
+            belief.max(wall)
+        } else {
+            belief
+        }
+    }
+}
+
+/// The cartographer's own directional beliefs around the robot, bounded.
+#[derive(Debug, Clone)]
+pub struct DirectionalView {
+    settings: DirectionalSettings,
+    wall: i16,
+    resolution: Resolution,
+    tile_size: TileSize,
+    tiles: HashMap<TileKey, DirectionalTile>,
+    clock: u64,
+}
+
+impl DirectionalView {
+    /// An empty view of a map of `resolution` and `tile_size`.
+    pub fn new(
+        resolution: Resolution,
+        tile_size: TileSize,
+        settings: DirectionalSettings,
+    ) -> Result<Self, MappingError> {
+        let settings = settings.validate()?;
+        Ok(Self {
+            wall: LogOdds::from_probability(settings.wall_probability)?.raw(),
+            settings,
+            resolution,
+            tile_size,
+            tiles: HashMap::new(),
+            clock: 0,
+        })
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &DirectionalSettings {
+        &self.settings
+    }
+
+    /// Tiles held.
+    pub fn len(&self) -> usize {
+        self.tiles.len()
+    }
+
+    /// Whether no tile is held.
+    pub fn is_empty(&self) -> bool {
+        self.tiles.is_empty()
+    }
+
+    /// The belief the map holds for `cell` from this view: its most
+    /// occupied observed direction, or a wall's if it is walled off from
+    /// every robot's path; `None` if never observed (or forgotten).
+    pub fn belief(&self, cell: CellIndex) -> Option<LogOdds> {
+        let (key, offset) = self.tile_size.split(cell);
+        let tile = self.tiles.get(&key)?;
+        LogOdds::from_raw(tile.held(offset.index(self.tile_size), self.wall))
+    }
+
+    /// Whether `cell` is judged walled off from every robot's path.
+    pub fn is_enclosed(&self, cell: CellIndex) -> bool {
+        let (key, offset) = self.tile_size.split(cell);
+        self.tiles
+            .get(&key)
+            .is_some_and(|t| t.enclosed[offset.index(self.tile_size)])
+    }
+
+    /// Takes one frame's plain evidence (`plain`, the sonar model's deltas
+    /// for a robot at `robot`) into the directional beliefs, marks the
+    /// cells the robot stands on, and appends to `out` the change each
+    /// touched cell's belief makes, one delta per tile that changed; every
+    /// [`DirectionalSettings::enclosure_period`] frames also the changes of
+    /// the judgement of enclosed space, merged into the same deltas.
+    pub fn absorb(
+        &mut self,
+        robot: &Pose2,
+        plain: &[TileDelta],
+        out: &mut Vec<TileDelta>,
+    ) -> Result<(), MappingError> {
+        self.clock += 1;
+        let start = out.len();
+        let size = self.tile_size;
+        let cells_per_tile = size.area();
+        let bin_width = std::f64::consts::TAU / DIRECTIONS as f64;
+        let wall = self.wall;
+        for delta in plain {
+            size.check(delta.key)?;
+            let origin = size.origin(delta.key)?;
+            let clock = self.clock;
+            let tile = self
+                .tiles
+                .entry(delta.key)
+                .or_insert_with(|| DirectionalTile::new(cells_per_tile));
+            tile.used = clock;
+            let mut change: Option<TileDelta> = None;
+            for (index, &d) in delta.raw().iter().enumerate() {
+                if d == 0 {
+                    continue;
+                }
+                let offset = CellOffset::from_index(index, size);
+                let cell = CellIndex::new(
+                    origin.x + i32::from(offset.x),
+                    origin.y + i32::from(offset.y),
+                );
+                let (cx, cy) = self.resolution.cell_center(cell);
+                // The direction back at the robot, in bins: the normal of
+                // a surface this cell could have echoed from.
+                let back = (robot.y - cy).atan2(robot.x - cx);
+                let position = back.rem_euclid(std::f64::consts::TAU) / bin_width;
+                let below = (position.floor() as usize) % DIRECTIONS;
+                let above = (below + 1) % DIRECTIONS;
+                let before = tile.held(index, wall);
+                let bins = &mut tile.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS];
+                for b in [below, above] {
+                    bins[b] = self.settings.limits.apply(bins[b], d);
+                }
+                let after = tile.held(index, wall);
+                if after != before {
+                    change
+                        .get_or_insert_with(|| TileDelta::zero(delta.key, size))
+                        .raw_mut()[index] = step(before, after);
+                }
+            }
+            out.extend(change);
+        }
+        self.tread(robot)?;
+        let period = u64::from(self.settings.enclosure_period);
+        if period > 0 && self.clock % period == 0 {
+            self.judge_enclosure(out, start);
+        }
+        self.evict();
+        Ok(())
+    }
+
+    /// Marks the cells within [`TREAD_RADIUS_M`] of the robot's centre as
+    /// stood on: where the flood of [`enclosure`] starts.
+    fn tread(&mut self, robot: &Pose2) -> Result<(), MappingError> {
+        let r = NEAR_PATH_M;
+        let low = self.resolution.cell_of(robot.x - r, robot.y - r)?;
+        let high = self.resolution.cell_of(robot.x + r, robot.y + r)?;
+        let size = self.tile_size;
+        let clock = self.clock;
+        for y in low.y..=high.y {
+            for x in low.x..=high.x {
+                let cell = CellIndex::new(x, y);
+                let (cx, cy) = self.resolution.cell_center(cell);
+                let distance = (cx - robot.x).hypot(cy - robot.y);
+                if distance > r {
+                    continue;
+                }
+                let (key, offset) = size.split(cell);
+                size.check(key)?;
+                let tile = self
+                    .tiles
+                    .entry(key)
+                    .or_insert_with(|| DirectionalTile::new(size.area()));
+                tile.used = clock;
+                tile.near_path[offset.index(size)] = true;
+                if distance <= TREAD_RADIUS_M {
+                    tile.trodden[offset.index(size)] = true;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Judges again which observed cells are walled off from every path a
+    /// robot took, in the tiles used within the last
+    /// [`JUDGED_FOR_PERIODS`] judgements, and adds the change of their
+    /// beliefs to `out[start..]` (into a tile's delta there, or a new one).
+    fn judge_enclosure(&mut self, out: &mut Vec<TileDelta>, start: usize) {
+        let size = self.tile_size;
+        // A cell the view leans to believe occupied stops the flood.
+        let reached = enclosure::reach_from_trodden(&self.tiles, size, 0);
+        let since = self
+            .clock
+            .saturating_sub(JUDGED_FOR_PERIODS * u64::from(self.settings.enclosure_period));
+        let wall = self.wall;
+        for (key, reached) in reached {
+            let Some(tile) = self.tiles.get_mut(&key) else {
+                continue;
+            };
+            if tile.used < since {
+                continue;
+            }
+            let mut change: Option<TileDelta> = None;
+            for (index, &reach) in reached.iter().enumerate() {
+                let belief = combined(&tile.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS]);
+                // A wall keeps its belief; any other observed cell inside
+                // is sent as one (the uncertain ones too: a cone's occupied
+                // arc spread into an obstacle as much as its free part).
+                let enclosed =
+                    reach == enclosure::Reach::Inside && belief != UNSEEN && belief < wall;
+                if enclosed == tile.enclosed[index] {
+                    continue;
+                }
+                let before = tile.held(index, wall);
+                tile.enclosed[index] = enclosed;
+                let after = tile.held(index, wall);
+                if after != before {
+                    change
+                        .get_or_insert_with(|| TileDelta::zero(key, size))
+                        .raw_mut()[index] = step(before, after);
+                }
+            }
+            let Some(change) = change else { continue };
+            match out[start..].iter_mut().find(|d| d.key == key) {
+                Some(existing) => {
+                    for (sum, &more) in existing.raw_mut().iter_mut().zip(change.raw()) {
+                        *sum = sum.saturating_add(more);
+                    }
+                }
+                None => out.push(change),
+            }
+        }
+    }
+
+    fn evict(&mut self) {
+        evict_least_recent(&mut self.tiles, self.settings.max_tiles, |t| t.used);
+    }
+}
+
+/// The delta that takes a cell's belief from `before` to `after`; a cell
+/// seen first starts from even odds, as the map's cells do.
+fn step(before: i16, after: i16) -> i16 {
+    let base = if before == UNSEEN { 0 } else { before };
+    (i32::from(after) - i32::from(base)) as i16
+}
+
+/// A cell's belief from its directions: the most occupied one if some
+/// direction holds it occupied, else the freest observed one; [`UNSEEN`]
+/// if none was observed.
+#[inline]
+fn combined(bins: &[i16]) -> i16 {
+    let most = bins.iter().copied().max().unwrap_or(UNSEEN);
+    if most > 0 {
+        return most;
+    }
+    bins.iter()
+        .copied()
+        .filter(|&b| b != UNSEEN)
+        .min()
+        .unwrap_or(UNSEEN)
+}
+
+impl ConeGuard for DirectionalView {
+    fn shadows(&self, cell: CellIndex) -> bool {
+        self.belief(cell).is_some_and(|b| b.raw() >= self.wall)
+    }
+
+    /// A wall's cells still take the evidence of the readings that reach
+    /// them: it lands in the directions those readings face, never in the
+    /// one the wall echoed from.
+    fn keeps(&self, _cell: CellIndex) -> bool {
+        false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use deog_grid::TileMap;
+
+    fn view() -> DirectionalView {
+        DirectionalView::new(
+            Resolution::DEFAULT,
+            TileSize::new(16).expect("size"),
+            DirectionalSettings::default(),
+        )
+        .expect("view")
+    }
+
+    /// One cell's delta.
+    fn delta_for(cell: CellIndex, value: i16) -> TileDelta {
+        let size = TileSize::new(16).expect("size");
+        let (key, offset) = size.split(cell);
+        let mut delta = TileDelta::zero(key, size);
+        delta.raw_mut()[offset.index(size)] = value;
+        delta
+    }
+
+    fn absorb(v: &mut DirectionalView, robot: Pose2, cell: CellIndex, value: i16) -> i16 {
+        let mut out = Vec::new();
+        v.absorb(&robot, &[delta_for(cell, value)], &mut out)
+            .expect("absorb");
+        out.iter()
+            .map(|d| d.raw().iter().map(|&x| i32::from(x)).sum::<i32>())
+            .sum::<i32>() as i16
+    }
+
+    #[test]
+    fn misses_from_a_grazing_direction_leave_an_echo_from_the_front() {
+        let mut v = view();
+        let cell = CellIndex::new(40, 0);
+        let (cx, cy) = Resolution::DEFAULT.cell_center(cell);
+        // Echoes from straight in front of the wall (west of it) ...
+        let front = Pose2::new(cx - 2.0, cy, 0.0);
+        let mut sent = 0i32;
+        for _ in 0..4 {
+            sent += i32::from(absorb(&mut v, front, cell, 600));
+        }
+        let wall = v.belief(cell).expect("observed").raw();
+        assert!(wall >= 2000, "four echoes make a wall: {wall}");
+        assert_eq!(sent, i32::from(wall), "the server is sent the belief");
+        // ... then many misses from the south, along the wall.
+        let along = Pose2::new(cx, cy - 2.0, std::f64::consts::FRAC_PI_2);
+        for _ in 0..20 {
+            sent += i32::from(absorb(&mut v, along, cell, -400));
+        }
+        assert_eq!(v.belief(cell).expect("observed").raw(), wall);
+        assert_eq!(sent, i32::from(wall));
+        assert!(v.shadows(cell) && !v.keeps(cell));
+        // Misses from the direction the echoes came from do free it.
+        for _ in 0..20 {
+            sent += i32::from(absorb(&mut v, front, cell, -400));
+        }
+        let now = v.belief(cell).expect("observed").raw();
+        assert!(now < 0, "freed from the front: {now}");
+        assert_eq!(sent, i32::from(now));
+    }
+
+    #[test]
+    fn a_free_cell_seen_from_two_sides_is_as_free_as_its_freest_side() {
+        let mut v = view();
+        let cell = CellIndex::new(-7, 9);
+        let (cx, cy) = Resolution::DEFAULT.cell_center(cell);
+        absorb(&mut v, Pose2::new(cx - 1.0, cy, 0.0), cell, -900);
+        absorb(&mut v, Pose2::new(cx, cy + 1.0, 0.0), cell, -300);
+        assert_eq!(v.belief(cell).expect("observed").raw(), -900);
+        assert!(v.belief(CellIndex::new(-6, 9)).is_none());
+    }
+
+    /// Plain deltas giving each of `cells` its value, one per tile.
+    fn deltas_for(cells: &[(CellIndex, i16)]) -> Vec<TileDelta> {
+        let size = TileSize::new(16).expect("size");
+        let mut by_key: HashMap<TileKey, TileDelta> = HashMap::new();
+        for &(cell, value) in cells {
+            let (key, offset) = size.split(cell);
+            by_key
+                .entry(key)
+                .or_insert_with(|| TileDelta::zero(key, size))
+                .raw_mut()[offset.index(size)] = value;
+        }
+        by_key.into_values().collect()
+    }
+
+    /// The cells of the square ring from `low` to `high` on both axes,
+    /// and the cells inside it.
+    fn square(low: i32, high: i32) -> (Vec<CellIndex>, Vec<CellIndex>) {
+        let (mut ring, mut inside) = (Vec::new(), Vec::new());
+        for y in low..=high {
+            for x in low..=high {
+                let cell = CellIndex::new(x, y);
+                if x == low || x == high || y == low || y == high {
+                    ring.push(cell);
+                } else {
+                    inside.push(cell);
+                }
+            }
+        }
+        (ring, inside)
+    }
+
+    #[test]
+    fn space_walled_off_from_the_path_is_sent_as_a_wall_until_a_path_reaches_it() {
+        let size = TileSize::new(16).expect("size");
+        let mut v = DirectionalView::new(
+            Resolution::DEFAULT,
+            size,
+            DirectionalSettings {
+                enclosure_period: 1,
+                ..DirectionalSettings::default()
+            },
+        )
+        .expect("view");
+        let mut server = TileMap::new(Resolution::DEFAULT, size, ClampLimits::default());
+        let mut absorb_all = |v: &mut DirectionalView, robot: Pose2, cells: &[(CellIndex, i16)]| {
+            let mut out = Vec::new();
+            v.absorb(&robot, &deltas_for(cells), &mut out)
+                .expect("absorb");
+            let keys: Vec<TileKey> = out.iter().map(|d| d.key).collect();
+            let mut unique = keys.clone();
+            unique.sort();
+            unique.dedup();
+            assert_eq!(unique.len(), keys.len(), "one delta a tile");
+            for delta in &out {
+                server.apply(delta).expect("apply");
+            }
+            server.clone()
+        };
+        // A robot at (0.2, 0.2) m; free space west of a box of walls
+        // whose ring crosses a tile edge (cells 12 to 24), its inside
+        // freed as a specular cone frees it.
+        let robot = Pose2::new(0.2, 0.2, 0.0);
+        let (ring, inside) = square(12, 24);
+        let outside: Vec<CellIndex> = (0..=30)
+            .flat_map(|y| (0..12).map(move |x| CellIndex::new(x, y)))
+            .collect();
+        let mut cells: Vec<(CellIndex, i16)> = outside.iter().map(|&c| (c, -500)).collect();
+        cells.extend(ring.iter().map(|&c| (c, 2000)));
+        cells.extend(inside.iter().map(|&c| (c, -500)));
+        let map = absorb_all(&mut v, robot, &cells);
+        let wall = LogOdds::from_probability(0.7).expect("wall").raw();
+        for &c in &inside {
+            assert!(v.is_enclosed(c), "{c:?} is walled off");
+            assert_eq!(v.belief(c).expect("observed").raw(), wall);
+        }
+        for &c in outside.iter().chain(&ring) {
+            assert!(!v.is_enclosed(c), "{c:?} is not");
+        }
+        assert_eq!(v.belief(CellIndex::new(5, 5)).expect("seen").raw(), -500);
+        assert_eq!(v.belief(ring[0]).expect("seen").raw(), 2000);
+        let agree = |v: &DirectionalView, map: &TileMap| {
+            for c in outside.iter().chain(&ring).chain(&inside) {
+                assert_eq!(
+                    map.get(*c).map(LogOdds::raw),
+                    v.belief(*c).map(LogOdds::raw),
+                    "the server holds the view's belief at {c:?}"
+                );
+            }
+        };
+        agree(&v, &map);
+        // Misses from the robot free three cells of the west face: the
+        // inside joins the path and is sent back as its readings left it.
+        let door: Vec<(CellIndex, i16)> =
+            (17..=19).map(|y| (CellIndex::new(12, y), -4000)).collect();
+        let map = absorb_all(&mut v, robot, &door);
+        for &c in &inside {
+            assert!(!v.is_enclosed(c), "{c:?} is reached through the door");
+            assert_eq!(v.belief(c).expect("observed").raw(), -500);
+        }
+        agree(&v, &map);
+    }
+
+    #[test]
+    fn unobserved_space_lets_the_flood_through_only_near_the_path() {
+        let mut v = DirectionalView::new(
+            Resolution::DEFAULT,
+            TileSize::new(16).expect("size"),
+            DirectionalSettings {
+                enclosure_period: 1,
+                ..DirectionalSettings::default()
+            },
+        )
+        .expect("view");
+        // Free cells that begin where the robot's cones begin (0.25 m
+        // from its centre, unobserved cells between), and a patch seen
+        // free 2 m away with nothing observed between.
+        let robot = Pose2::new(0.0, 0.0, 0.0);
+        let near: Vec<(CellIndex, i16)> = (5..20).map(|x| (CellIndex::new(x, 0), -500)).collect();
+        let far: Vec<(CellIndex, i16)> = (60..64).map(|x| (CellIndex::new(x, 0), -500)).collect();
+        let mut out = Vec::new();
+        let plain = deltas_for(&[near.as_slice(), far.as_slice()].concat());
+        v.absorb(&robot, &plain, &mut out).expect("absorb");
+        assert!(near.iter().all(|&(c, _)| !v.is_enclosed(c)));
+        assert!(far.iter().all(|&(c, _)| v.is_enclosed(c)));
+    }
+
+    #[test]
+    fn with_no_period_nothing_is_judged() {
+        let mut v = view();
+        v.settings.enclosure_period = 0;
+        let (ring, inside) = square(12, 24);
+        let cells: Vec<(CellIndex, i16)> = ring
+            .iter()
+            .map(|&c| (c, 2000))
+            .chain(inside.iter().map(|&c| (c, -500)))
+            .collect();
+        let mut out = Vec::new();
+        for _ in 0..(2 * DEFAULT_ENCLOSURE_PERIOD) {
+            v.absorb(&Pose2::new(0.2, 0.2, 0.0), &deltas_for(&cells), &mut out)
+                .expect("absorb");
+        }
+        assert!(inside.iter().all(|&c| !v.is_enclosed(c)));
+        assert!(v.belief(inside[0]).expect("seen").raw() < 0);
+    }
+
+    #[test]
+    fn the_view_stays_bounded() {
+        let mut v = DirectionalView::new(
+            Resolution::DEFAULT,
+            TileSize::new(16).expect("size"),
+            DirectionalSettings {
+                max_tiles: 16,
+                ..DirectionalSettings::default()
+            },
+        )
+        .expect("view");
+        for x in 0..40 {
+            absorb(
+                &mut v,
+                Pose2::new(0.0, 0.0, 0.0),
+                CellIndex::new(16 * x, 0),
+                500,
+            );
+            assert!(v.len() <= 16);
+        }
+        // The newest stays, and the robot's own tiles; the oldest went.
+        assert!(v.belief(CellIndex::new(16 * 39, 0)).is_some());
+        assert!(v.belief(CellIndex::new(0, 0)).is_some());
+        assert!(v.belief(CellIndex::new(16, 0)).is_none());
+    }
+}
