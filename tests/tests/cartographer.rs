@@ -235,6 +235,71 @@ async fn directional_a_reading_that_swept_along_the_wall_does_not_erase_it() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn directional_space_walled_off_from_the_path_is_mapped_as_a_wall() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let server = ServerProcess::start(&dir.path().join("data"), &[]).await;
+    let client = MapClient::connect(ClientConfig::new(server.addr.to_string()))
+        .await
+        .expect("client");
+    // Twenty readings from the origin that heard something 3 m ahead
+    // (freeing the cone out to 2 m), then a hundred echoes off a face 1 m
+    // ahead of the front sonar (1.2 m from the robot's centre) from along
+    // a line across it: the space between 1.2 and 2.2 m was
+    // freed through a face that walls it off from every pose the robot
+    // took.
+    let frames: Vec<_> = (1..=20)
+        .map(|k| facing_wall("r", k, 3.0))
+        .chain((21..=120).map(|k| {
+            let y = -0.6 + 0.05 * ((k - 21) % 25) as f64;
+            front_reading("r", k, (0.0, y, 0.0), 1.0)
+        }))
+        .collect();
+    client.publish_frames(frames).await.expect("publish");
+    let specular = [
+        "--sonar-method",
+        "directional",
+        "--no-echo-free-range",
+        "0",
+        "--max-free-range",
+        "2",
+    ];
+    let map_to = |map: &str, period: &str| {
+        map_robot_r(
+            &server,
+            map,
+            &[specular.as_slice(), &["--enclosure-period", period]].concat(),
+        )
+    };
+    map_to("judged", "10");
+    map_to("open", "0");
+    let belief = |map: &str, x: f64| {
+        let client = client.clone();
+        let map = map.to_owned();
+        async move {
+            let (_, tiles) = client.download(&map).await.expect("download");
+            let cell = tiles.resolution().cell_of(x, 0.0).expect("cell");
+            tiles.get(cell).map(|b| b.probability())
+        }
+    };
+    let open = belief("open", 1.7).await;
+    assert!(open.is_some_and(|p| p < 0.196), "open: {open:?}");
+    let judged = belief("judged", 1.7).await;
+    assert!(judged.is_some_and(|p| p > 0.65), "judged: {judged:?}");
+    // The face and the space before it are what the readings made them.
+    for map in ["judged", "open"] {
+        let face = belief(map, 1.2).await;
+        assert!(face.is_some_and(|p| p > 0.65), "{map}, the face: {face:?}");
+        let before = belief(map, 0.6).await;
+        assert!(
+            before.is_some_and(|p| p < 0.196),
+            "{map}, before it: {before:?}"
+        );
+    }
+    drop(client);
+    drop(server);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_ring_fired_in_turn_is_mapped_where_its_sonar_fired() {
     let dir = tempfile::tempdir().expect("temp dir");
     let server = ServerProcess::start(&dir.path().join("data"), &[]).await;

@@ -165,7 +165,7 @@ pub struct MapArgs {
     #[arg(long)]
     pub view_tiles: Option<usize>,
     /// With --sonar-method directional: every this many frames, the
-    /// observed cells that no path from where the robot stood reaches
+    /// cells held free that no path from where the robot stood reaches
     /// without crossing a wall (the inside of an obstacle, the space past
     /// an outer wall, freed through a face the sonar met at a grazing
     /// angle) are sent as walls, and sent back as they were if a later

@@ -24,9 +24,10 @@
 //! Space no robot could have seen ([`enclosure`]): every
 //! [`DirectionalSettings::enclosure_period`] frames the view floods from
 //! the cells the robots stood on through every cell it does not hold as
-//! occupied; an observed cell the flood does not reach is walled off from
-//! every path, so the free evidence it got came through a grazed face,
-//! and the map is sent it as a wall ([`DirectionalSettings::wall_probability`]).
+//! occupied; a cell it holds free that the flood does not reach (nor its
+//! neighbours) is walled off from every path, so the free evidence it got
+//! came through a grazed face, and the map is sent it as a wall
+//! ([`DirectionalSettings::wall_probability`]).
 //! The judgement is undone, as a change sent like any other, when a later
 //! flood reaches the cell again.
 //!
@@ -324,11 +325,11 @@ impl DirectionalView {
             let mut change: Option<TileDelta> = None;
             for (index, &reach) in reached.iter().enumerate() {
                 let belief = combined(&tile.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS]);
-                // A wall keeps its belief; any other observed cell inside
-                // is sent as one (the uncertain ones too: a cone's occupied
-                // arc spread into an obstacle as much as its free part).
-                let enclosed =
-                    reach == enclosure::Reach::Inside && belief != UNSEEN && belief < wall;
+                // Only the cells the view leans to believe free: raising the
+                // uncertain ones inside too gained a point of cells right
+                // but walled off free pockets by the walls' fringe, and
+                // cost the localizer (BENCHMARKS.md, sonar mapping).
+                let enclosed = reach == enclosure::Reach::Inside && belief != UNSEEN && belief <= 0;
                 if enclosed == tile.enclosed[index] {
                     continue;
                 }
