@@ -401,12 +401,24 @@ mod tests {
     use deog_grid::TileMap;
 
     fn view() -> DirectionalView {
+        view_with(DirectionalSettings::default())
+    }
+
+    fn view_with(settings: DirectionalSettings) -> DirectionalView {
         DirectionalView::new(
             Resolution::DEFAULT,
             TileSize::new(16).expect("size"),
-            DirectionalSettings::default(),
+            settings,
         )
         .expect("view")
+    }
+
+    /// A view that judges enclosed space at every frame.
+    fn judging_view() -> DirectionalView {
+        view_with(DirectionalSettings {
+            enclosure_period: 1,
+            ..DirectionalSettings::default()
+        })
     }
 
     /// One cell's delta.
@@ -503,15 +515,7 @@ mod tests {
     #[test]
     fn space_walled_off_from_the_path_is_sent_as_a_wall_until_a_path_reaches_it() {
         let size = TileSize::new(16).expect("size");
-        let mut v = DirectionalView::new(
-            Resolution::DEFAULT,
-            size,
-            DirectionalSettings {
-                enclosure_period: 1,
-                ..DirectionalSettings::default()
-            },
-        )
-        .expect("view");
+        let mut v = judging_view();
         let mut server = TileMap::new(Resolution::DEFAULT, size, ClampLimits::default());
         let mut absorb_all = |v: &mut DirectionalView, robot: Pose2, cells: &[(CellIndex, i16)]| {
             let mut out = Vec::new();
@@ -573,15 +577,7 @@ mod tests {
 
     #[test]
     fn unobserved_space_lets_the_flood_through_only_near_the_path() {
-        let mut v = DirectionalView::new(
-            Resolution::DEFAULT,
-            TileSize::new(16).expect("size"),
-            DirectionalSettings {
-                enclosure_period: 1,
-                ..DirectionalSettings::default()
-            },
-        )
-        .expect("view");
+        let mut v = judging_view();
         // Free cells that begin where the robot's cones begin (0.25 m
         // from its centre, unobserved cells between), and a patch seen
         // free 2 m away with nothing observed between.
@@ -616,15 +612,10 @@ mod tests {
 
     #[test]
     fn the_view_stays_bounded() {
-        let mut v = DirectionalView::new(
-            Resolution::DEFAULT,
-            TileSize::new(16).expect("size"),
-            DirectionalSettings {
-                max_tiles: 16,
-                ..DirectionalSettings::default()
-            },
-        )
-        .expect("view");
+        let mut v = view_with(DirectionalSettings {
+            max_tiles: 16,
+            ..DirectionalSettings::default()
+        });
         for x in 0..40 {
             absorb(
                 &mut v,
