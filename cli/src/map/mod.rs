@@ -161,7 +161,7 @@ pub struct MapArgs {
     /// With --sonar-method keep-walls or directional: tiles of the map
     /// kept in memory around the robot, least recently used forgotten
     /// first (for 64-cell tiles, keep-walls: 8 KiB each, 4,096 by default;
-    /// directional: 96 KiB each, 1,024 by default).
+    /// directional: 108 KiB each, 1,024 by default).
     #[arg(long)]
     pub view_tiles: Option<usize>,
     /// With --sonar-method directional: every this many frames, the

@@ -71,7 +71,7 @@ pub struct DirectionalSettings {
 }
 
 impl Default for DirectionalSettings {
-    /// Walls at 0.7, as [`crate::MapViewSettings`]; 1,024 tiles (96 MiB
+    /// Walls at 0.7, as [`crate::MapViewSettings`]; 1,024 tiles (108 MiB
     /// of 64-cell tiles, twelve beliefs a cell); enclosed space judged
     /// every 50 frames (5 s of a Scout's).
     fn default() -> Self {
