@@ -12,17 +12,6 @@ use deog_grid::{TileKey, TileSize};
 
 use super::{DIRECTIONS, DirectionalTile, UNSEEN, combined};
 
-/// Where a flood from the trodden cells got to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum Reach {
-    /// Reached.
-    Reached,
-    /// Not reached, beside a reached cell: the face of what walls it off.
-    Face,
-    /// Not reached, nor beside a reached cell.
-    Inside,
-}
-
 /// The tiles held, in slots, with each slot's 3 × 3 block of neighbouring
 /// slots, so that a cell's neighbours across a tile's edge are a lookup.
 struct Slots {
@@ -76,21 +65,19 @@ impl Slots {
     }
 }
 
-/// For each tile of `tiles`, how far a flood from the trodden cells gets
-/// to each of its cells. The flood passes observed cells whose belief
-/// stays at or below `block`, and unobserved cells near a robot's path
-/// (between a robot and where its sensors' cones begin). It keeps to the
-/// tiles held: a
-/// region joined to a robot's path only through forgotten tiles is not
+/// For each tile of `tiles`, which of its cells a flood from the trodden
+/// cells reaches. The flood passes observed cells whose belief stays at
+/// or below `block`, and unobserved cells near a robot's path (between a
+/// robot and where its sensors' cones begin). It keeps to the tiles held:
+/// a region joined to a robot's path only through forgotten tiles is not
 /// reached, which is why the caller judges only the tiles near the robot.
-pub(super) fn reach_from_trodden(
+pub(super) fn reached_from_trodden(
     tiles: &HashMap<TileKey, DirectionalTile>,
     size: TileSize,
     block: i16,
-) -> HashMap<TileKey, Vec<Reach>> {
+) -> HashMap<TileKey, Vec<bool>> {
     let slots = Slots::new(tiles, size);
     let area = size.area();
-    let count = slots.keys.len();
     let passable: Vec<Vec<bool>> = slots
         .keys
         .iter()
@@ -108,7 +95,7 @@ pub(super) fn reach_from_trodden(
                 .collect()
         })
         .collect();
-    let mut reached: Vec<Vec<bool>> = vec![vec![false; area]; count];
+    let mut reached: Vec<Vec<bool>> = vec![vec![false; area]; slots.keys.len()];
     let mut stack: Vec<(usize, usize)> = Vec::new();
     for (slot, key) in slots.keys.iter().enumerate() {
         for (index, &trodden) in tiles[key].trodden.iter().enumerate() {
@@ -126,25 +113,5 @@ pub(super) fn reach_from_trodden(
             }
         }
     }
-    let reach = (0..count)
-        .map(|slot| {
-            (0..area)
-                .map(|i| {
-                    if reached[slot][i] {
-                        Reach::Reached
-                    } else if slots
-                        .edge_neighbours(slot, i)
-                        .into_iter()
-                        .flatten()
-                        .any(|(s, j)| reached[s][j])
-                    {
-                        Reach::Face
-                    } else {
-                        Reach::Inside
-                    }
-                })
-                .collect()
-        })
-        .collect::<Vec<Vec<Reach>>>();
-    slots.keys.into_iter().zip(reach).collect()
+    slots.keys.into_iter().zip(reached).collect()
 }

@@ -24,8 +24,8 @@
 //! Space no robot could have seen ([`enclosure`]): every
 //! [`DirectionalSettings::enclosure_period`] frames the view floods from
 //! the cells the robots stood on through every cell it does not hold as
-//! occupied; a cell it holds free that the flood does not reach (nor its
-//! neighbours) is walled off from every path, so the free evidence it got
+//! occupied; a cell it holds free that the flood does not reach is
+//! walled off from every path, so the free evidence it got
 //! came through a grazed face, and the map is sent it as a wall
 //! ([`DirectionalSettings::wall_probability`]).
 //! The judgement is undone, as a change sent like any other, when a later
@@ -103,6 +103,10 @@ const TREAD_RADIUS_M: f64 = 0.1;
 /// [`enclosure`] through, metres: the sonar cones begin at the body's
 /// edge, a little beyond it.
 const NEAR_PATH_M: f64 = 0.4;
+
+/// The belief above which an observed cell stops the flood of
+/// [`enclosure`]: a cell the view leans to believe occupied.
+const FLOOD_BLOCK: i16 = 0;
 
 /// Judgements of enclosed space a tile stays judged after its last use:
 /// the flood keeps to the tiles held, and a tile long unused may have
@@ -309,8 +313,7 @@ impl DirectionalView {
     /// beliefs to `out[start..]` (into a tile's delta there, or a new one).
     fn judge_enclosure(&mut self, out: &mut Vec<TileDelta>, start: usize) {
         let size = self.tile_size;
-        // A cell the view leans to believe occupied stops the flood.
-        let reached = enclosure::reach_from_trodden(&self.tiles, size, 0);
+        let reached = enclosure::reached_from_trodden(&self.tiles, size, FLOOD_BLOCK);
         let since = self
             .clock
             .saturating_sub(JUDGED_FOR_PERIODS * u64::from(self.settings.enclosure_period));
@@ -323,13 +326,14 @@ impl DirectionalView {
                 continue;
             }
             let mut change: Option<TileDelta> = None;
-            for (index, &reach) in reached.iter().enumerate() {
+            for (index, &reached) in reached.iter().enumerate() {
                 let belief = combined(&tile.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS]);
-                // Only the cells the view leans to believe free: raising the
-                // uncertain ones inside too gained a point of cells right
-                // but walled off free pockets by the walls' fringe, and
-                // cost the localizer (BENCHMARKS.md, sonar mapping).
-                let enclosed = reach == enclosure::Reach::Inside && belief != UNSEEN && belief <= 0;
+                // Only the cells the view leans to believe free (the ones
+                // the flood passes): raising the uncertain ones inside too
+                // gained a point of cells right but walled off free pockets
+                // by the walls' fringe, and cost the localizer
+                // (BENCHMARKS.md, sonar mapping).
+                let enclosed = !reached && belief != UNSEEN && belief <= FLOOD_BLOCK;
                 if enclosed == tile.enclosed[index] {
                     continue;
                 }
