@@ -108,8 +108,9 @@ pub struct LocalizeOptions {
     #[arg(long, default_value_t = FilterSettings::default().kld.min_particles)]
     pub min_particles: usize,
     /// The beam model's tempering τ (see deog_localizer::beam_model).
-    #[arg(long, default_value_t = BeamModelParams::default().tempering)]
-    pub tempering: f64,
+    /// Default: 0.05, or 0.08 with a specular sonar (as `deog localize`).
+    #[arg(long)]
+    pub tempering: Option<f64>,
     /// The beam model's hit spread at zero range, metres.
     #[arg(long, default_value_t = BeamModelParams::default().hit_sigma_m)]
     pub hit_sigma: f64,
@@ -202,6 +203,15 @@ impl LocalizeOptions {
         // A JSON file that cannot be written fails now, not after the runs.
         require_folder_of(self.json.as_deref(), "--json")?;
         Ok(())
+    }
+
+    /// The beam model's τ: `--tempering`, or the default for the runs'
+    /// sonar ([`BeamModelParams::for_sonar`]).
+    pub fn tempering(&self) -> f64 {
+        self.tempering.unwrap_or(
+            BeamModelParams::for_sonar(self.sonar_preset().specular_angle_deg().is_some())
+                .tempering,
+        )
     }
 
     /// The sonar preset of the runs: `--sonar`, or specular60 for
@@ -300,6 +310,7 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
         sensor: setup.sensor.name().to_string(),
         sonar: preset.name().to_string(),
         clean_map: options.clean_map,
+        beam_tempering: (setup.sensor == SensorChoice::Beam).then(|| options.tempering()),
         seconds: options.seconds,
         kidnap_at_s: options.kidnap_at,
         converge_limit_s: CONVERGE_LIMIT_S,
@@ -447,6 +458,19 @@ mod tests {
             "--clean-map",
         ]);
         assert_eq!(diagnostics.validate(), Ok(()));
+    }
+
+    #[test]
+    fn a_specular_sonar_gets_its_own_tempering_unless_one_is_given() {
+        let plain = BeamModelParams::default().tempering;
+        let specular = BeamModelParams::for_sonar(true).tempering;
+        assert_eq!(parse(&[]).tempering(), plain);
+        assert_eq!(parse(&["--sonar", "realistic"]).tempering(), specular);
+        assert_eq!(parse(&["--specular"]).tempering(), specular);
+        assert_eq!(
+            parse(&["--sonar", "realistic", "--tempering", "0.2"]).tempering(),
+            0.2
+        );
     }
 
     #[test]

@@ -16,6 +16,8 @@ pub(super) struct LocalizeReport {
     pub sonar: String,
     /// Whether the map came from the default sonar whatever the runs'.
     pub clean_map: bool,
+    /// The beam model's tempering τ; `None` for the likelihood field.
+    pub beam_tempering: Option<f64>,
     /// Seconds of a run, and its kidnap (0: none).
     pub seconds: f64,
     pub kidnap_at_s: f64,
@@ -133,6 +135,7 @@ mod tests {
             sensor: "beam".into(),
             sonar: "realistic".into(),
             clean_map: false,
+            beam_tempering: Some(0.08),
             seconds: 180.0,
             kidnap_at_s: 90.0,
             converge_limit_s: 60.0,
@@ -161,5 +164,6 @@ mod tests {
             serde_json::Value::Null
         );
         assert_eq!(json["sonar"], "realistic");
+        assert_eq!(json["beam_tempering"], 0.08);
     }
 }

@@ -31,7 +31,7 @@ fn filter_settings(options: &LocalizeOptions, seed: u64) -> FilterSettings {
     };
     settings.kld.max_particles = options.max_particles;
     settings.kld.min_particles = options.min_particles;
-    settings.beam.tempering = options.tempering;
+    settings.beam.tempering = options.tempering();
     settings.beam.hit_sigma_m = options.hit_sigma;
     settings.beam.hit_sigma_per_m = options.hit_sigma_per_m;
     settings.alpha_fast = options.alpha_fast;

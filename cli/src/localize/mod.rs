@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail, ensure};
 use clap::{Args, ValueEnum};
 use deog_grid::{CellBox, CellIndex, OccupancyThresholds, Resolution, RingFiring, TileSize};
+use deog_localizer::beam_model::BeamModelParams;
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::preset::Preset;
@@ -94,9 +95,10 @@ pub struct LocalizeArgs {
     #[arg(long, default_value_t = FilterSettings::default().search_share)]
     pub recovery_search_share: f64,
     /// The beam model's tempering τ: the frame counts as 16·τ independent
-    /// beams.
-    #[arg(long, default_value_t = FilterSettings::default().beam.tempering)]
-    pub tempering: f64,
+    /// beams. Default: 0.05, or 0.08 with --specular-angle (a specular
+    /// sonar's frames carry fewer echoes; measured best, BENCHMARKS.md).
+    #[arg(long)]
+    pub tempering: Option<f64>,
     /// The sonar is specular past this incidence, degrees from a wall's
     /// normal: such walls are expected to send no echo (as `deog sim
     /// --specular lost --specular-angle`). Unset: every wall echoes.
@@ -273,7 +275,9 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     };
     settings.kld.max_particles = args.max_particles;
     settings.kld.min_particles = args.min_particles.unwrap_or(preset.min_particles);
-    settings.beam.tempering = args.tempering;
+    settings.beam.tempering = args
+        .tempering
+        .unwrap_or(BeamModelParams::for_sonar(args.specular_angle.is_some()).tempering);
     settings.alpha_slow = args.recovery_alpha_slow;
     settings.alpha_fast = args.recovery_alpha_fast;
     settings.recovery_threshold = args.recovery_threshold;
