@@ -101,7 +101,9 @@ pub struct LocalizeArgs {
     pub tempering: Option<f64>,
     /// The sonar is specular past this incidence, degrees from a wall's
     /// normal: such walls are expected to send no echo (as `deog sim
-    /// --specular lost --specular-angle`). Unset: every wall echoes.
+    /// --specular lost --specular-angle`), and the beam model takes a
+    /// specular sonar's τ and weights (more lost echoes, more readings no
+    /// prediction explains). Unset: every wall echoes.
     #[arg(long)]
     pub specular_angle: Option<f64>,
     /// The sonars fire one after another in ring order over this many
@@ -275,9 +277,11 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     };
     settings.kld.max_particles = args.max_particles;
     settings.kld.min_particles = args.min_particles.unwrap_or(preset.min_particles);
-    settings.beam.tempering = args
-        .tempering
-        .unwrap_or(BeamModelParams::for_sonar(args.specular_angle.is_some()).tempering);
+    // A specular sonar's beam model: its own τ and causes' weights.
+    settings.beam = BeamModelParams::for_sonar(args.specular_angle.is_some());
+    if let Some(tempering) = args.tempering {
+        settings.beam.tempering = tempering;
+    }
     settings.alpha_slow = args.recovery_alpha_slow;
     settings.alpha_fast = args.recovery_alpha_fast;
     settings.recovery_threshold = args.recovery_threshold;
