@@ -47,10 +47,11 @@ pub fn table_len(max_range: f64) -> usize {
 }
 
 /// τ for a specular sonar ([`BeamModelParams::for_sonar`]): a frame of
-/// one counts as 16 · 0.08 ≈ 1.3 independent beams. Its walls met past the critical angle send nothing
-/// back, so fewer of a frame's beams carry an echo, and the map built from
-/// such readings disagrees with more of them; the default τ then weighs a
-/// frame too lightly to single out a place. Measured best for
+/// one counts as 16 · 0.08 ≈ 1.3 independent beams. Its walls met past
+/// the critical angle send nothing back, so fewer of a frame's beams carry
+/// an echo, and the map built from such readings disagrees with more of
+/// them; the default τ then weighs a frame too lightly to single out a
+/// place. Measured best for
 /// `--sonar realistic` in `map2` (converged within 60 s in 56 of 60 seeds
 /// against 47 at the default; 0.07 to 0.10 all better than 0.05, 0.12
 /// worse), no worse in `map1`, and still best once the weights of

@@ -205,13 +205,18 @@ impl LocalizeOptions {
         Ok(())
     }
 
-    /// The beam model's τ: `--tempering`, or the default for the runs'
-    /// sonar ([`BeamModelParams::for_sonar`]).
-    pub fn tempering(&self) -> f64 {
-        self.tempering.unwrap_or(
-            BeamModelParams::for_sonar(self.sonar_preset().specular_angle_deg().is_some())
-                .tempering,
-        )
+    /// The beam model's parameters: those of the runs' sonar
+    /// ([`BeamModelParams::for_sonar`]) with `--tempering`, `--hit-sigma`
+    /// and `--hit-sigma-per-m`.
+    pub fn beam_params(&self) -> BeamModelParams {
+        let specular = self.sonar_preset().specular_angle_deg().is_some();
+        let mut beam = BeamModelParams::for_sonar(specular);
+        if let Some(tempering) = self.tempering {
+            beam.tempering = tempering;
+        }
+        beam.hit_sigma_m = self.hit_sigma;
+        beam.hit_sigma_per_m = self.hit_sigma_per_m;
+        beam
     }
 
     /// The sonar preset of the runs: `--sonar`, or specular60 for
@@ -310,7 +315,8 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
         sensor: setup.sensor.name().to_string(),
         sonar: preset.name().to_string(),
         clean_map: options.clean_map,
-        beam_tempering: (setup.sensor == SensorChoice::Beam).then(|| options.tempering()),
+        beam_tempering: (setup.sensor == SensorChoice::Beam)
+            .then(|| options.beam_params().tempering),
         seconds: options.seconds,
         kidnap_at_s: options.kidnap_at,
         converge_limit_s: CONVERGE_LIMIT_S,
@@ -461,15 +467,28 @@ mod tests {
     }
 
     #[test]
-    fn a_specular_sonar_gets_its_own_tempering_unless_one_is_given() {
-        let plain = BeamModelParams::default().tempering;
-        let specular = BeamModelParams::for_sonar(true).tempering;
-        assert_eq!(parse(&[]).tempering(), plain);
-        assert_eq!(parse(&["--sonar", "realistic"]).tempering(), specular);
-        assert_eq!(parse(&["--specular"]).tempering(), specular);
+    fn a_specular_sonar_gets_its_own_beam_model_with_the_options_on_top() {
+        let plain = BeamModelParams::default();
+        let specular = BeamModelParams::for_sonar(true);
+        assert_eq!(parse(&[]).beam_params(), plain);
+        assert_eq!(parse(&["--sonar", "realistic"]).beam_params(), specular);
+        assert_eq!(parse(&["--specular"]).beam_params(), specular);
+        let tuned = parse(&[
+            "--sonar",
+            "realistic",
+            "--tempering",
+            "0.2",
+            "--hit-sigma",
+            "0.07",
+        ])
+        .beam_params();
         assert_eq!(
-            parse(&["--sonar", "realistic", "--tempering", "0.2"]).tempering(),
-            0.2
+            tuned,
+            BeamModelParams {
+                tempering: 0.2,
+                hit_sigma_m: 0.07,
+                ..specular
+            }
         );
     }
 

@@ -31,12 +31,7 @@ fn filter_settings(options: &LocalizeOptions, seed: u64) -> FilterSettings {
     };
     settings.kld.max_particles = options.max_particles;
     settings.kld.min_particles = options.min_particles;
-    settings.beam = deog_localizer::beam_model::BeamModelParams::for_sonar(
-        options.sonar_preset().specular_angle_deg().is_some(),
-    );
-    settings.beam.tempering = options.tempering();
-    settings.beam.hit_sigma_m = options.hit_sigma;
-    settings.beam.hit_sigma_per_m = options.hit_sigma_per_m;
+    settings.beam = options.beam_params();
     settings.alpha_fast = options.alpha_fast;
     settings.recovery_threshold = options.recovery_threshold;
     settings.search_share = options.search_share;
