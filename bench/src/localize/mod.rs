@@ -200,6 +200,38 @@ impl LocalizeOptions {
                     .into()
             },
         )?;
+        // The beam model's figures fail now, not after the map is built:
+        // each flag's figure alone on the sonar's model, so the error
+        // names the flag that holds it.
+        let beam = self.beam_params();
+        let sonar = BeamModelParams::for_sonar(self.specular_sonar());
+        for (flag, alone) in [
+            (
+                "--tempering",
+                BeamModelParams {
+                    tempering: beam.tempering,
+                    ..sonar
+                },
+            ),
+            (
+                "--hit-sigma",
+                BeamModelParams {
+                    hit_sigma_m: beam.hit_sigma_m,
+                    ..sonar
+                },
+            ),
+            (
+                "--hit-sigma-per-m",
+                BeamModelParams {
+                    hit_sigma_per_m: beam.hit_sigma_per_m,
+                    ..sonar
+                },
+            ),
+        ] {
+            if let Err(error) = alone.validate() {
+                require(false, flag, || format!("{flag}: {error}"))?;
+            }
+        }
         // A JSON file that cannot be written fails now, not after the runs.
         require_folder_of(self.json.as_deref(), "--json")?;
         Ok(())
@@ -209,14 +241,18 @@ impl LocalizeOptions {
     /// ([`BeamModelParams::for_sonar`]) with `--tempering`, `--hit-sigma`
     /// and `--hit-sigma-per-m`.
     pub fn beam_params(&self) -> BeamModelParams {
-        let specular = self.sonar_preset().specular_angle_deg().is_some();
-        let mut beam = BeamModelParams::for_sonar(specular);
+        let mut beam = BeamModelParams::for_sonar(self.specular_sonar());
         if let Some(tempering) = self.tempering {
             beam.tempering = tempering;
         }
         beam.hit_sigma_m = self.hit_sigma;
         beam.hit_sigma_per_m = self.hit_sigma_per_m;
         beam
+    }
+
+    /// Whether the runs' sonar loses echoes off grazed walls.
+    fn specular_sonar(&self) -> bool {
+        self.sonar_preset().specular_angle_deg().is_some()
     }
 
     /// The sonar preset of the runs: `--sonar`, or specular60 for
@@ -504,6 +540,13 @@ mod tests {
             ("--clean-map", &["--clean-map"][..]),
             ("--clean-map", &["--clean-map", "--sonar", "default"][..]),
             ("--json", &["--json", "no-such-folder/figures.json"][..]),
+            ("--tempering", &["--tempering=-1"][..]),
+            (
+                "--tempering",
+                &["--sonar", "realistic", "--tempering", "NaN"][..],
+            ),
+            ("--hit-sigma", &["--hit-sigma", "0"][..]),
+            ("--hit-sigma-per-m", &["--hit-sigma-per-m", "2"][..]),
         ] {
             let err = parse(args).validate().expect_err(flag);
             assert_eq!(err.flag, flag);
