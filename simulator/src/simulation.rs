@@ -25,7 +25,7 @@ use crate::error::SimError;
 use crate::laser::LaserParams;
 use crate::rig_sensors::RigSensors;
 use crate::robot::{OdometryNoise, Robot, ScoutParams};
-use crate::sonar::SonarParams;
+use crate::sonar::{SonarParams, Specular};
 use crate::sonar_firing::{SonarFiring, steps_before_frame};
 
 /// Figures of a simulation.
@@ -133,6 +133,12 @@ struct SimRobot {
 pub struct Simulation {
     world: World,
     index: SegmentIndex,
+    /// The walls the sensors fire at: the world's faces
+    /// ([`SegmentIndex::of_world`]) when the sonar loses grazed echoes,
+    /// since it must tell a face seen from its solid side; otherwise the
+    /// walls as given, so the default sonar's frames stay the same to the
+    /// last bit.
+    sensed: SegmentIndex,
     sensors: RigSensors,
     rig_name: Arc<str>,
     robot_params: ScoutParams,
@@ -194,8 +200,15 @@ impl Simulation {
         config.sonar.validate()?;
         let sensors = RigSensors::new(config.rig.clone(), config.sonar, config.laser)?;
         let robot_params = config.robot_params().validate()?;
+        let index = SegmentIndex::new(world.walls());
+        let sensed = if matches!(config.sonar.specular, Specular::Off) {
+            index.clone()
+        } else {
+            SegmentIndex::of_world(&world)
+        };
         Ok(Self {
-            index: SegmentIndex::new(world.walls()),
+            index,
+            sensed,
             world,
             sensors,
             rig_name: Arc::from(config.rig.name()),
@@ -400,7 +413,7 @@ impl Simulation {
                     .unwrap_or(pose)
             }));
             self.sensors.fire_sequential(
-                &self.index,
+                &self.sensed,
                 &pose,
                 &entry.sonar_poses,
                 &mut entry.rng,
@@ -408,7 +421,7 @@ impl Simulation {
             )?;
         } else {
             self.sensors
-                .fire(&self.index, &pose, &mut entry.rng, &mut entry.ranges)?;
+                .fire(&self.sensed, &pose, &mut entry.rng, &mut entry.ranges)?;
         }
         entry.sequence += 1;
         Ok(())

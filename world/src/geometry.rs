@@ -99,6 +99,21 @@ impl Polygon {
         (0..n).map(move |i| Segment::new(self.vertices[i], self.vertices[(i + 1) % n]))
     }
 
+    /// Twice the signed area (shoelace): positive when the vertices run
+    /// counter-clockwise, negative when clockwise.
+    pub fn signed_area2(&self) -> f64 {
+        self.edges().map(|e| e.a.x * e.b.y - e.b.x * e.a.y).sum()
+    }
+
+    /// The edges, each oriented with the polygon's inside on its left
+    /// (`inside_left`) or on its right: counter-clockwise or clockwise
+    /// whatever order the vertices were given in.
+    pub fn oriented_edges(&self, inside_left: bool) -> impl Iterator<Item = Segment> + '_ {
+        let flip = (self.signed_area2() > 0.0) != inside_left;
+        self.edges()
+            .map(move |e| if flip { Segment::new(e.b, e.a) } else { e })
+    }
+
     /// Whether `p` is inside (even-odd rule; points on an edge may go
     /// either way).
     pub fn contains(&self, p: Point2) -> bool {
@@ -143,6 +158,26 @@ mod tests {
             Point2::new(0.0, 0.0)
         );
         assert!((s.distance_to(Point2::new(3.0, 0.0)) - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn oriented_edges_run_the_asked_way_whatever_the_vertices_order() {
+        let square = |points: &[(f64, f64)]| {
+            Polygon::new(points.iter().map(|&(x, y)| Point2::new(x, y)).collect()).expect("square")
+        };
+        let ccw = square(&[(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]);
+        let cw = square(&[(0.0, 0.0), (0.0, 1.0), (1.0, 1.0), (1.0, 0.0)]);
+        assert!(ccw.signed_area2() > 0.0 && cw.signed_area2() < 0.0);
+        for polygon in [&ccw, &cw] {
+            for inside_left in [true, false] {
+                for e in polygon.oriented_edges(inside_left) {
+                    // The centre (0.5, 0.5) is left of a→b when the cross
+                    // product of b − a and centre − a is positive.
+                    let cross = (e.b.x - e.a.x) * (0.5 - e.a.y) - (e.b.y - e.a.y) * (0.5 - e.a.x);
+                    assert_eq!(cross > 0.0, inside_left, "{e:?}");
+                }
+            }
+        }
     }
 
     #[test]

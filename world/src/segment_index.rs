@@ -79,6 +79,9 @@ pub struct SegmentIndex {
     /// Bucket `y * cols + x` holds `entries[starts[i]..starts[i + 1]]`.
     starts: Vec<usize>,
     entries: Vec<Entry>,
+    /// Whether every wall is a face with free space on its left
+    /// ([`SegmentIndex::of_world`]).
+    one_sided: bool,
 }
 
 impl SegmentIndex {
@@ -87,6 +90,24 @@ impl SegmentIndex {
     /// a world's walls never have one ([`crate::Polygon`] checks).
     pub fn new(walls: Vec<Segment>) -> Self {
         Self::build(walls, DEFAULT_CELL_SIZE_M)
+    }
+
+    /// Indexes a world's walls as faces ([`crate::World::faces`]), each
+    /// with free space on its left, so that a query may tell a surface
+    /// seen from its free side from one seen through solid matter
+    /// ([`SegmentIndex::one_sided`]).
+    pub fn of_world(world: &crate::World) -> Self {
+        Self {
+            one_sided: true,
+            ..Self::new(world.faces())
+        }
+    }
+
+    /// Whether every wall is a face with free space on its left (an index
+    /// [`SegmentIndex::of_world`]); `false`: walls with no known free side,
+    /// seen alike from both.
+    pub fn one_sided(&self) -> bool {
+        self.one_sided
     }
 
     /// Indexes `walls` with buckets of about `cell_size` metres (more if the
@@ -139,6 +160,7 @@ impl SegmentIndex {
             rows,
             starts: Vec::new(),
             entries: Vec::new(),
+            one_sided: false,
         };
 
         let boxes: Vec<((i64, i64), (i64, i64))> = walls

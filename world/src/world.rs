@@ -69,6 +69,18 @@ impl World {
             .collect()
     }
 
+    /// Every wall as a face: oriented so that free space lies on its left
+    /// (from `a` to `b`), the boundary's edges counter-clockwise and each
+    /// obstacle's clockwise. A surface echoes only towards its free side;
+    /// a sensor on a face's right sees it from inside solid matter.
+    pub fn faces(&self) -> Vec<Segment> {
+        self.boundary
+            .iter()
+            .flat_map(|b| b.oriented_edges(true))
+            .chain(self.obstacles.iter().flat_map(|o| o.oriented_edges(false)))
+            .collect()
+    }
+
     /// Whether `p` lies in free space (inside the boundary, inside the
     /// bounds, outside every obstacle). Ignores the robot's size.
     pub fn is_free(&self, p: Point2) -> bool {

@@ -245,3 +245,36 @@ fn a_bad_world_file_names_file_line_and_field() {
         )
     );
 }
+
+/// The point `offset` metres to the left (positive) or right (negative) of
+/// the face's midpoint.
+fn beside_midpoint(face: &deog_world::Segment, offset: f64) -> Point2 {
+    let (dx, dy) = (face.b.x - face.a.x, face.b.y - face.a.y);
+    let length = dx.hypot(dy);
+    let (mx, my) = ((face.a.x + face.b.x) / 2.0, (face.a.y + face.b.y) / 2.0);
+    Point2::new(mx - dy / length * offset, my + dx / length * offset)
+}
+
+#[test]
+fn every_face_has_free_space_on_its_left_and_solid_on_its_right() {
+    for name in ["map1", "map2", "office"] {
+        let world = world(name);
+        let faces = world.faces();
+        assert_eq!(faces.len(), world.walls().len(), "{name}");
+        let mut free_left = 0;
+        for face in &faces {
+            assert!(
+                !world.is_free(beside_midpoint(face, -1e-3)),
+                "{name}: free space right of {face:?}"
+            );
+            // A face laid along another wall (a cupboard against the
+            // boundary) has solid matter on both sides.
+            free_left += usize::from(world.is_free(beside_midpoint(face, 1e-3)));
+        }
+        assert!(
+            free_left * 10 >= faces.len() * 9,
+            "{name}: only {free_left} of {} faces face free space",
+            faces.len()
+        );
+    }
+}

@@ -15,6 +15,11 @@
 //!   crosses the line from the sensor to it and it is no farther than the
 //!   farthest first hit of the fan.
 //!
+//! With an index of a world's faces ([`SegmentIndex::one_sided`]), a
+//! wall seen from its solid side sends no echo: a ray that reaches it
+//! there met its obstacle's corner, where the face turned towards the
+//! sensor is the one struck.
+//!
 //! The second keeps an unhidden wall's echo exact (the foot of the
 //! perpendicular rarely lies on a ray) and lets a post thinner than the
 //! rays' spacing answer; the rays tell what a grazed wall hides. Where a
@@ -97,6 +102,7 @@ impl SonarRing {
         }
         let rays = self.fan.len();
         let max_range = self.params.max_range;
+        let one_sided = index.one_sided();
         let mut hits = vec![NO_HIT; n * rays];
         // Per sonar: the walls met inside its wedge, and how far its fan's
         // farthest first hit is (max_range until every ray has one).
@@ -116,7 +122,7 @@ impl SonarRing {
                     if dc2 < bound * bound && nearest_in_wedge(s, wall).is_some() {
                         walls[i].push(wall);
                         let fan_hits = &mut hits[i * rays..(i + 1) * rays];
-                        self.cast_fan(s, axes[i], wall, fan_hits);
+                        self.cast_fan(s, axes[i], wall, one_sided, fan_hits);
                     }
                 }
                 ControlFlow::Continue(())
@@ -148,17 +154,26 @@ impl SonarRing {
             let far = fan_hits
                 .iter()
                 .fold(0.0, |m: f64, h| m.max(h.distance.min(max_range)));
-            *echo = self.nearest_echo(&wedges[i], fan_hits, &walls[i], far);
+            *echo = self.nearest_echo(&wedges[i], fan_hits, &walls[i], one_sided, far);
         }
     }
 
     /// Lowers each ray's first hit in `hits` to where it meets `wall`, if
     /// nearer, for the sonar of wedge `s` whose axis is the unit vector
-    /// `(ux, uy)`.
-    fn cast_fan(&self, s: &Wedge, (ux, uy): (f64, f64), wall: &Segment, hits: &mut [FirstHit]) {
+    /// `(ux, uy)`. A `one_sided` wall seen from its solid side stands in
+    /// the way but sends no echo, as if grazed.
+    fn cast_fan(
+        &self,
+        s: &Wedge,
+        (ux, uy): (f64, f64),
+        wall: &Segment,
+        one_sided: bool,
+        hits: &mut [FirstHit],
+    ) {
         let p = (wall.a.x - s.x, wall.a.y - s.y);
         let (ex, ey) = (wall.b.x - wall.a.x, wall.b.y - wall.a.y);
         let ee = ex * ex + ey * ey;
+        let from_behind = one_sided && !faces_sensor(s, wall);
         for (&(cos, sin), hit) in self.fan.iter().zip(hits.iter_mut()) {
             let (dx, dy) = (ux * cos - uy * sin, uy * cos + ux * sin);
             let Some(distance) = ray_hits(dx, dy, p, ex, ey) else {
@@ -166,7 +181,7 @@ impl SonarRing {
             };
             // cos(incidence) = |d × e| / |e| for the unit ray d.
             let cross = dx * ey - dy * ex;
-            let grazing = cross * cross < self.cos2_incidence * ee;
+            let grazing = from_behind || cross * cross < self.cos2_incidence * ee;
             let nearer = distance < hit.distance - TIE_M
                 || (distance <= hit.distance + TIE_M && hit.grazing && !grazing);
             if nearer {
@@ -184,9 +199,17 @@ impl SonarRing {
     }
 
     /// The sonar's echo from its fan's first hits and the nearest points
-    /// of `walls` (every wall inside its wedge within `far`), or
-    /// `max_range` for none.
-    fn nearest_echo(&self, s: &Wedge, hits: &[FirstHit], walls: &[&Segment], far: f64) -> f64 {
+    /// of `walls` (every wall inside its wedge within `far`; when
+    /// `one_sided`, only those facing the sensor), or `max_range` for
+    /// none.
+    fn nearest_echo(
+        &self,
+        s: &Wedge,
+        hits: &[FirstHit],
+        walls: &[&Segment],
+        one_sided: bool,
+        far: f64,
+    ) -> f64 {
         let mut best = self.params.max_range;
         for hit in hits.iter().filter(|h| h.distance.is_finite()) {
             let echo = if hit.grazing {
@@ -197,6 +220,9 @@ impl SonarRing {
             best = best.min(echo);
         }
         for (k, wall) in walls.iter().enumerate() {
+            if one_sided && !faces_sensor(s, wall) {
+                continue;
+            }
             let Some(near) = nearest_in_wedge(s, wall) else {
                 continue;
             };
@@ -212,6 +238,13 @@ impl SonarRing {
         }
         best
     }
+}
+
+/// Whether the sensor of wedge `s` lies on the free side of the face
+/// `wall`, its left from `a` to `b` ([`deog_world::World::faces`]).
+fn faces_sensor(s: &Wedge, wall: &Segment) -> bool {
+    let (ex, ey) = (wall.b.x - wall.a.x, wall.b.y - wall.a.y);
+    ex * (s.y - wall.a.y) - ey * (s.x - wall.a.x) > 0.0
 }
 
 /// Whether a wall other than `walls[own]` crosses the line from the sensor
@@ -249,13 +282,13 @@ impl SonarRing {
         let scale = 0.5 / self.cos_half;
         let axis = ((s.rx + s.lx) * scale, (s.ry + s.ly) * scale);
         for wall in &inside {
-            self.cast_fan(s, axis, wall, &mut hits);
+            self.cast_fan(s, axis, wall, false, &mut hits);
         }
         let max_range = self.params.max_range;
         let far = hits
             .iter()
             .fold(0.0, |m: f64, h| m.max(h.distance.min(max_range)));
-        self.nearest_echo(s, &hits, &inside, far)
+        self.nearest_echo(s, &hits, &inside, false, far)
     }
 }
 
@@ -368,6 +401,40 @@ mod tests {
         // And it hides the wall behind it only where it stands.
         let walls = vec![seg(3.0, 0.0, 3.0, 0.0), seg(4.0, -5.0, 4.0, 5.0)];
         assert_abs_diff_eq!(read(&lost, walls), 3.0, epsilon = 1e-12);
+    }
+
+    /// map2's table, 1.5 to 3.0 m by 1.5 to 2.3 m, alone in a world.
+    fn table() -> deog_world::World {
+        let rect = deog_world::Polygon::rectangle(Point2::new(1.5, 1.5), Point2::new(3.0, 2.3));
+        deog_world::World::new("table", None, vec![rect]).expect("world")
+    }
+
+    fn read_at(sonar: &SonarRing, index: &SegmentIndex, pose: Pose2) -> f64 {
+        let mut out = [0.0];
+        sonar
+            .true_ranges(index, &pose, &mut out)
+            .expect("valid input");
+        out[0]
+    }
+
+    #[test]
+    fn a_box_corner_is_not_heard_through_the_box() {
+        let sonar = single(Specular::Lost {
+            max_incidence: 30f64.to_radians(),
+        });
+        let world = table();
+        // Above and left of the table, looking down past its near corner:
+        // both faces there are struck past 30°; the far corner (1.5, 1.5)
+        // lies square to the bottom face, which faces away.
+        let pose = Pose2::new(1.2, 2.76, (-78f64).to_radians());
+        let two_sided = read_at(&sonar, &SegmentIndex::new(world.walls()), pose);
+        assert_abs_diff_eq!(two_sided, 0.3f64.hypot(1.26), epsilon = 1e-9);
+        let faces = SegmentIndex::of_world(&world);
+        assert!(faces.one_sided());
+        assert_eq!(read_at(&sonar, &faces, pose), sonar.params().max_range);
+        // Square on to its left face, the table still answers.
+        let facing = Pose2::new(0.5, 1.9, 0.0);
+        assert_abs_diff_eq!(read_at(&sonar, &faces, facing), 1.0, epsilon = 1e-9);
     }
 
     #[test]
