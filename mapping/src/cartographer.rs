@@ -261,6 +261,7 @@ impl Cartographer {
                     max_tiles: settings.max_tiles,
                     limits: settings.limits,
                     enclosure_period: settings.enclosure_period,
+                    shadow_depth: settings.shadow_depth,
                 },
             )?;
             return Ok(self.by_direction(view));

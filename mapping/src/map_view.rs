@@ -37,6 +37,11 @@ pub struct MapViewSettings {
     /// judgements of the space no robot could have seen
     /// ([`crate::DirectionalSettings::enclosure_period`]); 0: never.
     pub enclosure_period: u32,
+    /// With [`crate::SonarMethod::Directional`]: how far behind a wall,
+    /// once heard, the free evidence that reached cells through it is
+    /// taken back, metres
+    /// ([`crate::DirectionalSettings::shadow_depth`]); 0: never.
+    pub shadow_depth: f64,
 }
 
 impl Default for MapViewSettings {
@@ -50,6 +55,7 @@ impl Default for MapViewSettings {
             max_tiles: 4096,
             limits: ClampLimits::default(),
             enclosure_period: crate::directional::DEFAULT_ENCLOSURE_PERIOD,
+            shadow_depth: crate::directional::DEFAULT_SHADOW_DEPTH_M,
         }
     }
 }

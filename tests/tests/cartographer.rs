@@ -263,15 +263,21 @@ async fn directional_space_walled_off_from_the_path_is_mapped_as_a_wall() {
         "--max-free-range",
         "2",
     ];
-    let map_to = |map: &str, period: &str| {
+    let map_to = |map: &str, period: &str, shadow: &str| {
         map_robot_r(
             &server,
             map,
-            &[specular.as_slice(), &["--enclosure-period", period]].concat(),
+            &[
+                specular.as_slice(),
+                &["--enclosure-period", period, "--shadow-depth", shadow],
+            ]
+            .concat(),
         )
     };
-    map_to("judged", "10");
-    map_to("open", "0");
+    map_to("judged", "10", "0");
+    map_to("open", "0", "0");
+    // The face, once heard, takes back what was freed through it.
+    map_to("shadowed", "0", "1");
     let belief = |map: &str, x: f64| {
         let client = client.clone();
         let map = map.to_owned();
@@ -285,8 +291,10 @@ async fn directional_space_walled_off_from_the_path_is_mapped_as_a_wall() {
     assert!(open.is_some_and(|p| p < 0.196), "open: {open:?}");
     let judged = belief("judged", 1.7).await;
     assert!(judged.is_some_and(|p| p > 0.65), "judged: {judged:?}");
+    let shadowed = belief("shadowed", 1.7).await;
+    assert!(shadowed.is_some_and(|p| p > 0.65), "shadowed: {shadowed:?}");
     // The face and the space before it are what the readings made them.
-    for map in ["judged", "open"] {
+    for map in ["judged", "open", "shadowed"] {
         let face = belief(map, 1.2).await;
         assert!(face.is_some_and(|p| p > 0.65), "{map}, the face: {face:?}");
         let before = belief(map, 0.6).await;

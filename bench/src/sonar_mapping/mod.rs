@@ -27,6 +27,9 @@
 //!   space no robot could have seen sent as walls every 50 frames);
 //! - `directional-specular-no-enclosure`: the same without the judgement
 //!   of enclosed space (`deog map --enclosure-period 0`);
+//! - `directional-specular-no-shadow`: `directional-specular` without
+//!   taking back the free evidence that reached cells through a wall
+//!   before it was heard (`deog map --shadow-depth 0`);
 //! - `octomap`: OctoMap, with one ray per reading with an echo, from its
 //!   transducer along its axis to the range read, no-echo readings left
 //!   out, OctoMap's default probabilities (hit 0.7, miss 0.4, clamping
@@ -85,7 +88,7 @@ use crate::option_error::{OptionError, require};
 use octomap_method::{OctomapDetails, OctomapRecord, OctomapSide};
 
 /// The methods compared, in the order the table lists them.
-pub const METHODS: [&str; 9] = [
+pub const METHODS: [&str; 10] = [
     "thesis",
     "thesis-no-echo-ignored",
     "keep-walls",
@@ -94,6 +97,7 @@ pub const METHODS: [&str; 9] = [
     "directional-no-echo-ignored",
     "directional-specular",
     "directional-specular-no-enclosure",
+    "directional-specular-no-shadow",
     "octomap",
 ];
 
@@ -535,6 +539,11 @@ fn build(
             0
         } else {
             MapViewSettings::default().enclosure_period
+        },
+        shadow_depth: if method.ends_with("no-shadow") {
+            0.0
+        } else {
+            MapViewSettings::default().shadow_depth
         },
         ..MapViewSettings::default()
     };

@@ -172,6 +172,13 @@ pub struct MapArgs {
     /// path reaches them. 0: never.
     #[arg(long, default_value_t = MapViewSettings::default().enclosure_period)]
     pub enclosure_period: u32,
+    /// With --sonar-method directional: how far behind a wall, once it is
+    /// heard, the free evidence that reached cells through it is taken
+    /// back, metres (a specular sonar frees an obstacle's inside through
+    /// a face it grazed before that face became a wall); a cell left with
+    /// nothing else is sent as a wall. 0: never.
+    #[arg(long, default_value_t = MapViewSettings::default().shadow_depth)]
+    pub shadow_depth: f64,
     /// With --sonar-method keep-walls: how often the tiles kept are read
     /// again from the map server, seconds, so that other robots' walls
     /// count too.
@@ -259,10 +266,17 @@ pub fn run(args: MapArgs) -> Result<()> {
             _ => MapViewSettings::default().max_tiles,
         }),
         enclosure_period: args.enclosure_period,
+        shadow_depth: args.shadow_depth,
         ..MapViewSettings::default()
     }
     .validate()
     .context("--wall-probability, --view-tiles")?;
+    DirectionalSettings {
+        shadow_depth: args.shadow_depth,
+        ..DirectionalSettings::default()
+    }
+    .validate()
+    .context("--shadow-depth")?;
     if !(args.view_refresh_s.is_finite() && args.view_refresh_s > 0.0) {
         bail!(
             "--view-refresh-s must be positive, got {}",

@@ -68,6 +68,10 @@ pub struct DirectionalSettings {
     /// Frames between two judgements of the space no robot could have
     /// seen ([`enclosure`]); 0: never judged.
     pub enclosure_period: u32,
+    /// How far behind a wall, once heard, the free evidence that reached
+    /// it through the wall is taken back, metres
+    /// ([`DirectionalView::shadow_behind`]); 0: never.
+    pub shadow_depth: f64,
 }
 
 impl Default for DirectionalSettings {
@@ -80,6 +84,7 @@ impl Default for DirectionalSettings {
             max_tiles: 1024,
             limits: ClampLimits::default(),
             enclosure_period: DEFAULT_ENCLOSURE_PERIOD,
+            shadow_depth: DEFAULT_SHADOW_DEPTH_M,
         }
     }
 }
@@ -88,12 +93,43 @@ impl DirectionalSettings {
     /// Checks the figures.
     pub fn validate(self) -> Result<Self, MappingError> {
         check_view(self.wall_probability, self.max_tiles)?;
+        let depth = self.shadow_depth;
+        if !(depth.is_finite() && (0.0..=MAX_SHADOW_DEPTH_M).contains(&depth)) {
+            return Err(MappingError::invalid(
+                "shadow_depth",
+                format!("must be within 0 to {MAX_SHADOW_DEPTH_M} m, got {depth}"),
+            ));
+        }
         Ok(self)
     }
 }
 
 /// Frames between two judgements of enclosed space by default.
 pub const DEFAULT_ENCLOSURE_PERIOD: u32 = 50;
+
+/// How far behind a wall heard free evidence is taken back by default,
+/// metres. The inside of an obstacle lies within a metre of some face in
+/// the worlds measured; farther, the space behind a thin wall is more
+/// often a room a doorway showed (BENCHMARKS.md, sonar mapping: 2 m
+/// turned more of it into walls and cost the office map).
+pub const DEFAULT_SHADOW_DEPTH_M: f64 = 1.0;
+
+/// The deepest shadow allowed, metres.
+const MAX_SHADOW_DEPTH_M: f64 = 10.0;
+
+/// The directions, either side of the one a wall was heard from, whose
+/// readings [`DirectionalView::shadow_behind`] takes back: a reading
+/// through a wall met it this far from the wall's normal or less.
+const SHADOW_FAN_DEG: f64 = 60.0;
+
+/// Between two rays of that fan, degrees: a cell seen from 2 m behind one
+/// wall cell is on some neighbouring wall cell's ray.
+const SHADOW_RAY_STEP_DEG: f64 = 10.0;
+
+/// Wall cells a ray of that fan crosses before the cells behind the wall
+/// begin: a wall is a cell or two thick; a ray along the wall meets more
+/// and stops.
+const WALL_THICKNESS_CELLS: usize = 2;
 
 /// How far from a robot's centre the cells it stands on reach, metres:
 /// well inside any robot's body.
@@ -114,13 +150,15 @@ const FLOOD_BLOCK: i16 = 0;
 const JUDGED_FOR_PERIODS: u64 = 10;
 
 /// A tile's beliefs, [`DIRECTIONS`] per cell, which cells a robot stood
-/// on and which are judged enclosed, and when it was last used.
+/// on, which are judged enclosed, which were seen only through a wall,
+/// and when it was last used.
 #[derive(Debug, Clone)]
 struct DirectionalTile {
     bins: Box<[i16]>,
     trodden: Box<[bool]>,
     near_path: Box<[bool]>,
     enclosed: Box<[bool]>,
+    shadowed: Box<[bool]>,
     used: u64,
 }
 
@@ -131,15 +169,19 @@ impl DirectionalTile {
             trodden: vec![false; area].into_boxed_slice(),
             near_path: vec![false; area].into_boxed_slice(),
             enclosed: vec![false; area].into_boxed_slice(),
+            shadowed: vec![false; area].into_boxed_slice(),
             used: 0,
         }
     }
 
     /// The belief the map holds for cell `index`: its directions'
-    /// ([`combined`]), or a wall's if it is judged enclosed.
+    /// ([`combined`]), or a wall's if it is judged enclosed or all it was
+    /// told came through a wall ([`DirectionalView::shadow_behind`]).
     fn held(&self, index: usize, wall: i16) -> i16 {
         let belief = combined(&self.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS]);
-        if self.enclosed[index] && belief != UNSEEN {
+        if belief == UNSEEN && self.shadowed[index] {
+            wall
+        } else if self.enclosed[index] && belief != UNSEEN {
             belief.max(wall)
         } else {
             belief
@@ -226,6 +268,7 @@ impl DirectionalView {
         let cells_per_tile = size.area();
         let bin_width = std::f64::consts::TAU / DIRECTIONS as f64;
         let wall = self.wall;
+        let mut new_walls: Vec<(CellIndex, usize)> = Vec::new();
         for delta in plain {
             size.check(delta.key)?;
             let origin = size.origin(delta.key)?;
@@ -263,8 +306,20 @@ impl DirectionalView {
                         .get_or_insert_with(|| TileDelta::zero(delta.key, size))
                         .raw_mut()[index] = step(before, after);
                 }
+                // A wall heard: what was freed behind it came through it.
+                if d > 0 && before < wall && after >= wall {
+                    let bins = &tile.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS];
+                    if let Some(facing) = (0..DIRECTIONS).max_by_key(|&b| bins[b]) {
+                        new_walls.push((cell, facing));
+                    }
+                }
             }
             out.extend(change);
+        }
+        if self.settings.shadow_depth > 0.0 {
+            for (cell, facing) in new_walls {
+                self.shadow_behind(cell, facing, out, start)?;
+            }
         }
         self.tread(robot)?;
         let period = u64::from(self.settings.enclosure_period);
@@ -272,6 +327,92 @@ impl DirectionalView {
             self.judge_enclosure(out, start);
         }
         self.evict();
+        Ok(())
+    }
+
+    /// Takes back the free evidence that reached the cells behind `wall`,
+    /// just heard from direction bin `facing`, through it: along rays from
+    /// the wall away from every direction within [`SHADOW_FAN_DEG`] of the
+    /// one it was heard from, each cell loses the free belief of the two
+    /// directions a reading down that ray gave, out to
+    /// [`DirectionalSettings::shadow_depth`]. A ray stops at another wall
+    /// (what lies beyond may be free space seen from its far side), at a
+    /// cell a robot came near and at a tile not held. A cell left with no
+    /// direction observed was seen only through walls and is held as one.
+    /// The change of each cell's belief is added to `out[start..]`.
+    ///
+    /// A specular sonar frees the inside of an obstacle through a face it
+    /// grazed before any reading has made that face a wall; once it is
+    /// one, the guard stops later cones at it, and this undoes the earlier
+    /// ones.
+    fn shadow_behind(
+        &mut self,
+        wall_cell: CellIndex,
+        facing: usize,
+        out: &mut Vec<TileDelta>,
+        start: usize,
+    ) -> Result<(), MappingError> {
+        let size = self.tile_size;
+        let resolution = self.resolution;
+        let wall = self.wall;
+        let cell_m = resolution.metres();
+        let bin_width = std::f64::consts::TAU / DIRECTIONS as f64;
+        let (wx, wy) = resolution.cell_center(wall_cell);
+        let steps = (self.settings.shadow_depth / (cell_m * 0.5)).ceil() as usize;
+        let rays = (SHADOW_FAN_DEG / SHADOW_RAY_STEP_DEG).round() as i32;
+        for k in -rays..=rays {
+            // The direction from a cell behind the wall back through it.
+            let back =
+                facing as f64 * bin_width + (f64::from(k) * SHADOW_RAY_STEP_DEG).to_radians();
+            let position = back.rem_euclid(std::f64::consts::TAU) / bin_width;
+            let below = (position.floor() as usize) % DIRECTIONS;
+            let above = (below + 1) % DIRECTIONS;
+            let (dx, dy) = (-back.cos() * cell_m * 0.5, -back.sin() * cell_m * 0.5);
+            let mut last = wall_cell;
+            let mut thickness = 0;
+            for i in 1..=steps {
+                let cell = resolution.cell_of(wx + dx * i as f64, wy + dy * i as f64)?;
+                if cell == last {
+                    continue;
+                }
+                last = cell;
+                let (key, offset) = size.split(cell);
+                let Some(tile) = self.tiles.get_mut(&key) else {
+                    break;
+                };
+                let index = offset.index(size);
+                let bins = &tile.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS];
+                if combined(bins) >= wall {
+                    thickness += 1;
+                    if thickness > WALL_THICKNESS_CELLS || i > 2 * (WALL_THICKNESS_CELLS + 1) {
+                        break;
+                    }
+                    continue;
+                }
+                if tile.near_path[index] {
+                    break;
+                }
+                let before = tile.held(index, wall);
+                let bins = &mut tile.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS];
+                let mut cleared = false;
+                for b in [below, above] {
+                    if bins[b] != UNSEEN && bins[b] <= 0 {
+                        bins[b] = UNSEEN;
+                        cleared = true;
+                    }
+                }
+                if !cleared {
+                    continue;
+                }
+                if bins.iter().all(|&b| b == UNSEEN) {
+                    tile.shadowed[index] = true;
+                }
+                let after = tile.held(index, wall);
+                if after != before {
+                    add_change(out, start, key, size, index, step(before, after));
+                }
+            }
+        }
         Ok(())
     }
 
@@ -363,6 +504,27 @@ impl DirectionalView {
     }
 }
 
+/// Adds `delta` to cell `index` of tile `key` in `out[start..]`: into the
+/// tile's delta there, or a new one.
+fn add_change(
+    out: &mut Vec<TileDelta>,
+    start: usize,
+    key: TileKey,
+    size: TileSize,
+    index: usize,
+    delta: i16,
+) {
+    let position = match out[start..].iter().position(|d| d.key == key) {
+        Some(p) => start + p,
+        None => {
+            out.push(TileDelta::zero(key, size));
+            out.len() - 1
+        }
+    };
+    let sum = &mut out[position].raw_mut()[index];
+    *sum = sum.saturating_add(delta);
+}
+
 /// The delta that takes a cell's belief from `before` to `after`; a cell
 /// seen first starts from even odds, as the map's cells do.
 fn step(before: i16, after: i16) -> i16 {
@@ -417,10 +579,12 @@ mod tests {
         .expect("view")
     }
 
-    /// A view that judges enclosed space at every frame.
+    /// A view that judges enclosed space at every frame and takes nothing
+    /// back behind walls.
     fn judging_view() -> DirectionalView {
         view_with(DirectionalSettings {
             enclosure_period: 1,
+            shadow_depth: 0.0,
             ..DirectionalSettings::default()
         })
     }
@@ -497,6 +661,86 @@ mod tests {
                 .raw_mut()[offset.index(size)] = value;
         }
         by_key.into_values().collect()
+    }
+
+    #[test]
+    fn free_evidence_that_came_through_a_wall_is_taken_back_once_it_is_heard() {
+        let size = TileSize::new(16).expect("size");
+        let mut v = view_with(DirectionalSettings {
+            enclosure_period: 0,
+            ..DirectionalSettings::default()
+        });
+        let mut server = TileMap::new(Resolution::DEFAULT, size, ClampLimits::default());
+        let absorb_all = |v: &mut DirectionalView,
+                          server: &mut TileMap,
+                          robot: Pose2,
+                          cells: &[(CellIndex, i16)]| {
+            let mut out = Vec::new();
+            v.absorb(&robot, &deltas_for(cells), &mut out)
+                .expect("absorb");
+            for delta in &out {
+                server.apply(delta).expect("apply");
+            }
+        };
+        let (_, row_y) = Resolution::DEFAULT.cell_center(CellIndex::new(0, 5));
+        let west = Pose2::new(-1.0, row_y, 0.0);
+        // A cone from the west frees a row straight through where a wall
+        // (the column of cells x = 20, 1.0 m) stands, not yet heard ...
+        let row: Vec<(CellIndex, i16)> = (0..=45)
+            .filter(|&x| x != 20)
+            .map(|x| (CellIndex::new(x, 5), -500))
+            .collect();
+        absorb_all(&mut v, &mut server, west, &row);
+        // ... and one cell behind it is also seen free from the east.
+        let east = Pose2::new(3.5, row_y, std::f64::consts::PI);
+        absorb_all(&mut v, &mut server, east, &[(CellIndex::new(30, 5), -500)]);
+        let belief =
+            |v: &DirectionalView, x: i32| v.belief(CellIndex::new(x, 5)).expect("seen").raw();
+        assert!((0..=45).filter(|&x| x != 20).all(|x| belief(&v, x) < 0));
+        // Then the wall is heard from the west.
+        let column: Vec<(CellIndex, i16)> =
+            (0..=10).map(|y| (CellIndex::new(20, y), 2000)).collect();
+        absorb_all(&mut v, &mut server, west, &column);
+        let wall = LogOdds::from_probability(0.7).expect("wall").raw();
+        for x in 0..20 {
+            assert!(belief(&v, x) < 0, "in front of the wall, {x} stays free");
+        }
+        for x in (21..=40).filter(|&x| x != 30) {
+            assert_eq!(
+                belief(&v, x),
+                wall,
+                "behind the wall, {x} was seen only through it"
+            );
+            assert!(v.shadows(CellIndex::new(x, 5)));
+        }
+        assert!(belief(&v, 30) < 0, "seen from the east too, it stays free");
+        for x in 42..=45 {
+            assert!(belief(&v, x) < 0, "past the shadow's metre, {x} stays free");
+        }
+        // The server holds what the view holds.
+        for x in 0..=45 {
+            let cell = CellIndex::new(x, 5);
+            assert_eq!(
+                server.get(cell).map(|b| b.raw()),
+                v.belief(cell).map(|b| b.raw()),
+                "{x}"
+            );
+        }
+        // A later reading from another side frees a shadowed cell.
+        absorb_all(&mut v, &mut server, east, &[(CellIndex::new(25, 5), -500)]);
+        assert!(belief(&v, 25) < 0);
+    }
+
+    #[test]
+    fn a_shadow_deeper_than_ten_metres_or_not_a_number_is_refused() {
+        for depth in [-0.1, 10.5, f64::NAN] {
+            let settings = DirectionalSettings {
+                shadow_depth: depth,
+                ..DirectionalSettings::default()
+            };
+            let err = settings.validate().expect_err("refused");
+            assert!(err.to_string().contains("shadow_depth"), "{err}");
+        }
     }
 
     /// The cells of the square ring from `low` to `high` on both axes,
