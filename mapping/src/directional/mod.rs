@@ -466,7 +466,6 @@ impl DirectionalView {
             if tile.used < since {
                 continue;
             }
-            let mut change: Option<TileDelta> = None;
             for (index, &reached) in reached.iter().enumerate() {
                 let belief = combined(&tile.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS]);
                 // Only the cells the view leans to believe free (the ones
@@ -482,19 +481,8 @@ impl DirectionalView {
                 tile.enclosed[index] = enclosed;
                 let after = tile.held(index, wall);
                 if after != before {
-                    change
-                        .get_or_insert_with(|| TileDelta::zero(key, size))
-                        .raw_mut()[index] = step(before, after);
+                    add_change(out, start, key, size, index, step(before, after));
                 }
-            }
-            let Some(change) = change else { continue };
-            match out[start..].iter_mut().find(|d| d.key == key) {
-                Some(existing) => {
-                    for (sum, &more) in existing.raw_mut().iter_mut().zip(change.raw()) {
-                        *sum = sum.saturating_add(more);
-                    }
-                }
-                None => out.push(change),
             }
         }
     }
