@@ -59,6 +59,20 @@ pub fn table_len(max_range: f64) -> usize {
 /// localization).
 pub const SPECULAR_TEMPERING: f64 = 0.08;
 
+/// σ₀ for a specular sonar ([`BeamModelParams::for_sonar`]), metres. The
+/// echoes a specular sonar keeps come from walls met within the critical
+/// angle of their normal, so nearly square on: their ranges spread less
+/// about the map's than a sonar's that hears walls at any slant. With
+/// the specular surface depth of [`crate::range_table::ConeGeometry::for_sonar`],
+/// σ₀ 0.03 and σ₁ 0.005 against 0.05 and 0.02 took the mean error after
+/// convergence in `map2` from 3.5 cm and 1.05° to 2.8 cm and 0.86°, and
+/// converged more often in `map1` (BENCHMARKS.md, localization).
+pub const SPECULAR_HIT_SIGMA_M: f64 = 0.03;
+
+/// σ₁ for a specular sonar: the hit spread's growth per metre (see
+/// [`SPECULAR_HIT_SIGMA_M`]).
+pub const SPECULAR_HIT_SIGMA_PER_M: f64 = 0.005;
+
 /// The mixture's parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BeamModelParams {
@@ -108,7 +122,8 @@ impl BeamModelParams {
     /// 0.10 and random 0.32 in `map2` (0.60, 0.00, 0.11 and 0.29 in
     /// `map1`), against the defaults' 0.75, 0.05, 0.05 and 0.15. More
     /// echoes lost (max) and more that no prediction explains (random):
-    /// a miss costs a particle less.
+    /// a miss costs a particle less. The hit spread is narrower
+    /// ([`SPECULAR_HIT_SIGMA_M`], [`SPECULAR_HIT_SIGMA_PER_M`]).
     pub fn for_sonar(specular: bool) -> Self {
         let defaults = Self::default();
         if !specular {
@@ -120,6 +135,8 @@ impl BeamModelParams {
             weight_short: 0.03,
             weight_max: 0.10,
             weight_random: 0.30,
+            hit_sigma_m: SPECULAR_HIT_SIGMA_M,
+            hit_sigma_per_m: SPECULAR_HIT_SIGMA_PER_M,
             ..defaults
         }
     }
@@ -338,8 +355,10 @@ mod tests {
         let weights =
             |p: &BeamModelParams| p.weight_hit + p.weight_short + p.weight_max + p.weight_random;
         assert_abs_diff_eq!(weights(&specular), weights(&plain), epsilon = 1e-12);
-        // The same spread and range: only the causes' shares differ.
-        assert_eq!(specular.hit_sigma_m, plain.hit_sigma_m);
+        // The same range; the causes' shares differ, and the echoes kept
+        // (walls met nearly square on) spread less.
+        assert!(specular.hit_sigma_m < plain.hit_sigma_m);
+        assert!(specular.hit_sigma_per_m < plain.hit_sigma_per_m);
         assert_eq!(specular.max_range, plain.max_range);
         let (plain, specular) = (
             BeamModel::new(plain).unwrap(),

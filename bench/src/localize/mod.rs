@@ -111,16 +111,19 @@ pub struct LocalizeOptions {
     /// Default: 0.05, or 0.08 with a specular sonar (as `deog localize`).
     #[arg(long)]
     pub tempering: Option<f64>,
-    /// The beam model's hit spread at zero range, metres.
-    #[arg(long, default_value_t = BeamModelParams::default().hit_sigma_m)]
-    pub hit_sigma: f64,
-    /// The beam model's hit spread growth per metre.
-    #[arg(long, default_value_t = BeamModelParams::default().hit_sigma_per_m)]
-    pub hit_sigma_per_m: f64,
+    /// The beam model's hit spread at zero range, metres. Default: 0.05,
+    /// or 0.03 with a specular sonar (as `deog localize`).
+    #[arg(long)]
+    pub hit_sigma: Option<f64>,
+    /// The beam model's hit spread growth per metre. Default: 0.02, or
+    /// 0.005 with a specular sonar (as `deog localize`).
+    #[arg(long)]
+    pub hit_sigma_per_m: Option<f64>,
     /// How far past the first occupied cell's near face echoes are
-    /// expected, metres (see `deog localize --surface-depth`).
-    #[arg(long, default_value_t = ConeGeometry::default().surface_depth)]
-    pub surface_depth: f64,
+    /// expected, metres (see `deog localize --surface-depth`). Default:
+    /// 0.05, or 0.1 with a specular sonar.
+    #[arg(long)]
+    pub surface_depth: Option<f64>,
     /// Scale of the motion model's four noise parameters (1: the filter's
     /// defaults).
     #[arg(long, default_value_t = 1.0)]
@@ -245,9 +248,28 @@ impl LocalizeOptions {
         if let Some(tempering) = self.tempering {
             beam.tempering = tempering;
         }
-        beam.hit_sigma_m = self.hit_sigma;
-        beam.hit_sigma_per_m = self.hit_sigma_per_m;
+        if let Some(sigma) = self.hit_sigma {
+            beam.hit_sigma_m = sigma;
+        }
+        if let Some(per_m) = self.hit_sigma_per_m {
+            beam.hit_sigma_per_m = per_m;
+        }
         beam
+    }
+
+    /// How far past the first occupied cell's near face the runs expect
+    /// echoes: `--surface-depth`, or that of the map's sonar
+    /// ([`ConeGeometry::for_sonar`]; a `--clean-map` is the default
+    /// sonar's).
+    pub fn surface_depth(&self) -> f64 {
+        let angle = if self.clean_map {
+            None
+        } else {
+            self.sonar_preset().specular_angle_deg()
+        }
+        .map(f64::to_radians);
+        self.surface_depth
+            .unwrap_or(ConeGeometry::for_sonar(angle).surface_depth)
     }
 
     /// Whether the runs' sonar loses echoes off grazed walls.
@@ -379,7 +401,7 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
             &config,
             setup.sensor,
             options.map_minutes,
-            options.surface_depth,
+            options.surface_depth(),
         )?;
         deog_harness::println_above_bars!(
             "{world_name}: map built in {:.1} s ({} tiles)",
@@ -525,6 +547,22 @@ mod tests {
                 hit_sigma_m: 0.07,
                 ..specular
             }
+        );
+    }
+
+    #[test]
+    fn a_specular_sonars_map_is_expected_deeper_unless_it_is_clean() {
+        let plain = ConeGeometry::default().surface_depth;
+        let specular = ConeGeometry::for_sonar(Some(0.5)).surface_depth;
+        assert_eq!(parse(&[]).surface_depth(), plain);
+        assert_eq!(parse(&["--sonar", "realistic"]).surface_depth(), specular);
+        assert_eq!(
+            parse(&["--sonar", "realistic", "--clean-map"]).surface_depth(),
+            plain
+        );
+        assert_eq!(
+            parse(&["--sonar", "realistic", "--surface-depth", "0.2"]).surface_depth(),
+            0.2
         );
     }
 

@@ -114,12 +114,14 @@ pub struct LocalizeArgs {
     #[arg(long, default_value_t = 0.0)]
     pub firing_period: f64,
     /// How far past the near face of the first occupied cell a sonar's
-    /// echo is expected, metres: 0.05 for maps the cartographer built
-    /// (their occupied cells stand about a cell in front of the walls);
-    /// about half a cell for maps whose walls lie inside their occupied
-    /// cells, as laser-built map_server maps.
-    #[arg(long, default_value_t = ConeGeometry::default().surface_depth)]
-    pub surface_depth: f64,
+    /// echo is expected, metres. Default: 0.05 for maps the cartographer
+    /// built (their occupied cells stand about a cell in front of the
+    /// walls), or 0.1 with --specular-angle (a specular sonar's maps,
+    /// built by direction, stand a cell further out); about half a cell
+    /// for maps whose walls lie inside their occupied cells, as
+    /// laser-built map_server maps.
+    #[arg(long)]
+    pub surface_depth: Option<f64>,
     /// The rig the robot's frames come from (a built-in name or a rig
     /// file): frames of another rig are refused. Without it, the rig the
     /// first frame names, as the map server keeps it.
@@ -256,11 +258,12 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         "--max-skip-s must be a positive number of seconds, got {}",
         args.max_skip_s
     );
-    ensure!(
-        args.surface_depth.is_finite() && (0.0..=1.0).contains(&args.surface_depth),
-        "--surface-depth must be in [0, 1] metres, got {}",
-        args.surface_depth
-    );
+    if let Some(depth) = args.surface_depth {
+        ensure!(
+            depth.is_finite() && (0.0..=1.0).contains(&depth),
+            "--surface-depth must be in [0, 1] metres, got {depth}"
+        );
+    }
     ensure!(
         (16..=1 << 20).contains(&args.cache_mb),
         "--cache-mb must be in [16, 1048576] MiB, got {}",
@@ -363,14 +366,13 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         .with_context(|| format!("reading rig {rig_name} of frame {}", first.sequence))?;
     let choice = args.sensor.unwrap_or(SensorChoice::for_rig(&rig));
     let cone = choice
-        .cone_geometry(
-            &rig,
+        .cone_geometry(&rig, {
+            let sonar = ConeGeometry::for_sonar(args.specular_angle.map(f64::to_radians));
             ConeGeometry {
-                specular_max_incidence: args.specular_angle.map(f64::to_radians),
-                surface_depth: args.surface_depth,
-                ..ConeGeometry::default()
-            },
-        )
+                surface_depth: args.surface_depth.unwrap_or(sonar.surface_depth),
+                ..sonar
+            }
+        })
         .context("--sensor beam")?;
     settings.beam.max_range = cone.max_range;
     let sensor = choice
