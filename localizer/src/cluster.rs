@@ -2,9 +2,6 @@
 //! occupied bins joined into clusters, and the weighted mean and covariance
 //! of the heaviest cluster. The same bins count `k` for KLD-sampling.
 
-use std::collections::{HashMap, HashSet};
-use std::hash::{BuildHasherDefault, Hasher};
-
 use deog_grid::{Pose2, normalize_angle};
 
 use crate::numeric::floor_i64;
@@ -30,51 +27,16 @@ impl Default for BinSize {
 
 type Bin = (i64, i64, i64);
 
-/// A hasher for bins: a multiply and a rotate a word. Every frame hashes
-/// each particle's bin once or twice, and the standard library's hasher,
-/// built to resist inputs chosen to collide, took a tenth of a tracking
-/// update; bins come from the filter's own particles, never from outside.
-#[derive(Debug, Default, Clone, Copy)]
-pub struct BinHasher(u64);
-
-impl Hasher for BinHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(u64::from(b));
-        }
-    }
-
-    #[inline]
-    fn write_u64(&mut self, word: u64) {
-        // The golden ratio's odd multiplier spreads low bits upwards.
-        self.0 = (self.0.rotate_left(5) ^ word).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-    }
-
-    #[inline]
-    fn write_i64(&mut self, word: i64) {
-        self.write_u64(word as u64);
-    }
-
-    #[inline]
-    fn write_u32(&mut self, word: u32) {
-        self.write_u64(u64::from(word));
-    }
-
-    #[inline]
-    fn write_i32(&mut self, word: i32) {
-        self.write_u64(word as u64);
-    }
-}
+/// The hasher of bins: the grid's hasher for small integer keys (every
+/// frame hashes each particle's bin once or twice, and the standard
+/// library's hasher took a tenth of a tracking update).
+pub type BinHasher = deog_grid::KeyHasher;
 
 /// A map keyed by bins (or other small integers) with [`BinHasher`].
-pub type BinMap<K, V> = HashMap<K, V, BuildHasherDefault<BinHasher>>;
+pub type BinMap<K, V> = deog_grid::KeyMap<K, V>;
 
 /// A set of bins (or other small integers) with [`BinHasher`].
-pub type BinSet<K = Bin> = HashSet<K, BuildHasherDefault<BinHasher>>;
+pub type BinSet<K = Bin> = deog_grid::KeySet<K>;
 
 impl BinSize {
     fn headings(&self) -> i64 {

@@ -9,11 +9,9 @@
 //! process feeding it (`deog map`) fetches the tiles a frame reaches
 //! before the frame is mapped ([`MapView::missing_around`]).
 
-use std::collections::HashMap;
-
 use deog_grid::{
-    CellBox, CellIndex, ClampLimits, ConeGuard, LogOdds, Pose2, Resolution, Tile, TileDelta,
-    TileKey, TileSize,
+    CellBox, CellIndex, ClampLimits, ConeGuard, KeyMap, LogOdds, Pose2, Resolution, Tile,
+    TileDelta, TileKey, TileSize,
 };
 
 use crate::error::MappingError;
@@ -110,7 +108,7 @@ pub struct MapView {
     shadow: i16,
     resolution: Resolution,
     tile_size: TileSize,
-    tiles: HashMap<TileKey, ViewTile>,
+    tiles: KeyMap<TileKey, ViewTile>,
     clock: u64,
 }
 
@@ -128,7 +126,7 @@ impl MapView {
             settings,
             resolution,
             tile_size,
-            tiles: HashMap::new(),
+            tiles: KeyMap::default(),
             clock: 0,
         })
     }
@@ -251,7 +249,7 @@ impl MapView {
 /// seven eighths of `max_tiles` once there are more, so that eviction runs
 /// once per many tiles.
 pub(crate) fn evict_least_recent<T>(
-    tiles: &mut HashMap<TileKey, T>,
+    tiles: &mut KeyMap<TileKey, T>,
     max_tiles: usize,
     used: impl Fn(&T) -> u64,
 ) {

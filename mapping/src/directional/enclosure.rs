@@ -6,11 +6,9 @@
 //! have come from inside, so what the view holds free there is wrong: the
 //! inside of an obstacle, the space beyond an outer wall.
 
-use std::collections::HashMap;
+use deog_grid::{KeyMap, TileKey, TileSize};
 
-use deog_grid::{TileKey, TileSize};
-
-use super::{DIRECTIONS, DirectionalTile, UNSEEN, combined};
+use super::{DirectionalTile, UNSEEN};
 
 /// The tiles held, in slots, with each slot's 3 × 3 block of neighbouring
 /// slots, so that a cell's neighbours across a tile's edge are a lookup.
@@ -23,9 +21,9 @@ struct Slots {
 }
 
 impl Slots {
-    fn new(tiles: &HashMap<TileKey, DirectionalTile>, size: TileSize) -> Self {
+    fn new(tiles: &KeyMap<TileKey, DirectionalTile>, size: TileSize) -> Self {
         let keys: Vec<TileKey> = tiles.keys().copied().collect();
-        let slot_of: HashMap<TileKey, usize> =
+        let slot_of: KeyMap<TileKey, usize> =
             keys.iter().enumerate().map(|(i, k)| (*k, i)).collect();
         let beside = keys
             .iter()
@@ -72,10 +70,10 @@ impl Slots {
 /// a region joined to a robot's path only through forgotten tiles is not
 /// reached, which is why the caller judges only the tiles near the robot.
 pub(super) fn reached_from_trodden(
-    tiles: &HashMap<TileKey, DirectionalTile>,
+    tiles: &KeyMap<TileKey, DirectionalTile>,
     size: TileSize,
     block: i16,
-) -> HashMap<TileKey, Vec<bool>> {
+) -> KeyMap<TileKey, Vec<bool>> {
     let slots = Slots::new(tiles, size);
     let area = size.area();
     let passable: Vec<Vec<bool>> = slots
@@ -85,7 +83,7 @@ pub(super) fn reached_from_trodden(
             let tile = &tiles[key];
             (0..area)
                 .map(|i| {
-                    let belief = combined(&tile.bins[i * DIRECTIONS..(i + 1) * DIRECTIONS]);
+                    let belief = tile.combined[i];
                     if belief == UNSEEN {
                         tile.near_path[i]
                     } else {

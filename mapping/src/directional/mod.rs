@@ -36,11 +36,9 @@
 //! Scout's sensors (0.2 m off centre) see a cell up to 12° from where the
 //! centre does, well within a bin.
 
-use std::collections::HashMap;
-
 use deog_grid::{
-    CellIndex, CellOffset, ClampLimits, ConeGuard, LogOdds, Pose2, Resolution, TileDelta, TileKey,
-    TileSize,
+    CellIndex, CellOffset, ClampLimits, ConeGuard, KeyMap, LogOdds, Pose2, Resolution, TileDelta,
+    TileKey, TileSize,
 };
 
 use crate::error::MappingError;
@@ -149,12 +147,15 @@ const FLOOD_BLOCK: i16 = 0;
 /// lost the path that joined it to a robot.
 const JUDGED_FOR_PERIODS: u64 = 10;
 
-/// A tile's beliefs, [`DIRECTIONS`] per cell, which cells a robot stood
-/// on, which are judged enclosed, which were seen only through a wall,
-/// and when it was last used.
+/// A tile's beliefs, [`DIRECTIONS`] per cell, and each cell's
+/// [`combined`] belief kept beside them (the cone guard asks for it at
+/// every cell of every cone), which cells a robot stood on, which are
+/// judged enclosed, which were seen only through a wall, and when it was
+/// last used.
 #[derive(Debug, Clone)]
 struct DirectionalTile {
     bins: Box<[i16]>,
+    combined: Box<[i16]>,
     trodden: Box<[bool]>,
     near_path: Box<[bool]>,
     enclosed: Box<[bool]>,
@@ -166,6 +167,7 @@ impl DirectionalTile {
     fn new(area: usize) -> Self {
         Self {
             bins: vec![UNSEEN; area * DIRECTIONS].into_boxed_slice(),
+            combined: vec![UNSEEN; area].into_boxed_slice(),
             trodden: vec![false; area].into_boxed_slice(),
             near_path: vec![false; area].into_boxed_slice(),
             enclosed: vec![false; area].into_boxed_slice(),
@@ -178,7 +180,7 @@ impl DirectionalTile {
     /// ([`combined`]), or a wall's if it is judged enclosed or all it was
     /// told came through a wall ([`DirectionalView::shadow_behind`]).
     fn held(&self, index: usize, wall: i16) -> i16 {
-        let belief = combined(&self.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS]);
+        let belief = self.combined[index];
         if belief == UNSEEN && self.shadowed[index] {
             wall
         } else if self.enclosed[index] && belief != UNSEEN {
@@ -186,6 +188,20 @@ impl DirectionalTile {
         } else {
             belief
         }
+    }
+
+    /// Cell `index`'s beliefs by direction.
+    fn bins(&self, index: usize) -> &[i16] {
+        &self.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS]
+    }
+
+    /// Changes cell `index`'s beliefs by direction with `change`, keeping
+    /// its combined belief.
+    fn change_bins<R>(&mut self, index: usize, change: impl FnOnce(&mut [i16]) -> R) -> R {
+        let bins = &mut self.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS];
+        let result = change(bins);
+        self.combined[index] = combined(bins);
+        result
     }
 }
 
@@ -196,7 +212,7 @@ pub struct DirectionalView {
     wall: i16,
     resolution: Resolution,
     tile_size: TileSize,
-    tiles: HashMap<TileKey, DirectionalTile>,
+    tiles: KeyMap<TileKey, DirectionalTile>,
     clock: u64,
 }
 
@@ -213,7 +229,7 @@ impl DirectionalView {
             settings,
             resolution,
             tile_size,
-            tiles: HashMap::new(),
+            tiles: KeyMap::default(),
             clock: 0,
         })
     }
@@ -296,10 +312,12 @@ impl DirectionalView {
                 let below = (position.floor() as usize) % DIRECTIONS;
                 let above = (below + 1) % DIRECTIONS;
                 let before = tile.held(index, wall);
-                let bins = &mut tile.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS];
-                for b in [below, above] {
-                    bins[b] = self.settings.limits.apply(bins[b], d);
-                }
+                let limits = self.settings.limits;
+                tile.change_bins(index, |bins| {
+                    for b in [below, above] {
+                        bins[b] = limits.apply(bins[b], d);
+                    }
+                });
                 let after = tile.held(index, wall);
                 if after != before {
                     change
@@ -308,7 +326,7 @@ impl DirectionalView {
                 }
                 // A wall heard: what was freed behind it came through it.
                 if d > 0 && before < wall && after >= wall {
-                    let bins = &tile.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS];
+                    let bins = tile.bins(index);
                     if let Some(facing) = (0..DIRECTIONS).max_by_key(|&b| bins[b]) {
                         new_walls.push((cell, facing));
                     }
@@ -381,8 +399,7 @@ impl DirectionalView {
                     break;
                 };
                 let index = offset.index(size);
-                let bins = &tile.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS];
-                if combined(bins) >= wall {
+                if tile.combined[index] >= wall {
                     thickness += 1;
                     if thickness > WALL_THICKNESS_CELLS || i > 2 * (WALL_THICKNESS_CELLS + 1) {
                         break;
@@ -393,18 +410,20 @@ impl DirectionalView {
                     break;
                 }
                 let before = tile.held(index, wall);
-                let bins = &mut tile.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS];
-                let mut cleared = false;
-                for b in [below, above] {
-                    if bins[b] != UNSEEN && bins[b] <= 0 {
-                        bins[b] = UNSEEN;
-                        cleared = true;
+                let cleared = tile.change_bins(index, |bins| {
+                    let mut cleared = false;
+                    for b in [below, above] {
+                        if bins[b] != UNSEEN && bins[b] <= 0 {
+                            bins[b] = UNSEEN;
+                            cleared = true;
+                        }
                     }
-                }
+                    cleared
+                });
                 if !cleared {
                     continue;
                 }
-                if bins.iter().all(|&b| b == UNSEEN) {
+                if tile.combined[index] == UNSEEN {
                     tile.shadowed[index] = true;
                 }
                 let after = tile.held(index, wall);
@@ -467,7 +486,7 @@ impl DirectionalView {
                 continue;
             }
             for (index, &reached) in reached.iter().enumerate() {
-                let belief = combined(&tile.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS]);
+                let belief = tile.combined[index];
                 // Only the cells the view leans to believe free (the ones
                 // the flood passes): raising the uncertain ones inside too
                 // gained a point of cells right but walled off free pockets
@@ -640,7 +659,7 @@ mod tests {
     /// Plain deltas giving each of `cells` its value, one per tile.
     fn deltas_for(cells: &[(CellIndex, i16)]) -> Vec<TileDelta> {
         let size = TileSize::new(16).expect("size");
-        let mut by_key: HashMap<TileKey, TileDelta> = HashMap::new();
+        let mut by_key: KeyMap<TileKey, TileDelta> = KeyMap::default();
         for &(cell, value) in cells {
             let (key, offset) = size.split(cell);
             by_key
