@@ -71,6 +71,7 @@ impl MapViewSettings {
                 ),
             ));
         }
+        crate::directional::check_shadow_depth(self.shadow_depth)?;
         Ok(self)
     }
 }

@@ -147,6 +147,20 @@ fn bad_files_and_flags_are_named() {
         "0",
     ]);
     assert!(line.contains("--connect-timeout"), "{line}");
+    // Checked before the map server is asked for anything.
+    let line = error_line(&[
+        "map",
+        "--robot",
+        "r",
+        "--map",
+        "lab",
+        "--shadow-depth",
+        "11",
+    ]);
+    assert!(
+        line.contains("--shadow-depth") && line.contains("got 11"),
+        "{line}"
+    );
     // clap's own: the flag named, the usage after it.
     let output = run_deog(&["map", "--robot"], &[]);
     let stderr = failure(&output);

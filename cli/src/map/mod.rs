@@ -270,13 +270,7 @@ pub fn run(args: MapArgs) -> Result<()> {
         ..MapViewSettings::default()
     }
     .validate()
-    .context("--wall-probability, --view-tiles")?;
-    DirectionalSettings {
-        shadow_depth: args.shadow_depth,
-        ..DirectionalSettings::default()
-    }
-    .validate()
-    .context("--shadow-depth")?;
+    .context("--wall-probability, --view-tiles, --shadow-depth")?;
     if !(args.view_refresh_s.is_finite() && args.view_refresh_s > 0.0) {
         bail!(
             "--view-refresh-s must be positive, got {}",

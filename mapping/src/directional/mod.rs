@@ -91,15 +91,21 @@ impl DirectionalSettings {
     /// Checks the figures.
     pub fn validate(self) -> Result<Self, MappingError> {
         check_view(self.wall_probability, self.max_tiles)?;
-        let depth = self.shadow_depth;
-        if !(depth.is_finite() && (0.0..=MAX_SHADOW_DEPTH_M).contains(&depth)) {
-            return Err(MappingError::invalid(
-                "shadow_depth",
-                format!("must be within 0 to {MAX_SHADOW_DEPTH_M} m, got {depth}"),
-            ));
-        }
+        check_shadow_depth(self.shadow_depth)?;
         Ok(self)
     }
+}
+
+/// Checks a depth of [`DirectionalSettings::shadow_depth`]: 0 to
+/// [`MAX_SHADOW_DEPTH_M`] metres.
+pub(crate) fn check_shadow_depth(depth: f64) -> Result<(), MappingError> {
+    if !(depth.is_finite() && (0.0..=MAX_SHADOW_DEPTH_M).contains(&depth)) {
+        return Err(MappingError::invalid(
+            "shadow_depth",
+            format!("must be within 0 to {MAX_SHADOW_DEPTH_M} m, got {depth}"),
+        ));
+    }
+    Ok(())
 }
 
 /// Frames between two judgements of enclosed space by default.
@@ -746,6 +752,12 @@ mod tests {
                 ..DirectionalSettings::default()
             };
             let err = settings.validate().expect_err("refused");
+            assert!(err.to_string().contains("shadow_depth"), "{err}");
+            let view = crate::MapViewSettings {
+                shadow_depth: depth,
+                ..crate::MapViewSettings::default()
+            };
+            let err = view.validate().expect_err("refused");
             assert!(err.to_string().contains("shadow_depth"), "{err}");
         }
     }
