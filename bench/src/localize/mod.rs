@@ -368,13 +368,16 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
     options.validate()?;
     let setup = options.rig_setup()?;
     let preset = options.sonar_preset();
+    let beam = (setup.sensor == SensorChoice::Beam).then(|| options.beam_params());
     let mut report = report::LocalizeReport {
         rig: setup.rig.name().to_string(),
         sensor: setup.sensor.name().to_string(),
         sonar: preset.name().to_string(),
         clean_map: options.clean_map,
-        beam_tempering: (setup.sensor == SensorChoice::Beam)
-            .then(|| options.beam_params().tempering),
+        beam_tempering: beam.map(|b| b.tempering),
+        beam_hit_sigma_m: beam.map(|b| b.hit_sigma_m),
+        beam_hit_sigma_per_m: beam.map(|b| b.hit_sigma_per_m),
+        surface_depth_m: beam.map(|_| options.surface_depth()),
         seconds: options.seconds,
         kidnap_at_s: options.kidnap_at,
         converge_limit_s: CONVERGE_LIMIT_S,

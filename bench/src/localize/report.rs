@@ -18,6 +18,13 @@ pub(super) struct LocalizeReport {
     pub clean_map: bool,
     /// The beam model's tempering τ; `None` for the likelihood field.
     pub beam_tempering: Option<f64>,
+    /// The beam model's hit spread at zero range and its growth per
+    /// metre, metres; `None` for the likelihood field.
+    pub beam_hit_sigma_m: Option<f64>,
+    pub beam_hit_sigma_per_m: Option<f64>,
+    /// How far past the first occupied cell echoes were expected, metres;
+    /// `None` for the likelihood field.
+    pub surface_depth_m: Option<f64>,
     /// Seconds of a run, and its kidnap (0: none).
     pub seconds: f64,
     pub kidnap_at_s: f64,
@@ -136,6 +143,9 @@ mod tests {
             sonar: "realistic".into(),
             clean_map: false,
             beam_tempering: Some(0.08),
+            beam_hit_sigma_m: Some(0.03),
+            beam_hit_sigma_per_m: Some(0.005),
+            surface_depth_m: Some(0.1),
             seconds: 180.0,
             kidnap_at_s: 90.0,
             converge_limit_s: 60.0,
@@ -165,5 +175,8 @@ mod tests {
         );
         assert_eq!(json["sonar"], "realistic");
         assert_eq!(json["beam_tempering"], 0.08);
+        assert_eq!(json["beam_hit_sigma_m"], 0.03);
+        assert_eq!(json["beam_hit_sigma_per_m"], 0.005);
+        assert_eq!(json["surface_depth_m"], 0.1);
     }
 }
