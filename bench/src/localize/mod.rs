@@ -235,6 +235,18 @@ impl LocalizeOptions {
                 require(false, flag, || format!("{flag}: {error}"))?;
             }
         }
+        // The range tables' depth fails now too, not once the map is built.
+        let depth = self.surface_depth();
+        require(
+            ConeGeometry {
+                surface_depth: depth,
+                ..ConeGeometry::default()
+            }
+            .validate()
+            .is_ok(),
+            "--surface-depth",
+            || format!("--surface-depth must be within 0 to 1 m, got {depth}"),
+        )?;
         // A JSON file that cannot be written fails now, not after the runs.
         require_folder_of(self.json.as_deref(), "--json")?;
         Ok(())
@@ -588,6 +600,11 @@ mod tests {
             ),
             ("--hit-sigma", &["--hit-sigma", "0"][..]),
             ("--hit-sigma-per-m", &["--hit-sigma-per-m", "2"][..]),
+            ("--surface-depth", &["--surface-depth", "2"][..]),
+            (
+                "--surface-depth",
+                &["--sonar", "realistic", "--surface-depth", "NaN"][..],
+            ),
         ] {
             let err = parse(args).validate().expect_err(flag);
             assert_eq!(err.flag, flag);

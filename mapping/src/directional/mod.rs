@@ -878,6 +878,44 @@ mod tests {
     }
 
     #[test]
+    fn each_cells_kept_belief_is_its_directions_combined() {
+        // Echoes and misses from robots all round, walls heard (so taken
+        // back behind) and enclosure judged at every frame: whatever path
+        // changes a cell's directions keeps its combined belief with them.
+        let mut v = view_with(DirectionalSettings {
+            enclosure_period: 1,
+            ..DirectionalSettings::default()
+        });
+        let mut state = 12_345u64;
+        let mut next = |n: u64| {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 33) % n
+        };
+        let mut out = Vec::new();
+        for _ in 0..400 {
+            let angle = next(360) as f64 * std::f64::consts::TAU / 360.0;
+            let robot = Pose2::new(0.6 * angle.cos(), 0.6 * angle.sin(), angle);
+            let cells: Vec<(CellIndex, i16)> = (0..20)
+                .map(|_| {
+                    let cell = CellIndex::new(next(40) as i32 - 20, next(40) as i32 - 20);
+                    (cell, next(1600) as i16 - 700)
+                })
+                .collect();
+            out.clear();
+            v.absorb(&robot, &deltas_for(&cells), &mut out)
+                .expect("absorb");
+        }
+        assert!(!v.is_empty());
+        for tile in v.tiles.values() {
+            for (index, &kept) in tile.combined.iter().enumerate() {
+                assert_eq!(kept, combined(tile.bins(index)), "cell {index}");
+            }
+        }
+    }
+
+    #[test]
     fn the_view_stays_bounded() {
         let mut v = view_with(DirectionalSettings {
             max_tiles: 16,
