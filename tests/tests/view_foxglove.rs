@@ -106,6 +106,35 @@ fn run_client(url: &str, want: &[&str]) -> Value {
         .unwrap_or_else(|e| panic!("the client's report is not JSON ({e}): {stdout}"))
 }
 
+/// Whether the view's `/api/robots` gives `robot` a true pose. A plain
+/// HTTP/1.0 request: the server closes the connection after answering.
+fn view_follows_true_pose(view_addr: std::net::SocketAddr, robot: &str) -> bool {
+    use std::io::{Read, Write};
+    let Ok(mut stream) = std::net::TcpStream::connect(view_addr) else {
+        return false;
+    };
+    let timeout = Some(Duration::from_secs(5));
+    if stream.set_read_timeout(timeout).is_err() || stream.set_write_timeout(timeout).is_err() {
+        return false;
+    }
+    let request = format!("GET /api/robots HTTP/1.0\r\nHost: {view_addr}\r\n\r\n");
+    let mut response = String::new();
+    if stream.write_all(request.as_bytes()).is_err()
+        || stream.read_to_string(&mut response).is_err()
+    {
+        return false;
+    }
+    let Some((_, body)) = response.split_once("\r\n\r\n") else {
+        return false;
+    };
+    serde_json::from_str::<Value>(body).is_ok_and(|robots| {
+        robots["robots"].as_array().is_some_and(|list| {
+            list.iter()
+                .any(|r| r["name"] == robot && r["true_pose"].is_array())
+        })
+    })
+}
+
 fn f64_at(value: &Value, pointer: &str) -> f64 {
     value
         .pointer(pointer)
@@ -233,6 +262,18 @@ fn foxglove_shows_the_map_poses_scans_and_cones_of_a_running_system() {
             .expect("publish an estimate");
         (info, published)
     });
+    // The view must follow r1's true pose before the kidnap, or it has
+    // nothing to see r1 jump from: it finds the simulator's robots once a
+    // second, and a busy machine can grow four tiles sooner than that.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !view_follows_true_pose(view_addr, "r1") {
+        assert!(view.is_running(), "deog view exited");
+        assert!(
+            Instant::now() < deadline,
+            "deog view never followed r1's true pose"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
     // A kidnap: r1 put down at least 6 m from where it is, somewhere clear.
     // The view calls a jump a kidnap when no drive could make it (0.5 m
     // plus 2 m/s of the simulated time between the frames it saw): on a
