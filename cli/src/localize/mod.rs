@@ -5,20 +5,20 @@
 
 mod carry;
 mod server;
+mod settings;
 
 use carry::{Carrier, worth_carrying};
 use server::{ServerTiles, estimate_message, log_estimate};
+use settings::LocalizeSettings;
 
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail, ensure};
 use clap::{Args, ValueEnum};
-use deog_grid::{CellBox, CellIndex, OccupancyThresholds, Resolution, RingFiring, TileSize};
-use deog_localizer::beam_model::BeamModelParams;
+use deog_grid::{CellBox, CellIndex, OccupancyThresholds, Resolution, TileSize};
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::preset::Preset;
-use deog_localizer::range_table::ConeGeometry;
 use deog_localizer::step::{FetchedTile, Localizer};
 use deog_robot_client::convert::{cell_box_from_wire, pose_from_wire};
 use deog_robot_client::{MapClient, TileChange, TileWatch};
@@ -26,7 +26,7 @@ use deog_robot_client::{MapClient, TileChange, TileWatch};
 use crate::connection::ConnectionArgs;
 use crate::frame_queue::{CatchUp, FrameQueue};
 use crate::pose_args::InitialPose;
-use crate::rig_args::{load_rig, publish_rig};
+use crate::rig_args::publish_rig;
 use deog_localizer::sensors::{LikelihoodFieldParams, SensorChoice};
 use deog_proto::rig::frame_rig_name;
 
@@ -224,94 +224,13 @@ impl From<PresetChoice> for Preset {
 
 /// Runs `deog localize`.
 pub fn run(args: LocalizeArgs) -> Result<()> {
-    anyhow::ensure!(
-        args.particle_sample <= 5_000,
-        "--particle-sample is at most 5000 (the map server keeps samples small), not {}",
-        args.particle_sample
-    );
-    anyhow::ensure!(
-        args.particle_sample_every_s.is_finite() && args.particle_sample_every_s >= 0.0,
-        "--particle-sample-every-s must be a number of seconds, at least 0, not {}",
-        args.particle_sample_every_s
-    );
-    let preset = Preset::from(args.preset).tuning();
-    let motion_noise_scale = args.motion_noise_scale.unwrap_or(preset.motion_noise_scale);
-    ensure!(
-        args.idle_exit.is_finite() && args.idle_exit >= 0.0,
-        "--idle-exit must be zero or positive, got {}",
-        args.idle_exit
-    );
-    ensure!(
-        args.refresh_s.is_finite() && args.refresh_s >= 0.0,
-        "--refresh-s must be zero or positive, got {}",
-        args.refresh_s
-    );
-    RingFiring::over(args.firing_period).context("--firing-period (seconds)")?;
-    if let Some(angle) = args.specular_angle {
-        ensure!(
-            angle.is_finite() && (0.0..=90.0).contains(&angle),
-            "--specular-angle must be in [0, 90] degrees, got {angle}"
-        );
-    }
-    ensure!(
-        args.max_skip_s.is_finite() && args.max_skip_s > 0.0,
-        "--max-skip-s must be a positive number of seconds, got {}",
-        args.max_skip_s
-    );
-    if let Some(depth) = args.surface_depth {
-        ensure!(
-            depth.is_finite() && (0.0..=1.0).contains(&depth),
-            "--surface-depth must be in [0, 1] metres, got {depth}"
-        );
-    }
-    ensure!(
-        (16..=1 << 20).contains(&args.cache_mb),
-        "--cache-mb must be in [16, 1048576] MiB, got {}",
-        args.cache_mb
-    );
-    ensure!(
-        motion_noise_scale.is_finite() && (0.0..=100.0).contains(&motion_noise_scale),
-        "--motion-noise-scale must be in [0, 100], got {motion_noise_scale}"
-    );
-    let expected_rig = args.rig.as_deref().map(load_rig).transpose()?;
-    let mut settings = FilterSettings {
-        seed: args.seed,
-        ..FilterSettings::default()
-    };
-    settings.kld.max_particles = args.max_particles;
-    settings.kld.min_particles = args.min_particles.unwrap_or(preset.min_particles);
-    // A specular sonar's beam model: its own τ and causes' weights.
-    settings.beam = BeamModelParams::for_sonar(args.specular_angle.is_some());
-    if let Some(tempering) = args.tempering {
-        settings.beam.tempering = tempering;
-    }
-    settings.alpha_slow = args.recovery_alpha_slow;
-    settings.alpha_fast = args.recovery_alpha_fast;
-    settings.recovery_threshold = args.recovery_threshold;
-    settings.search_share = args.recovery_search_share;
-    settings.motion = settings.motion.scaled(motion_noise_scale);
-    // The filter is built once the first frame names the rig; its
-    // settings are checked now, before anything waits.
-    let mut settings = settings.validate().context("the filter's settings")?;
-    let field = LikelihoodFieldParams {
-        sigma_hit: args.field_sigma,
-        max_beams: args.field_beams.unwrap_or(preset.field_beams),
-        tempering: args.field_tempering.unwrap_or(preset.field_tempering),
-        search_tempering: args
-            .field_search_tempering
-            .or(preset.field_search_tempering),
-        refine: if args.no_refine {
-            None
-        } else {
-            LikelihoodFieldParams::default().refine
-        },
-        ..LikelihoodFieldParams::default()
-    }
-    .validate()
-    .context(
-        "the likelihood field's options (--field-sigma, --field-beams, --field-tempering, \
-         --field-search-tempering)",
-    )?;
+    let LocalizeSettings {
+        filter: mut settings,
+        field,
+        sonar_cone,
+        firing,
+        expected_rig,
+    } = args.settings()?;
     // One thread: the filter is sequential, and its allocations then come
     // from one arena of the allocator, not one per worker thread each
     // holding memory the others freed. The loop is synchronous and waits
@@ -366,13 +285,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         .with_context(|| format!("reading rig {rig_name} of frame {}", first.sequence))?;
     let choice = args.sensor.unwrap_or(SensorChoice::for_rig(&rig));
     let cone = choice
-        .cone_geometry(&rig, {
-            let sonar = ConeGeometry::for_sonar(args.specular_angle.map(f64::to_radians));
-            ConeGeometry {
-                surface_depth: args.surface_depth.unwrap_or(sonar.surface_depth),
-                ..sonar
-            }
-        })
+        .cone_geometry(&rig, sonar_cone)
         .context("--sensor beam")?;
     settings.beam.max_range = cone.max_range;
     let sensor = choice
@@ -380,7 +293,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         .with_context(|| format!("the {choice} model for rig {}", rig.name()))?;
     tracing::info!(rig = rig.name(), readings = rig.readings(), sensor = %choice, "localizing with the frames' rig");
     let mut mcl = Mcl::with_sensor(settings, sensor).context("the filter's settings")?;
-    mcl.set_firing(RingFiring::over(args.firing_period).context("--firing-period (seconds)")?);
+    mcl.set_firing(firing);
     let resolution = Resolution::new(info.resolution_m)?;
     let tile_size = TileSize::new(info.tile_size)?;
     let map = LocalMap::new(MapSettings {
