@@ -5,19 +5,16 @@
 
 mod by_rig;
 mod estimates;
+mod settings;
 
 use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
-use deog_grid::{
-    FrameMotion, RayModelParams, Resolution, RingFiring, SonarModelParams, TileKey, TileSize,
-};
+use deog_grid::{FrameMotion, RayModelParams, Resolution, TileKey, TileSize};
 use deog_mapping::{
-    DirectionalSettings, FrameInput, MapView, MapViewSettings, PoseChoice, SonarMethod,
-    mapping_sonar_model,
+    FrameInput, MapView, MapViewSettings, PoseChoice, SonarMethod, mapping_sonar_model,
 };
-use deog_proto::names::check_robot_name;
 use deog_proto::v1 as pb;
 use deog_robot_client::convert::{pose_from_wire, pose_or_origin};
 use deog_robot_client::{MapClient, UpdateSenderConfig};
@@ -25,9 +22,10 @@ use deog_robot_client::{MapClient, UpdateSenderConfig};
 use crate::connection::ConnectionArgs;
 use crate::frame_queue::FrameQueue;
 use crate::pose_args::MapPoseSource;
-use crate::rig_args::{load_rig, publish_rig};
+use crate::rig_args::publish_rig;
 use by_rig::{CartographerByRig, ModelSettings};
 use estimates::EstimateFollower;
+use settings::MapSettings;
 
 /// Options of `deog map`.
 #[derive(Debug, Args)]
@@ -215,70 +213,14 @@ const MAX_BATCH_TILES: usize = 256;
 
 /// Runs the cartographer.
 pub fn run(args: MapArgs) -> Result<()> {
-    check_robot_name(&args.robot).context("--robot")?;
-    if args.batch_frames == 0 {
-        bail!("--batch-frames must be at least 1");
-    }
-    if !(args.idle_exit.is_finite() && args.idle_exit >= 0.0) {
-        bail!(
-            "--idle-exit must be zero or positive, got {}",
-            args.idle_exit
-        );
-    }
-    if !(args.estimate_wait.is_finite() && args.estimate_wait >= 0.0) {
-        bail!(
-            "--estimate-wait must be zero or positive, got {}",
-            args.estimate_wait
-        );
-    }
-    let firing = RingFiring::over(args.firing_period).context("--firing-period (seconds)")?;
-    let params = SonarModelParams {
-        max_occupied: args.max_occupied,
-        max_empty: args.max_empty,
-        min_empty: args.min_empty,
-        min_occupied: args.min_occupied,
-        region_i_tolerance: args.region_tolerance,
-        no_echo_free_range: args.no_echo_free_range,
-        max_mapped_range: args.max_mapped_range,
-        max_free_range: args.max_free_range,
-        ..mapping_sonar_model()
-    };
-    let params = params.validate().context(
-        "the sonar model's options (--max-occupied, --max-empty, --min-empty, --min-occupied, \
-         --region-tolerance, --no-echo-free-range, --max-mapped-range, --max-free-range)",
-    )?;
-    let ray = RayModelParams {
-        hit_probability: args.hit_probability,
-        miss_probability: args.miss_probability,
-        no_echo_free_range: args.ray_no_echo_free_range,
-        max_mapped_range: args.ray_max_mapped_range,
-        ..RayModelParams::default()
-    };
-    let ray = ray.validate().context(
-        "the laser ray model's options (--hit-probability, --miss-probability, \
-         --ray-no-echo-free-range, --ray-max-mapped-range)",
-    )?;
-    let view = MapViewSettings {
-        wall_probability: args.wall_probability,
-        shadow_probability: args.wall_probability,
-        max_tiles: args.view_tiles.unwrap_or(match args.sonar_method {
-            SonarMethodChoice::Directional => DirectionalSettings::default().max_tiles,
-            _ => MapViewSettings::default().max_tiles,
-        }),
-        enclosure_period: args.enclosure_period,
-        shadow_depth: args.shadow_depth,
-        ..MapViewSettings::default()
-    }
-    .validate()
-    .context("--wall-probability, --view-tiles, --shadow-depth")?;
-    if !(args.view_refresh_s.is_finite() && args.view_refresh_s > 0.0) {
-        bail!(
-            "--view-refresh-s must be positive, got {}",
-            args.view_refresh_s
-        );
-    }
-    let view_refresh = std::time::Duration::from_secs_f64(args.view_refresh_s);
-    let expected_rig = args.rig.as_deref().map(load_rig).transpose()?;
+    let MapSettings {
+        sonar: params,
+        ray,
+        view,
+        view_refresh,
+        firing,
+        expected_rig,
+    } = args.settings()?;
     let client_id = format!("carto/{}", args.robot);
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     runtime.block_on(async {
