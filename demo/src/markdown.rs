@@ -165,6 +165,11 @@ fn robot_line(r: &LocalizationReport, max_lag_s: Option<f64>) -> String {
         }
         None => line.push_str("never converged"),
     }
+    // The judge's convergence is the last time an estimate left the
+    // bounds: say when it first came within them, if that was earlier.
+    if let Some(first) = r.first_within_s().filter(|&f| r.converge_s() != Some(f)) {
+        let _ = write!(line, " (first within the bounds after {first:.1} s)");
+    }
     if let Some(s) = &r.stats {
         let _ = write!(
             line,
@@ -181,6 +186,9 @@ fn robot_line(r: &LocalizationReport, max_lag_s: Option<f64>) -> String {
                 "; kidnapped, found again after {}",
                 seconds(r.recover_s())
             );
+            if let Some(first) = r.first_back_s().filter(|&f| r.recover_s() != Some(f)) {
+                let _ = write!(line, " (first back within the bounds after {first:.1} s)");
+            }
         }
         Some(false) => line.push_str("; kidnapped, not found again"),
         None => {}
@@ -282,6 +290,29 @@ mod tests {
         assert_eq!(
             lines[4],
             "80 s in all; wrote demo-out (report.md, report.json, map.yaml, the plots, logs/)"
+        );
+    }
+
+    #[test]
+    fn a_robot_that_strayed_after_it_was_first_right_says_both_times() {
+        use deog_evaluation::localization::{EstimateSample, EvalInput, TruthSample, evaluate};
+        use deog_grid::Pose2;
+        let truth: Vec<TruthSample> = (1..=40)
+            .map(|s| TruthSample::new(s, s as f64 * 0.1, Pose2::new(s as f64 * 0.05, 0.0, 0.0)))
+            .collect();
+        // 5 cm ahead throughout, but 1 m off at frame 10.
+        let estimates: Vec<EstimateSample> = truth
+            .iter()
+            .map(|t| {
+                let off = if t.sequence == 10 { 1.0 } else { 0.05 };
+                EstimateSample::new(t.sequence, Pose2::new(t.pose.x + off, 0.0, 0.0))
+            })
+            .collect();
+        let report = evaluate(&EvalInput::new("scout-1", &truth, &estimates)).expect("judged");
+        assert_eq!(
+            robot_line(&report, None),
+            "scout-1: converged after 1.0 s (first within the bounds after 0.0 s), \
+             mean error 5.0 cm x, 0.0 cm y, 0.00°"
         );
     }
 

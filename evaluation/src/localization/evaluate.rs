@@ -38,6 +38,9 @@ pub struct Kidnap {
     pub turn_rad: f64,
     /// When the estimate settled again; `None` if it never did.
     pub recovery: Option<Settling>,
+    /// The first estimate back within the bounds, which may leave them
+    /// again before the settling; `None` if none came back.
+    pub first_within: Option<Settling>,
 }
 
 /// Mean absolute error, mean signed error and the standard deviation of
@@ -129,6 +132,9 @@ pub struct LocalizationReport {
     pub end_time_s: f64,
     /// The first settling; `None` if the estimate never settled.
     pub convergence: Option<Settling>,
+    /// The first estimate within the bounds before any kidnap, which may
+    /// leave them again before the settling; `None` if none was within.
+    pub first_within: Option<Settling>,
     /// The kidnaps, in order.
     pub kidnaps: Vec<Kidnap>,
     /// The figures over the used estimates; `None` when none was used.
@@ -144,6 +150,26 @@ impl LocalizationReport {
     /// Seconds from the first frame to the convergence.
     pub fn converge_s(&self) -> Option<f64> {
         self.convergence.map(|c| c.after_s)
+    }
+
+    /// Seconds from the first frame to the first estimate within the
+    /// bounds, before any kidnap; `None` if none was.
+    pub fn first_within_s(&self) -> Option<f64> {
+        self.first_within.map(|c| c.after_s)
+    }
+
+    /// The longest time from a kidnap to the first estimate back within
+    /// the bounds; `None` without a kidnap or when one never came back.
+    pub fn first_back_s(&self) -> Option<f64> {
+        if !self.kidnapped() {
+            return None;
+        }
+        self.kidnaps
+            .iter()
+            .map(|k| k.first_within.map(|r| r.after_s))
+            .collect::<Option<Vec<_>>>()?
+            .into_iter()
+            .reduce(f64::max)
     }
 
     /// Whether the robot was kidnapped at least once.
@@ -259,6 +285,7 @@ pub fn evaluate(input: &EvalInput<'_>) -> Result<LocalizationReport, EvaluationE
     let mut segment_starts = vec![0];
     segment_starts.extend_from_slice(&kidnap_starts);
     let mut settlings: Vec<Option<usize>> = Vec::with_capacity(segment_starts.len());
+    let mut firsts: Vec<Option<usize>> = Vec::with_capacity(segment_starts.len());
     let mut used: Vec<&Paired> = Vec::new();
     for (s, &start) in segment_starts.iter().enumerate() {
         let end = segment_starts.get(s + 1).copied().unwrap_or(truth.len());
@@ -269,6 +296,12 @@ pub fn evaluate(input: &EvalInput<'_>) -> Result<LocalizationReport, EvaluationE
             .rposition(|p| !p.within(&params))
             .map_or(lo, |bad| lo + bad + 1);
         let settle = (settle < hi).then_some(settle);
+        firsts.push(
+            paired[lo..hi]
+                .iter()
+                .position(|p| p.within(&params))
+                .map(|first| lo + first),
+        );
         if let Some(first) = settle {
             used.extend(&paired[first..hi]);
         }
@@ -289,6 +322,9 @@ pub fn evaluate(input: &EvalInput<'_>) -> Result<LocalizationReport, EvaluationE
         .flatten()
         .next()
         .map(|&index| settling_from(0, index));
+    // Of the segment before any kidnap, as the convergence (which is the
+    // first segment that settled) mostly is.
+    let first_within = firsts[0].map(|index| settling_from(0, index));
     let kidnaps = kidnap_starts
         .iter()
         .enumerate()
@@ -303,6 +339,7 @@ pub fn evaluate(input: &EvalInput<'_>) -> Result<LocalizationReport, EvaluationE
                 jump_m: (b.pose.x - a.pose.x).hypot(b.pose.y - a.pose.y),
                 turn_rad: normalize_angle(b.pose.theta - a.pose.theta),
                 recovery: settlings[k + 1].map(|index| settling_from(start, index)),
+                first_within: firsts[k + 1].map(|index| settling_from(start, index)),
             }
         })
         .collect();
@@ -323,6 +360,7 @@ pub fn evaluate(input: &EvalInput<'_>) -> Result<LocalizationReport, EvaluationE
         start_time_s: truth[0].time_s,
         end_time_s: truth[truth.len() - 1].time_s,
         convergence,
+        first_within,
         kidnaps,
         stats: error_stats(&used),
     })

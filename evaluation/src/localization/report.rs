@@ -82,6 +82,9 @@ pub struct KidnapRecord {
     pub recover_distance_m: Option<f64>,
     /// The settling estimate's frame.
     pub recover_sequence: Option<u64>,
+    /// Seconds from the kidnap to the first estimate back within the
+    /// bounds (it may leave them again before the settling).
+    pub first_within_s: Option<f64>,
 }
 
 /// The bounds and limits of the judging, in JSON.
@@ -115,6 +118,7 @@ pub struct LocalizationRecord {
     pub converge_s: Option<f64>,
     pub converge_sequence: Option<u64>,
     pub converge_distance_m: Option<f64>,
+    pub first_within_s: Option<f64>,
     pub mean_abs_error_m: XyRecord,
     pub mean_abs_error_in: XyRecord,
     pub std_error_m: XyRecord,
@@ -133,6 +137,7 @@ pub struct LocalizationRecord {
     pub kidnapped: bool,
     pub recovered: Option<bool>,
     pub recover_s: Option<f64>,
+    pub first_back_s: Option<f64>,
     pub kidnap_count: usize,
     pub kidnaps: Vec<KidnapRecord>,
     pub frames: u64,
@@ -172,6 +177,7 @@ impl LocalizationReport {
             converge_s: self.converge_s(),
             converge_sequence: self.convergence.map(|c| c.sequence),
             converge_distance_m: self.convergence.map(|c| c.distance_m),
+            first_within_s: self.first_within_s(),
             mean_abs_error_m: xy(1.0, |a| a.mean_abs),
             mean_abs_error_in: xy(INCHES_PER_METRE, |a| a.mean_abs),
             std_error_m: xy(1.0, |a| a.std_dev),
@@ -190,6 +196,7 @@ impl LocalizationReport {
             kidnapped: self.kidnapped(),
             recovered: self.recovered(),
             recover_s: self.recover_s(),
+            first_back_s: self.first_back_s(),
             kidnap_count: self.kidnaps.len(),
             kidnaps: self.kidnaps.iter().map(kidnap_record).collect(),
             frames: self.frames,
@@ -242,6 +249,17 @@ impl LocalizationReport {
             ),
             None => writeln!(out, "never converged"),
         };
+        if let Some(first) = self.first_within
+            && self
+                .convergence
+                .is_none_or(|c| c.sequence != first.sequence)
+        {
+            let _ = writeln!(
+                out,
+                "first within the bounds after {:.3} s (frame {}), outside them again before settling",
+                first.after_s, first.sequence
+            );
+        }
         let recovered = self.kidnaps.iter().filter(|k| k.recovery.is_some()).count();
         let _ = match (self.kidnaps.len(), self.recover_s()) {
             (0, _) => writeln!(out, "not kidnapped"),
@@ -305,9 +323,9 @@ impl LocalizationReport {
         if !self.kidnaps.is_empty() {
             let _ = writeln!(
                 out,
-                "\n| kidnap | frames | time s | jump m | turn deg | recovered | recover s | recover m |"
+                "\n| kidnap | frames | time s | jump m | turn deg | recovered | recover s | recover m | first back s |"
             );
-            let _ = writeln!(out, "|---:|---|---:|---:|---:|---|---:|---:|");
+            let _ = writeln!(out, "|---:|---|---:|---:|---:|---|---:|---:|---:|");
             for (i, k) in self.kidnaps.iter().enumerate() {
                 let (recovered, seconds, metres) = match k.recovery {
                     Some(r) => (
@@ -319,13 +337,15 @@ impl LocalizationReport {
                 };
                 let _ = writeln!(
                     out,
-                    "| {} | {} to {} | {:.3} | {:.3} | {:.1} | {recovered} | {seconds} | {metres} |",
+                    "| {} | {} to {} | {:.3} | {:.3} | {:.1} | {recovered} | {seconds} | {metres} | {} |",
                     i + 1,
                     k.sequence_before,
                     k.sequence,
                     k.time_s,
                     k.jump_m,
                     k.turn_rad.to_degrees(),
+                    k.first_within
+                        .map_or("n/a".to_string(), |f| format!("{:.3}", f.after_s)),
                 );
             }
         }
@@ -346,6 +366,7 @@ fn kidnap_record(k: &Kidnap) -> KidnapRecord {
         recover_s: k.recovery.map(|r| r.after_s),
         recover_distance_m: k.recovery.map(|r| r.distance_m),
         recover_sequence: k.recovery.map(|r| r.sequence),
+        first_within_s: k.first_within.map(|r| r.after_s),
     }
 }
 

@@ -116,6 +116,62 @@ fn convergence_is_where_the_error_stays_within_the_bounds() {
 }
 
 #[test]
+fn the_first_estimate_within_the_bounds_is_said_beside_the_settling() {
+    let truth = straight(10);
+    // Within from frame 2, out again at frame 5, within for good from 6.
+    let estimates = offset(&truth, |s| match s {
+        1 | 5 => (1.0, 0.0, 0.0),
+        _ => (0.0, 0.1, 0.0),
+    });
+    let r = run(&truth, &estimates);
+    assert_eq!(r.convergence.expect("converged").sequence, 6);
+    let first = r.first_within.expect("within at frame 2");
+    assert_eq!(first.sequence, 2);
+    assert_relative_eq!(r.first_within_s().expect("seconds"), 0.1, epsilon = 1e-12);
+    assert!(
+        r.table()
+            .contains("first within the bounds after 0.100 s (frame 2)"),
+        "{}",
+        r.table()
+    );
+    let json = r.record();
+    assert_eq!(json.first_within_s, r.first_within_s());
+    assert_eq!(json.first_back_s, None);
+
+    // Settled at once: the same estimate, and the table says nothing more.
+    let settled = run(&truth, &offset(&truth, |_| (0.0, 0.1, 0.0)));
+    assert_eq!(settled.first_within, settled.convergence);
+    assert!(!settled.table().contains("first within"));
+
+    // Never within: neither.
+    let lost = run(&truth, &offset(&truth, |_| (1.0, 0.0, 0.0)));
+    assert_eq!(lost.first_within, None);
+}
+
+#[test]
+fn after_a_kidnap_the_first_estimate_back_within_the_bounds() {
+    let truth = kidnapped_run();
+    // Back within at frame 13, out at 15, within for good from 16.
+    let estimates = offset(&truth, |s| match s {
+        11 | 12 | 15 => (2.0, 0.0, 0.0),
+        _ => (0.0, 0.05, 0.0),
+    });
+    let r = run(&truth, &estimates);
+    let k = r.kidnaps[0];
+    assert_eq!(k.recovery.expect("recovered").sequence, 16);
+    assert_eq!(k.first_within.expect("back").sequence, 13);
+    assert_relative_eq!(r.first_back_s().expect("seconds"), 0.2, epsilon = 1e-12);
+    let json = r.record();
+    assert_eq!(json.first_back_s, r.first_back_s());
+    assert_eq!(json.kidnaps[0].first_within_s, r.first_back_s());
+    assert!(
+        r.table().contains("| 0.500 | 0.500 | 0.200 |"),
+        "{}",
+        r.table()
+    );
+}
+
+#[test]
 fn a_heading_error_alone_keeps_it_from_converging() {
     let truth = straight(10);
     let estimates = offset(&truth, |s| (0.0, 0.0, if s < 6 { 0.3 } else { 0.1 }));
