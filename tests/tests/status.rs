@@ -115,7 +115,11 @@ async fn status_shows_the_maps_robots_and_localizers_being_written() {
         assert!(acks.message().await.expect("ack").is_some());
         sent = i + 2;
         frames_sent = i + 1;
-        tokio::time::sleep(Duration::from_millis(20)).await;
+        // Status lists the robots, then reads their estimates: a frame and
+        // its estimates every 0.1 s keep a busy machine's gap between the
+        // two reads from showing a newer estimate beside an older frame
+        // (at 20 ms, a lag of one frame was seen).
+        tokio::time::sleep(Duration::from_millis(100)).await;
     }
     let output = status.join().expect("status thread");
     let stdout = deog_tests::succeeded(&output);
