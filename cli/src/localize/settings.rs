@@ -67,12 +67,6 @@ impl LocalizeArgs {
             "--max-skip-s must be a positive number of seconds, got {}",
             self.max_skip_s
         );
-        if let Some(depth) = self.surface_depth {
-            ensure!(
-                depth.is_finite() && (0.0..=1.0).contains(&depth),
-                "--surface-depth must be in [0, 1] metres, got {depth}"
-            );
-        }
         ensure!(
             (16..=1 << 20).contains(&self.cache_mb),
             "--cache-mb must be in [16, 1048576] MiB, got {}",
@@ -122,10 +116,15 @@ impl LocalizeArgs {
              --field-search-tempering)",
         )?;
         let sonar = ConeGeometry::for_sonar(self.specular_angle.map(f64::to_radians));
+        // The range tables' own limits (the surface depth's; the angle was
+        // checked in degrees above), now rather than once the first frame
+        // has named the rig.
         let sonar_cone = ConeGeometry {
             surface_depth: self.surface_depth.unwrap_or(sonar.surface_depth),
             ..sonar
-        };
+        }
+        .validate()
+        .context("--surface-depth (metres)")?;
         Ok(LocalizeSettings {
             filter: settings,
             field,
@@ -216,6 +215,8 @@ mod tests {
             (&["--surface-depth", "2"][..], "--surface-depth"),
             (&["--surface-depth", "NaN"], "--surface-depth"),
             (&["--specular-angle", "95"], "--specular-angle"),
+            (&["--specular-angle", "NaN"], "--specular-angle"),
+            (&["--specular-angle=-5"], "--specular-angle"),
             (&["--particle-sample", "6000"], "--particle-sample"),
             (&["--firing-period=-1"], "--firing-period"),
             (&["--cache-mb", "8"], "--cache-mb"),
