@@ -104,6 +104,12 @@ pub struct LocalizeOptions {
     /// run's figures.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Also judge each world's map against the world and draw where it is
+    /// right and wrong into this folder, as `{world}-map.png` (the
+    /// picture `deog eval map --png` draws): where the runs' map fails
+    /// its localizer.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
     /// Fewest particles.
     #[arg(long, default_value_t = FilterSettings::default().kld.min_particles)]
     pub min_particles: usize,
@@ -249,6 +255,11 @@ impl LocalizeOptions {
         )?;
         // A JSON file that cannot be written fails now, not after the runs.
         require_folder_of(self.json.as_deref(), "--json")?;
+        require(
+            self.out.as_ref().is_none_or(|p| !p.exists() || p.is_dir()),
+            "--out",
+            || "--out names a folder to write the maps' pictures into, not a file".into(),
+        )?;
         Ok(())
     }
 
@@ -423,6 +434,9 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
             started.elapsed().as_secs_f64(),
             map.tile_count()
         );
+        if let Some(out) = &options.out {
+            write_verdict(out, world_name, &world, &tiles, &setup.rig)?;
+        }
         let mut all = Vec::new();
         let mut particles = Vec::new();
         for seed in options.seed..options.seed + options.runs {
@@ -494,6 +508,44 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
     if let Some(path) = &options.json {
         deog_harness::eprintln_above_bars!("figures written to {}", path.display());
     }
+    Ok(())
+}
+
+/// Judges a world's map and writes its verdict picture into `out`.
+fn write_verdict(
+    out: &std::path::Path,
+    world_name: &str,
+    world: &deog_world::World,
+    tiles: &deog_grid::TileMap,
+    rig: &Rig,
+) -> Result<()> {
+    use deog_evaluation::map_quality::{QualityInput, map_quality, verdict_png};
+    let input = QualityInput {
+        map: tiles,
+        world,
+        seeds: &[],
+        robot_radius_m: rig.body_radius(),
+    };
+    let quality =
+        map_quality(&input).with_context(|| format!("judging the map of {world_name}"))?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    // A world given as a file is named by its file name.
+    let stem = std::path::Path::new(world_name).file_stem().map_or_else(
+        || world_name.to_string(),
+        |s| s.to_string_lossy().into_owned(),
+    );
+    let path = out.join(format!("{stem}-map.png"));
+    let png = verdict_png(&input).context("drawing the verdict")?;
+    std::fs::write(&path, png).with_context(|| format!("writing {}", path.display()))?;
+    let percent = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.1} %", 100.0 * v));
+    deog_harness::println_above_bars!(
+        "{world_name}: map {:.1} % of {} observed cells right, occupied precision {}, recall {}; drawn to {}",
+        100.0 * quality.fraction_correct(),
+        quality.cells_observed(),
+        percent(quality.occupied_precision()),
+        percent(quality.occupied_recall()),
+        path.display()
+    );
     Ok(())
 }
 
@@ -593,6 +645,7 @@ mod tests {
             ("--clean-map", &["--clean-map"][..]),
             ("--clean-map", &["--clean-map", "--sonar", "default"][..]),
             ("--json", &["--json", "no-such-folder/figures.json"][..]),
+            ("--out", &["--out", "Cargo.toml"][..]),
             ("--tempering", &["--tempering=-1"][..]),
             (
                 "--tempering",
@@ -629,6 +682,32 @@ mod tests {
         let with_json = parse(&["--json", json.to_str().expect("a UTF-8 path")]);
         assert_eq!(with_json.validate(), Ok(()));
         assert_eq!(parse(&["--json", "figures.json"]).validate(), Ok(()));
+    }
+
+    #[test]
+    fn a_worlds_map_is_judged_and_drawn_into_the_folder() {
+        let options = parse(&["--worlds", "map2"]);
+        let setup = options.rig_setup().expect("the scout");
+        let world = load_world_spec("map2").expect("built in");
+        let config = map_build::sim_config(&setup.rig, SonarPreset::Default);
+        let (tiles, _) = map_build::build_map(
+            world.clone(),
+            &config,
+            &config,
+            setup.sensor,
+            0.2,
+            options.surface_depth(),
+        )
+        .expect("a map from 12 simulated seconds");
+        let out = tempfile::tempdir().expect("temp dir");
+        let folder = out.path().join("pictures");
+        write_verdict(&folder, "map2", &world, &tiles, &setup.rig).expect("written");
+        let png = std::fs::read(folder.join("map2-map.png")).expect("the picture");
+        assert_eq!(&png[1..4], b"PNG");
+        // A world given as a file is named by its file's stem.
+        write_verdict(&folder, "worlds/map2.toml", &world, &tiles, &setup.rig).expect("written");
+        assert!(folder.join("map2-map.png").is_file());
+        assert_eq!(std::fs::read_dir(&folder).expect("listed").count(), 1);
     }
 
     fn setup(args: &[&str]) -> RigSetup {
