@@ -17,6 +17,10 @@
 //!   holds a robot to its current goal unless another is clearly better.
 //! - [`follow`]: [`PathFollower`], pure pursuit along a path, slowing and
 //!   stopping for what the robot's own ranges see ahead.
+//! - [`steering`]: [`Steering`], the decisions one robot state at a
+//!   time: the plan to follow, when to ask for the next, a goal reached
+//!   or stalled and what that bars, looking about, and when the map is
+//!   explored; the edge drives, publishes and plans as it says.
 //! - [`dead_reckoning`]: [`DeadReckoning`], a localizer's newest
 //!   estimate carried forward by odometry: the pose to steer from when
 //!   no true pose is known.
@@ -28,6 +32,7 @@ pub mod error;
 pub mod follow;
 pub mod frontier;
 pub mod goal;
+pub mod steering;
 pub mod travel;
 pub mod window;
 
@@ -37,5 +42,6 @@ pub use error::ExploreError;
 pub use follow::{Clearance, FollowCommand, FollowParams, PathFollower};
 pub use frontier::{Frontier, find_frontiers, find_undecided};
 pub use goal::{Blacklist, Goal, GoalParams, approach_goal, choose_goal, choose_goal_keeping};
+pub use steering::{Decision, Plan, PlanRequest, Steering, SteeringEvent, SteeringParams};
 pub use travel::TravelCosts;
 pub use window::OccupancyWindow;

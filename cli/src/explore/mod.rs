@@ -8,13 +8,10 @@
 //! the frontier whose length is worth most against the way there; a pure
 //! pursuit follows the path, and the robot's own ranges slow and stop it
 //! short of anything ahead, mapped or not. Plans are made in a task of
-//! their own ([`planner`]), so that the steering never waits for one. A
-//! goal not neared for a while (by the way left along its path) is barred
-//! for a minute, for an hour the second time; the frontier cells around a
-//! goal reached are barred for an hour (if still a frontier once reached,
-//! nothing more can be seen of it from there). With frontiers left but
-//! none in reach, the robot keeps looking for half a minute, and until its
-//! bars run out, before it calls the map explored.
+//! their own ([`planner`]), so that the steering never waits for one. What
+//! to do with each robot state (follow, ask for a plan, bar a goal not
+//! neared, look about, stop once explored) is `deog_explore::Steering`'s
+//! to decide; this loop drives, publishes and logs as it says.
 
 mod planner;
 
@@ -23,8 +20,7 @@ use std::time::Duration;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use deog_explore::{
-    Blacklist, Clearance, DeadReckoning, FollowCommand, FollowParams, Goal, GoalParams,
-    PathFollower,
+    Clearance, DeadReckoning, FollowParams, Steering, SteeringEvent, SteeringParams,
 };
 use deog_grid::Pose2;
 use deog_proto::names::check_robot_name;
@@ -35,7 +31,7 @@ use deog_simulator::deog_rig::{Reading, Rig};
 
 use crate::connection::{ConnectionArgs, SimConnectionArgs};
 use crate::wander::{sim_rig, spawn_publisher, spawn_state_reader};
-use planner::{Plan, PlanRequest, Planner, spawn_planner};
+use planner::{Planner, spawn_planner};
 
 /// Options of `deog explore`.
 #[derive(Debug, Args)]
@@ -100,46 +96,13 @@ pub enum DrivePose {
 /// Wall-clock time between two reads of the localizer's new estimates.
 const ESTIMATE_POLL: Duration = Duration::from_millis(250);
 
-/// Plans in a row that found nothing before the robot is done.
-const EMPTY_PLANS_TO_STOP: u32 = 3;
-/// Simulated seconds a robot keeps looking when frontiers remain but none
-/// can be reached: the map changes under it (a wall thickened by a
-/// sonar's cone thins as more frames come, other robots open the way).
-const UNREACHABLE_PATIENCE_S: f64 = 30.0;
-/// Simulated seconds a barred goal stays barred the first time; barred
-/// again at the same place, it stays barred as long as a goal reached.
-const BAR_S: f64 = 60.0;
-/// Simulated seconds a goal reached stays barred: for the rest of any
-/// run worth the name (a frontier still there once reached is one nothing
-/// more can be seen from).
-const ARRIVED_BAR_S: f64 = 3600.0;
-/// A goal reached bars the cells of its frontier within this distance of
-/// it, metres (a long frontier's far end may yet be seen from elsewhere)...
-const ARRIVED_BAR_REACH_M: f64 = 2.5;
-/// ...each within this radius, metres.
-const ARRIVED_BAR_CELL_M: f64 = 0.15;
-/// Blocked this near its goal, metres, the robot counts it reached.
-const BLOCKED_REACHES_M: f64 = 1.0;
-/// A place a frontier was looked at from is not used again within this
-/// distance, metres.
-const APPROACH_BAR_M: f64 = 0.5;
-/// Simulated seconds without nearing its goal before it is barred.
-const STALL_S: f64 = 12.0;
-/// Simulated seconds turned in place to look about when the map has
-/// nothing near the robot yet, or after being blocked.
-const LOOK_ABOUT_S: f64 = 2.0;
-
-/// The steering half's own state: what it needs besides the plans.
+/// The robot's own ends of the loop: its name, the map and server it
+/// claims goals on, the rig its ranges come from.
 struct Explorer {
     robot: String,
     map: String,
     client: MapClient,
     rig: Rig,
-    follow: FollowParams,
-    goals: GoalParams,
-    blacklist: Blacklist,
-    /// When the last bar for a while runs out, simulated seconds.
-    bars_lapse_s: f64,
 }
 
 /// Follows the localizer's converged estimates of `robot` on `map`: the
@@ -186,20 +149,6 @@ fn follow_params(args: &ExploreArgs) -> Result<FollowParams> {
 }
 
 impl Explorer {
-    /// Bars a goal not neared: for a while the first time, as long as a
-    /// goal reached when the robot failed there before.
-    fn bar_stalled(&mut self, x: f64, y: f64, now_s: f64) {
-        let first = self.blacklist.bar_failure(
-            (x, y),
-            now_s,
-            (BAR_S, ARRIVED_BAR_S),
-            self.goals.blacklist_radius_m,
-        );
-        if first {
-            self.bars_lapse_s = self.bars_lapse_s.max(now_s + BAR_S);
-        }
-    }
-
     /// Tells the other explorers where this one is heading; `active`
     /// false gives the goal up.
     async fn publish_goal(&self, x: f64, y: f64, time_s: f64, active: bool) -> Result<()> {
@@ -232,16 +181,6 @@ impl Explorer {
             });
         Clearance::of_echoes(echoes, self.rig.body_radius())
     }
-}
-
-/// The goal being driven to, and how it is going.
-struct Pursuit {
-    goal: Goal,
-    follower: PathFollower,
-    planned_at_s: f64,
-    /// The shortest way left along the path so far, metres, and when.
-    best_distance: f64,
-    best_at_s: f64,
 }
 
 #[derive(Debug, Default)]
@@ -340,16 +279,18 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
             Err(error) => return Err(error),
         }
     };
-    let mut explorer = Explorer {
+    let explorer = Explorer {
         robot: args.robot.clone(),
         map: args.map.clone(),
         client: client.clone(),
         rig: rig.clone(),
-        follow: planner.follow,
-        goals: planner.goals,
-        blacklist: Blacklist::default(),
-        bars_lapse_s: f64::NEG_INFINITY,
     };
+    let mut steering = Steering::new(SteeringParams {
+        max_turn_rate: planner.follow.max_turn_rate,
+        replan_s: args.replan_s,
+        goals: planner.goals,
+    });
+    let max_turn_rate = planner.follow.max_turn_rate;
     let (plan_requests, mut plans) = spawn_planner(planner);
     let mut reckoning = DeadReckoning::new();
     let mut estimates = (args.pose == DrivePose::Estimate).then(|| {
@@ -359,24 +300,15 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
             args.estimate_map.as_deref().unwrap_or(&args.map),
         )
     });
-    let mut planning = false;
-    // The last goal driven to: where, the nearest the robot came, when.
-    let mut last_goal: Option<(f64, f64, f64, f64)> = None;
     let mut states = spawn_state_reader(sim.watch(&args.robot).await?);
     let shutdown = deog_harness::shutdown_signal();
     tokio::pin!(shutdown);
     let mut summary = Summary::default();
-    let mut pursuit: Option<Pursuit> = None;
-    let mut look_about_until: Option<f64> = None;
-    let mut empty_plans = 0;
-    // When the plans began to find frontiers but none in reach.
-    let mut out_of_reach_since: Option<f64> = None;
     let mut backlog = Vec::new();
     let mut start_time = None;
     let mut last_pose: Option<Pose2> = None;
     let mut last_time_s = 0.0;
     let mut was_bumped = false;
-    let mut next_plan_s = f64::NEG_INFINITY;
     'run: loop {
         if !states.next_batch(shutdown.as_mut(), &mut backlog).await? {
             break;
@@ -433,216 +365,77 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
                 None => {
                     // Nowhere to plan from yet: turn, so the localizer
                     // sees the walls all around.
-                    sim.drive(&args.robot, 0.0, 0.5 * explorer.follow.max_turn_rate)
-                        .await?;
+                    sim.drive(&args.robot, 0.0, 0.5 * max_turn_rate).await?;
                     continue;
                 }
             },
         };
-
-        if look_about_until.is_some_and(|until| now < until) {
-            let turn = if clearance.left >= clearance.right {
-                1.0
-            } else {
-                -1.0
-            };
-            sim.drive(&args.robot, 0.0, turn * explorer.follow.max_turn_rate)
-                .await?;
+        if let Some((linear, angular)) = steering.looking_about(now, clearance) {
+            sim.drive(&args.robot, linear, angular).await?;
             continue;
         }
-        look_about_until = None;
         // A plan that came back since the last state.
-        match plans.try_recv() {
+        let plan = match plans.try_recv() {
             Ok(answer) => {
-                planning = false;
                 let (request, plan) = answer?;
-                match plan {
-                    Plan::Go { ref goal, .. }
-                        if explorer.blacklist.bars(
-                            goal.x,
-                            goal.y,
-                            explorer.goals.blacklist_radius_m,
-                        ) =>
-                    {
-                        // Planned before its goal was barred: plan again
-                        // with the blacklist as it is now.
-                        pursuit = None;
-                    }
-                    Plan::Go {
-                        goal,
-                        follower,
-                        tight,
-                    } => {
-                        empty_plans = 0;
-                        out_of_reach_since = None;
-                        // The same goal as the last one, even if the pursuit
-                        // was dropped in between (blocked, looking about):
-                        // its progress carries over, so a goal the robot
-                        // keeps being turned back from is still barred.
-                        let same = last_goal.is_some_and(|(x, y, _, _)| {
-                            (x - goal.x).hypot(y - goal.y) <= explorer.goals.current_radius_m
-                        });
-                        let distance = follower.remaining_length_m(pose);
-                        let (best_distance, best_at_s) = match last_goal {
-                            Some((_, _, best, at)) if same => (best, at),
-                            _ => {
-                                summary.goals += 1;
-                                tracing::info!(
-                                    x = goal.x,
-                                    y = goal.y,
-                                    frontier_m = goal.frontier_m,
-                                    travel_m = goal.travel_m,
-                                    tight,
-                                    approach = goal.approach,
-                                    "new goal"
-                                );
-                                (distance, now)
-                            }
-                        };
-                        // Each plan refreshes the claim, so that it stays fresh.
-                        explorer.publish_goal(goal.x, goal.y, now, true).await?;
-                        pursuit = Some(Pursuit {
-                            goal,
-                            follower,
-                            planned_at_s: request.now_s,
-                            best_distance,
-                            best_at_s,
-                        });
-                    }
-                    Plan::LookAbout => {
-                        look_about_until = Some(now + LOOK_ABOUT_S);
-                        continue;
-                    }
-                    Plan::Nothing { frontiers } => {
-                        pursuit = None;
-                        empty_plans += 1;
-                        let since = *out_of_reach_since.get_or_insert(now);
-                        tracing::info!(frontiers, empty_plans, "no reachable frontier");
-                        // Frontiers left out of reach: not done while the
-                        // map may yet open a way or a bar run out.
-                        let hoping = frontiers > 0
-                            && (now - since < UNREACHABLE_PATIENCE_S
-                                || now < explorer.bars_lapse_s);
-                        if empty_plans >= EMPTY_PLANS_TO_STOP && !hoping {
-                            summary.finished = true;
-                            break 'run;
-                        }
-                        // Let the cartographer catch up before looking
-                        // again; turn meanwhile, so that the sonars sweep
-                        // what the map holds around the robot.
-                        next_plan_s = now + 1.0;
-                        if frontiers > 0 {
-                            look_about_until = Some(now + LOOK_ABOUT_S);
-                        }
-                        sim.drive(&args.robot, 0.0, 0.0).await?;
-                        continue;
-                    }
-                }
+                Some((request.now_s, plan))
             }
-            Err(tokio::sync::mpsc::error::TryRecvError::Empty) => {}
+            Err(tokio::sync::mpsc::error::TryRecvError::Empty) => None,
             Err(tokio::sync::mpsc::error::TryRecvError::Disconnected) => {
                 bail!("the planner stopped")
             }
+        };
+        let decision = steering.step(now, pose, clearance, plan);
+        for event in &decision.events {
+            match event {
+                SteeringEvent::NewGoal { goal, tight } => {
+                    summary.goals += 1;
+                    tracing::info!(
+                        x = goal.x,
+                        y = goal.y,
+                        frontier_m = goal.frontier_m,
+                        travel_m = goal.travel_m,
+                        tight,
+                        approach = goal.approach,
+                        "new goal"
+                    );
+                }
+                SteeringEvent::Barred { x, y } => {
+                    summary.barred += 1;
+                    tracing::info!(x, y, "goal not neared: barred for a while");
+                }
+                SteeringEvent::NoReachableFrontier {
+                    frontiers,
+                    empty_plans,
+                } => tracing::info!(frontiers, empty_plans, "no reachable frontier"),
+            }
         }
-        let replan = pursuit
-            .as_ref()
-            .is_none_or(|p| now - p.planned_at_s >= args.replan_s);
-        if replan && !planning && now >= next_plan_s {
-            explorer.blacklist.expire(now);
-            let request = PlanRequest {
-                pose,
-                now_s: now,
-                current: pursuit.as_ref().map(|p| (p.goal.x, p.goal.y)),
-                blacklist: explorer.blacklist.clone(),
-            };
+        if decision.finished {
+            summary.finished = true;
+            break 'run;
+        }
+        if let Some((x, y)) = decision.claim {
+            explorer.publish_goal(x, y, now, true).await?;
+        }
+        if let Some(request) = decision.request {
             plan_requests
                 .send(request)
                 .await
                 .context("the planner stopped")?;
-            planning = true;
         }
-        let Some(p) = pursuit.as_mut() else {
-            sim.drive(&args.robot, 0.0, 0.0).await?;
-            continue;
-        };
-        let distance = (p.goal.x - pose.x).hypot(p.goal.y - pose.y);
-        // Progress is the way left along the path, which falls as the
-        // robot goes round a pillar while the straight distance may not.
-        let way_left = p.follower.remaining_length_m(pose);
-        if way_left < p.best_distance - 0.1 {
-            p.best_distance = way_left;
-            p.best_at_s = now;
+        if let Some(command) = decision.followed {
+            tracing::trace!(
+                x = pose.x,
+                y = pose.y,
+                theta = pose.theta,
+                front = clearance.front(),
+                ?command,
+                "steering"
+            );
         }
-        last_goal = Some((p.goal.x, p.goal.y, p.best_distance, p.best_at_s));
-        let stalled = now - p.best_at_s > STALL_S;
-        let command = p.follower.command(pose, clearance);
-        tracing::trace!(
-            x = pose.x,
-            y = pose.y,
-            theta = pose.theta,
-            front = clearance.front(),
-            ?command,
-            "steering"
-        );
-        // Stopped by something just short of the goal is as near as the
-        // robot gets: as good as there.
-        let reached = command == FollowCommand::Arrived
-            || (command == FollowCommand::Blocked && distance <= BLOCKED_REACHES_M);
-        let (linear, angular) = match command {
-            _ if reached => {
-                // A frontier looked at from near: not from here again;
-                // turn, so that the sonars sweep it, then plan (the way
-                // there may have opened).
-                if p.goal.approach {
-                    explorer.blacklist.add_within(
-                        p.goal.x,
-                        p.goal.y,
-                        APPROACH_BAR_M,
-                        now + ARRIVED_BAR_S,
-                    );
-                    look_about_until = Some(now + LOOK_ABOUT_S);
-                    pursuit = None;
-                    sim.drive(&args.robot, 0.0, 0.0).await?;
-                    continue;
-                }
-                // A frontier the robot stands at and still sees as one (a
-                // gap in a wall's line, the far side of furniture) cannot
-                // be seen better from there: bar its cells around the
-                // goal, or the robot would come back to it for ever.
-                for &(x, y) in &p.goal.frontier_cells {
-                    if (x - p.goal.x).hypot(y - p.goal.y) <= ARRIVED_BAR_REACH_M {
-                        explorer.blacklist.add_within(
-                            x,
-                            y,
-                            ARRIVED_BAR_CELL_M,
-                            now + ARRIVED_BAR_S,
-                        );
-                    }
-                }
-                if command == FollowCommand::Blocked {
-                    look_about_until = Some(now + LOOK_ABOUT_S);
-                }
-                pursuit = None;
-                (0.0, 0.0)
-            }
-            FollowCommand::Drive { linear, angular } if !stalled => (linear, angular),
-            _ => {
-                if stalled {
-                    explorer.bar_stalled(p.goal.x, p.goal.y, now);
-                    last_goal = None;
-                    summary.barred += 1;
-                    tracing::info!(
-                        x = p.goal.x,
-                        y = p.goal.y,
-                        "goal not neared: barred for a while"
-                    );
-                }
-                pursuit = None;
-                look_about_until = Some(now + LOOK_ABOUT_S);
-                (0.0, 0.0)
-            }
-        };
-        sim.drive(&args.robot, linear, angular).await?;
+        if let Some((linear, angular)) = decision.drive {
+            sim.drive(&args.robot, linear, angular).await?;
+        }
     }
     if let Err(error) = sim.drive(&args.robot, 0.0, 0.0).await {
         tracing::warn!(%error, "could not stop the robot");

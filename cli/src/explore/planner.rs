@@ -13,7 +13,8 @@
 use anyhow::{Context, Result, bail};
 use deog_explore::{
     Blacklist, CostParams, Costmap, FollowParams, Frontier, Goal, GoalParams, OccupancyWindow,
-    PathFollower, TravelCosts, approach_goal, choose_goal_keeping, find_frontiers, find_undecided,
+    PathFollower, Plan, PlanRequest, TravelCosts, approach_goal, choose_goal_keeping,
+    find_frontiers, find_undecided,
 };
 use deog_grid::{
     CellBox, CellIndex, Occupancy, OccupancyThresholds, OccupancyView, Pose2, Resolution, TileSize,
@@ -55,21 +56,6 @@ impl OccupancyView for CachedMap<'_> {
     }
 }
 
-/// What one plan found.
-pub(super) enum Plan {
-    /// A goal and the way there; `tight` when it was found only on the
-    /// map's own cells, through gaps the merged cells close.
-    Go {
-        goal: Goal,
-        follower: PathFollower,
-        tight: bool,
-    },
-    /// Nothing known around the robot yet: look about first.
-    LookAbout,
-    /// No reachable frontier.
-    Nothing { frontiers: usize },
-}
-
 /// The planning half: reads the map and picks goals. It runs as a task of
 /// its own, so that the robot keeps being steered, and stopped short of
 /// walls, while a plan is worked out.
@@ -103,15 +89,6 @@ struct Attempt {
     chosen: Option<Goal>,
     frontiers: Vec<Frontier>,
     known_nearby: bool,
-}
-
-/// What a plan starts from.
-pub(super) struct PlanRequest {
-    pub(super) pose: Pose2,
-    pub(super) now_s: f64,
-    /// The goal being driven to, if any.
-    pub(super) current: Option<(f64, f64)>,
-    pub(super) blacklist: Blacklist,
 }
 
 impl Planner {
