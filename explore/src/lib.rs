@@ -17,6 +17,9 @@
 //!   holds a robot to its current goal unless another is clearly better.
 //! - [`follow`]: [`PathFollower`], pure pursuit along a path, slowing and
 //!   stopping for what the robot's own ranges see ahead.
+//! - [`planning`]: [`plan_on`], one plan from a view of the map: on
+//!   merged cells, then the map's own, then squeezing through; a look
+//!   from near at frontiers out of reach or at bands not yet decided.
 //! - [`steering`]: [`Steering`], the decisions one robot state at a
 //!   time: the plan to follow, when to ask for the next, a goal reached
 //!   or stalled and what that bars, looking about, and when the map is
@@ -32,6 +35,7 @@ pub mod error;
 pub mod follow;
 pub mod frontier;
 pub mod goal;
+pub mod planning;
 pub mod steering;
 pub mod travel;
 pub mod window;
@@ -42,6 +46,7 @@ pub use error::ExploreError;
 pub use follow::{Clearance, FollowCommand, FollowParams, PathFollower};
 pub use frontier::{Frontier, find_frontiers, find_undecided};
 pub use goal::{Blacklist, Goal, GoalParams, approach_goal, choose_goal, choose_goal_keeping};
+pub use planning::{PlanOutcome, PlanSettings, plan_on};
 pub use steering::{Decision, Plan, PlanRequest, Steering, SteeringEvent, SteeringParams};
 pub use travel::TravelCosts;
 pub use window::OccupancyWindow;

@@ -286,11 +286,11 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
         rig: rig.clone(),
     };
     let mut steering = Steering::new(SteeringParams {
-        max_turn_rate: planner.follow.max_turn_rate,
+        max_turn_rate: planner.settings.follow.max_turn_rate,
         replan_s: args.replan_s,
-        goals: planner.goals,
+        goals: planner.settings.goals,
     });
-    let max_turn_rate = planner.follow.max_turn_rate;
+    let max_turn_rate = planner.settings.follow.max_turn_rate;
     let (plan_requests, mut plans) = spawn_planner(planner);
     let mut reckoning = DeadReckoning::new();
     let mut estimates = (args.pose == DrivePose::Estimate).then(|| {
