@@ -43,6 +43,16 @@ impl OccupancyThresholds {
         })
     }
 
+    /// The belief above which a cell is occupied.
+    pub fn occupied(&self) -> LogOdds {
+        self.occupied
+    }
+
+    /// The belief below which a cell is free.
+    pub fn free(&self) -> LogOdds {
+        self.free
+    }
+
     /// The state of a cell holding `belief`.
     pub fn classify(&self, belief: Option<LogOdds>) -> Occupancy {
         match belief {

@@ -83,7 +83,7 @@ pub(super) fn reached_from_trodden(
             let tile = &tiles[key];
             (0..area)
                 .map(|i| {
-                    let belief = tile.combined[i];
+                    let belief = tile.leaning[i];
                     if belief == UNSEEN {
                         tile.near_path[i]
                     } else {

@@ -10,8 +10,10 @@
 //! normal ([`DIRECTIONS`] bins of 30°, the Polaroid transducer's critical
 //! angle). A cell's evidence from a frame goes to the two bins nearest to
 //! the direction back at the robot. The cell's belief in the map is its
-//! most occupied observed bin: a cell is a wall if it faces some way as a
-//! wall, and free once every way it was seen from says free. What goes to
+//! most occupied observed bin if that bin decides it a wall: a cell is a
+//! wall if it faces some way as a wall. Otherwise a bin that decides it
+//! free wins over bins that only lean occupied; with no bin decided, the
+//! most occupied lean stands ([`combined`]). What goes to
 //! the map server is the change of that belief, so the server's map (and
 //! every reader of it) stays one belief per cell.
 //!
@@ -51,6 +53,15 @@ pub const DIRECTIONS: usize = 12;
 
 /// The raw value of a bin that has received no evidence.
 const UNSEEN: i16 = LogOdds::UNKNOWN_RAW;
+
+/// A direction's belief above which it decides its cell a wall, raw:
+/// ROS map_server's occupied threshold (0.65), by which the localizer and
+/// the evaluation class the map's cells ([`deog_grid::OccupancyThresholds`]).
+const DECIDED_OCCUPIED: i16 = 619;
+
+/// A direction's belief below which it decides its cell free, raw: the
+/// same readers' free threshold (0.196).
+const DECIDED_FREE: i16 = -1411;
 
 /// How big a directional view is and what it calls a wall.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -162,6 +173,9 @@ const JUDGED_FOR_PERIODS: u64 = 10;
 struct DirectionalTile {
     bins: Box<[i16]>,
     combined: Box<[i16]>,
+    /// Each cell's [`leaning`] belief, which the flood of [`enclosure`]
+    /// goes by.
+    leaning: Box<[i16]>,
     trodden: Box<[bool]>,
     near_path: Box<[bool]>,
     enclosed: Box<[bool]>,
@@ -174,6 +188,7 @@ impl DirectionalTile {
         Self {
             bins: vec![UNSEEN; area * DIRECTIONS].into_boxed_slice(),
             combined: vec![UNSEEN; area].into_boxed_slice(),
+            leaning: vec![UNSEEN; area].into_boxed_slice(),
             trodden: vec![false; area].into_boxed_slice(),
             near_path: vec![false; area].into_boxed_slice(),
             enclosed: vec![false; area].into_boxed_slice(),
@@ -207,6 +222,7 @@ impl DirectionalTile {
         let bins = &mut self.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS];
         let result = change(bins);
         self.combined[index] = combined(bins);
+        self.leaning[index] = leaning(bins);
         result
     }
 }
@@ -492,7 +508,7 @@ impl DirectionalView {
                 continue;
             }
             for (index, &reached) in reached.iter().enumerate() {
-                let belief = tile.combined[index];
+                let belief = tile.leaning[index];
                 // Only the cells the view leans to believe free (the ones
                 // the flood passes): raising the uncertain ones inside too
                 // gained a point of cells right but walled off free pockets
@@ -545,11 +561,14 @@ fn step(before: i16, after: i16) -> i16 {
     (i32::from(after) - i32::from(base)) as i16
 }
 
-/// A cell's belief from its directions: the most occupied one if some
-/// direction holds it occupied, else the freest observed one; [`UNSEEN`]
-/// if none was observed.
+/// A cell's belief as its directions lean: the most occupied if any
+/// leans occupied, else the freest observed; [`UNSEEN`] if none was
+/// observed. The flood of [`enclosure`] goes by it: a cell any direction
+/// leans to believe a wall stops it, so that free pockets by a wall's
+/// fringe are not walled off. Going by [`combined`] there cost map1's
+/// localizer (BENCHMARKS.md, sonar mapping).
 #[inline]
-fn combined(bins: &[i16]) -> i16 {
+fn leaning(bins: &[i16]) -> i16 {
     let most = bins.iter().copied().max().unwrap_or(UNSEEN);
     if most > 0 {
         return most;
@@ -559,6 +578,38 @@ fn combined(bins: &[i16]) -> i16 {
         .filter(|&b| b != UNSEEN)
         .min()
         .unwrap_or(UNSEEN)
+}
+
+/// A cell's belief from its directions, decided as the map's readers
+/// class cells ([`DECIDED_OCCUPIED`], [`DECIDED_FREE`]): the most occupied
+/// direction if it reads as a wall; else the freest if it reads as free;
+/// else (nothing decided) the most occupied if it leans occupied, the
+/// freest if none does; [`UNSEEN`] if none was observed.
+///
+/// A direction that only leans occupied does not outweigh one that
+/// decided the cell free: the arc of a reading that met a wall square on
+/// lies a little in front of the wall off its axis, and leaves the free
+/// cells there leaning occupied in the direction it faced, while the
+/// readings that crossed them say free. Taking the lean over the decision
+/// left them uncertain, the largest share of wrong cells (BENCHMARKS.md,
+/// sonar mapping).
+#[inline]
+fn combined(bins: &[i16]) -> i16 {
+    let most = bins.iter().copied().max().unwrap_or(UNSEEN);
+    if most > DECIDED_OCCUPIED {
+        return most;
+    }
+    let freest = bins
+        .iter()
+        .copied()
+        .filter(|&b| b != UNSEEN)
+        .min()
+        .unwrap_or(UNSEEN);
+    if most > 0 && freest >= DECIDED_FREE {
+        most
+    } else {
+        freest
+    }
 }
 
 impl ConeGuard for DirectionalView {
@@ -878,6 +929,34 @@ mod tests {
     }
 
     #[test]
+    fn the_decided_beliefs_are_the_map_readers_thresholds() {
+        let thresholds = deog_grid::OccupancyThresholds::default();
+        assert_eq!(DECIDED_OCCUPIED, thresholds.occupied().raw());
+        assert_eq!(DECIDED_FREE, thresholds.free().raw());
+    }
+
+    #[test]
+    fn a_direction_that_decides_outweighs_one_that_leans() {
+        let mut bins = [UNSEEN; DIRECTIONS];
+        assert_eq!(combined(&bins), UNSEEN, "nothing observed");
+        // Leaning occupied one way, decided free another: free.
+        bins[0] = 300;
+        bins[3] = -2000;
+        assert_eq!(combined(&bins), -2000);
+        // Leaning free is no decision: the lean to occupied stands.
+        bins[3] = -1000;
+        assert_eq!(combined(&bins), 300);
+        // A wall one way is a wall, whatever the others decided.
+        bins[0] = 900;
+        bins[3] = -2000;
+        assert_eq!(combined(&bins), 900);
+        // Nothing leans occupied: the freest.
+        bins[0] = -200;
+        bins[3] = -1000;
+        assert_eq!(combined(&bins), -1000);
+    }
+
+    #[test]
     fn each_cells_kept_belief_is_its_directions_combined() {
         // Echoes and misses from robots all round, walls heard (so taken
         // back behind) and enclosure judged at every frame: whatever path
@@ -911,6 +990,7 @@ mod tests {
         for tile in v.tiles.values() {
             for (index, &kept) in tile.combined.iter().enumerate() {
                 assert_eq!(kept, combined(tile.bins(index)), "cell {index}");
+                assert_eq!(tile.leaning[index], leaning(tile.bins(index)), "cell {index}");
             }
         }
     }
