@@ -990,7 +990,11 @@ mod tests {
         for tile in v.tiles.values() {
             for (index, &kept) in tile.combined.iter().enumerate() {
                 assert_eq!(kept, combined(tile.bins(index)), "cell {index}");
-                assert_eq!(tile.leaning[index], leaning(tile.bins(index)), "cell {index}");
+                assert_eq!(
+                    tile.leaning[index],
+                    leaning(tile.bins(index)),
+                    "cell {index}"
+                );
             }
         }
     }
