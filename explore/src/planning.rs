@@ -347,18 +347,28 @@ mod tests {
         CellBox::new(CellIndex::new(-40, -40), CellIndex::new(100, 80)).expect("a box")
     }
 
-    #[test]
-    fn the_opening_in_the_wall_is_the_goal_and_the_path_leads_there() {
-        let outcome = plan_on(
-            &Room { known: true },
+    /// One plan in the room (its cells `known` or not), no cell undecided
+    /// and no other robot's goal.
+    fn plan_in_room(
+        known: bool,
+        request: &PlanRequest,
+        look_again: bool,
+        settings: &PlanSettings,
+    ) -> Result<PlanOutcome, ExploreError> {
+        plan_on(
+            &Room { known },
             |_| false,
             region(),
             &[],
-            &request(0.5, 1.0),
-            false,
-            &settings(),
+            request,
+            look_again,
+            settings,
         )
-        .expect("a plan");
+    }
+
+    #[test]
+    fn the_opening_in_the_wall_is_the_goal_and_the_path_leads_there() {
+        let outcome = plan_in_room(true, &request(0.5, 1.0), false, &settings()).expect("a plan");
         let Plan::Go {
             goal,
             follower,
@@ -378,16 +388,7 @@ mod tests {
 
     #[test]
     fn nothing_known_around_the_robot_asks_for_a_look_about() {
-        let outcome = plan_on(
-            &Room { known: false },
-            |_| false,
-            region(),
-            &[],
-            &request(0.5, 1.0),
-            false,
-            &settings(),
-        )
-        .expect("a plan");
+        let outcome = plan_in_room(false, &request(0.5, 1.0), false, &settings()).expect("a plan");
         assert!(
             matches!(outcome.plan, Plan::LookAbout),
             "{:?}",
@@ -406,16 +407,7 @@ mod tests {
             },
             ..settings()
         };
-        let outcome = plan_on(
-            &Room { known: true },
-            |_| false,
-            region(),
-            &[],
-            &barred,
-            true,
-            &settings,
-        )
-        .expect("a plan");
+        let outcome = plan_in_room(true, &barred, true, &settings).expect("a plan");
         assert!(
             matches!(outcome.plan, Plan::Nothing { frontiers } if frontiers >= 1),
             "{:?}",
@@ -426,16 +418,8 @@ mod tests {
 
     #[test]
     fn a_plan_from_outside_the_window_is_refused() {
-        let error = plan_on(
-            &Room { known: true },
-            |_| false,
-            region(),
-            &[],
-            &request(50.0, 50.0),
-            false,
-            &settings(),
-        )
-        .expect_err("outside");
+        let error =
+            plan_in_room(true, &request(50.0, 50.0), false, &settings()).expect_err("outside");
         assert!(error.to_string().contains("pose"), "{error}");
     }
 }
