@@ -32,14 +32,40 @@ pub(crate) fn build_map(
     minutes: f64,
     surface_depth: f64,
 ) -> Result<(TileMap, LocalMap)> {
+    const NAME: &str = "cartographer";
+    let mut sim = Simulation::new(world, config.clone(), 1000)?;
+    let mut state = sim.spawn(NAME, None)?;
+    let mut wanderer = Wanderer::for_rig(WanderParams::default(), &config.rig, 1000)?;
+    let mut growing = GrowingMap::new(config, &[NAME.to_string()])?;
+    let mut changed = Vec::new();
+    let mut fired = Vec::new();
+    let period = sim.config().sonar_period_s;
+    while sim.time_s() < minutes * 60.0 {
+        let (v, w) = wanderer.command(&state.ranges, state.bumper, period)?;
+        sim.drive(NAME, v, w)?;
+        fired.clear();
+        while fired.is_empty() {
+            sim.advance(period, &mut fired)?;
+        }
+        state = fired.pop().context("a firing")?;
+        changed.clear();
+        growing.integrate(&state, &mut changed)?;
+    }
+    let tiles = growing.tiles;
+    let mut map = empty_local_map(localize_config, sensor, surface_depth)?;
+    for (key, tile) in tiles.tiles() {
+        map.insert_tile(*key, 1, Some(tile))?;
+    }
+    Ok((tiles, map))
+}
+
+/// The cartographer `deog map` runs for a robot of `config`: the thesis's
+/// sonar model, or for a specular sonar the method `deog demo` maps with;
+/// from the true poses.
+pub(crate) fn cartographer_for(config: &SimConfig) -> Result<Cartographer> {
     let res = Resolution::DEFAULT;
     let size = TileSize::new(64)?;
-    let mut sim = Simulation::new(world, config.clone(), 1000)?;
-    let mut state = sim.spawn("cartographer", None)?;
-    let mut wanderer = Wanderer::for_rig(WanderParams::default(), &config.rig, 1000)?;
-    // The sonar model `deog map` maps with.
     let specular = !matches!(config.sonar.specular, Specular::Off);
-    // A specular sonar's readings are mapped as `deog demo` maps them.
     let (method, params) = if specular {
         deog_mapping::specular_sonar_mapping()
     } else {
@@ -67,37 +93,16 @@ pub(crate) fn build_map(
         res,
         size,
     )?;
-    let mut cartographer = cartographer.with_firing(config.ring_firing());
-    let mut frame_motion = deog_grid::FrameMotion::default();
-    let mut tiles = TileMap::new(res, size, ClampLimits::default());
-    let mut deltas = Vec::new();
-    let mut fired = Vec::new();
-    let period = sim.config().sonar_period_s;
-    while sim.time_s() < minutes * 60.0 {
-        let (v, w) = wanderer.command(&state.ranges, state.bumper, period)?;
-        sim.drive("cartographer", v, w)?;
-        fired.clear();
-        while fired.is_empty() {
-            sim.advance(period, &mut fired)?;
-        }
-        state = fired.pop().context("a firing")?;
-        deltas.clear();
-        cartographer.integrate(
-            &FrameInput {
-                sequence: state.sequence,
-                pace: frame_motion.observe(&state.odometry, state.time_s),
-                true_pose: Some(state.true_pose),
-                odometry: state.odometry,
-                reference_pose: None,
-                estimate: None,
-                ranges: &state.ranges,
-            },
-            &mut deltas,
-        )?;
-        for d in &deltas {
-            tiles.apply(d)?;
-        }
-    }
+    Ok(cartographer.with_firing(config.ring_firing()))
+}
+
+/// A localizer's map with no tile yet, its range tables for the sonar of
+/// `localize_config` as `sensor`'s cone sees it.
+pub(crate) fn empty_local_map(
+    localize_config: &SimConfig,
+    sensor: SensorChoice,
+    surface_depth: f64,
+) -> Result<LocalMap> {
     // The localizer knows its sonar: specular past the same angle.
     let base = ConeGeometry {
         specular_max_incidence: match localize_config.sonar.specular {
@@ -109,15 +114,77 @@ pub(crate) fn build_map(
         surface_depth,
         ..ConeGeometry::default()
     };
-    let mut map = LocalMap::new(MapSettings {
-        resolution: res,
-        tile_size: size,
+    Ok(LocalMap::new(MapSettings {
+        resolution: Resolution::DEFAULT,
+        tile_size: TileSize::new(64)?,
         thresholds: OccupancyThresholds::default(),
         geometry: sensor.cone_geometry(&localize_config.rig, base)?,
         budget_bytes: 512 << 20,
-    })?;
-    for (key, tile) in tiles.tiles() {
-        map.insert_tile(*key, 1, Some(tile))?;
+    })?)
+}
+
+/// A map being built while a robot localizes on it, as in `deog demo`:
+/// each mapping robot's cartographer turns its frames into deltas on one
+/// map.
+pub(crate) struct GrowingMap {
+    cartographers: Vec<(String, Cartographer, deog_grid::FrameMotion)>,
+    tiles: TileMap,
+    deltas: Vec<deog_grid::TileDelta>,
+}
+
+impl GrowingMap {
+    /// An empty map, built from the frames of the robots `names`.
+    pub(crate) fn new(config: &SimConfig, names: &[String]) -> Result<Self> {
+        Ok(Self {
+            cartographers: names
+                .iter()
+                .map(|n| Ok((n.clone(), cartographer_for(config)?, Default::default())))
+                .collect::<Result<_>>()?,
+            tiles: TileMap::new(
+                Resolution::DEFAULT,
+                TileSize::new(64)?,
+                ClampLimits::default(),
+            ),
+            deltas: Vec::new(),
+        })
     }
-    Ok((tiles, map))
+
+    /// The map as built so far.
+    pub(crate) fn tiles_mut(&mut self) -> &mut TileMap {
+        &mut self.tiles
+    }
+
+    /// Maps one frame of a mapping robot (others' are ignored); `changed`
+    /// gets the tiles it changed.
+    pub(crate) fn integrate(
+        &mut self,
+        state: &deog_simulator::simulation::RobotSnapshot,
+        changed: &mut Vec<deog_grid::TileKey>,
+    ) -> Result<()> {
+        let Some((_, cartographer, motion)) = self
+            .cartographers
+            .iter_mut()
+            .find(|(n, _, _)| *n == state.name)
+        else {
+            return Ok(());
+        };
+        self.deltas.clear();
+        cartographer.integrate(
+            &FrameInput {
+                sequence: state.sequence,
+                pace: motion.observe(&state.odometry, state.time_s),
+                true_pose: Some(state.true_pose),
+                odometry: state.odometry,
+                reference_pose: None,
+                estimate: None,
+                ranges: &state.ranges,
+            },
+            &mut self.deltas,
+        )?;
+        for d in &self.deltas {
+            self.tiles.apply(d)?;
+            changed.push(d.key);
+        }
+        Ok(())
+    }
 }

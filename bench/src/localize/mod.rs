@@ -79,6 +79,22 @@ pub struct LocalizeOptions {
     /// Simulated minutes of wandering that build each world's map.
     #[arg(long, default_value_t = 10.0)]
     pub map_minutes: f64,
+    /// Build the map during each run instead, as `deog demo` does: the
+    /// robot and `--mappers` − 1 others wander from the start and map from
+    /// their true poses; the filter starts after `--map-minutes` on the map
+    /// as it then is and takes in the tiles that changed every
+    /// `--refresh-s` simulated seconds. `--seconds` and `--kidnap-at`
+    /// count from the filter's start.
+    #[arg(long)]
+    pub growing_map: bool,
+    /// Robots that build a growing map, the one localized among them.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=8))]
+    pub mappers: u64,
+    /// Simulated seconds between two refreshes of a growing map's changed
+    /// tiles: `deog localize`'s `--refresh-s` (5 s) at the demo's pace of
+    /// 4 simulated seconds a second.
+    #[arg(long, default_value_t = 20.0)]
+    pub refresh_s: f64,
     /// Most particles.
     #[arg(long, default_value_t = FilterSettings::default().kld.max_particles)]
     pub max_particles: usize,
@@ -201,6 +217,23 @@ impl LocalizeOptions {
                 || "--mirror-about takes a point in metres, \"x,y\"".into(),
             )?;
         }
+        require(
+            self.refresh_s.is_finite() && self.refresh_s > 0.0,
+            "--refresh-s",
+            || "--refresh-s must be a positive number of seconds".into(),
+        )?;
+        require(
+            !self.growing_map || (self.map_minutes.is_finite() && self.map_minutes > 0.0),
+            "--map-minutes",
+            || {
+                "--map-minutes must be positive with --growing-map: the filter starts on the map the first minutes built"
+                    .into()
+            },
+        )?;
+        require(!(self.growing_map && self.clean_map), "--clean-map", || {
+            "--clean-map builds the map before the runs; a --growing-map is built from the runs' own readings"
+                .into()
+        })?;
         require(
             !self.clean_map || self.sonar_preset() != SonarPreset::Default,
             "--clean-map",
@@ -421,36 +454,60 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
             preset
         };
         let map_config = map_build::sim_config(&setup.rig, map_preset);
-        let (mut tiles, mut map) = map_build::build_map(
-            world.clone(),
-            &map_config,
-            &config,
-            setup.sensor,
-            options.map_minutes,
-            options.surface_depth(),
-        )?;
-        deog_harness::println_above_bars!(
-            "{world_name}: map built in {:.1} s ({} tiles)",
-            started.elapsed().as_secs_f64(),
-            map.tile_count()
-        );
-        if let Some(out) = &options.out {
-            write_verdict(out, world_name, &world, &tiles, &setup.rig)?;
-        }
+        let (mut tiles, mut map) = if options.growing_map {
+            (
+                deog_grid::TileMap::new(
+                    deog_grid::Resolution::DEFAULT,
+                    deog_grid::TileSize::new(64)?,
+                    deog_grid::ClampLimits::default(),
+                ),
+                map_build::empty_local_map(&config, setup.sensor, options.surface_depth())?,
+            )
+        } else {
+            let built = map_build::build_map(
+                world.clone(),
+                &map_config,
+                &config,
+                setup.sensor,
+                options.map_minutes,
+                options.surface_depth(),
+            )?;
+            deog_harness::println_above_bars!(
+                "{world_name}: map built in {:.1} s ({} tiles)",
+                started.elapsed().as_secs_f64(),
+                built.1.tile_count()
+            );
+            if let Some(out) = &options.out {
+                write_verdict(out, world_name, &world, &built.0, &setup.rig)?;
+            }
+            built
+        };
         let mut all = Vec::new();
         let mut particles = Vec::new();
         for seed in options.seed..options.seed + options.runs {
             let t0 = Instant::now();
+            // A growing map starts anew each run, from nothing.
+            let mut growing = if options.growing_map {
+                let names = seeded_run::mapping_robots(options.mappers);
+                map = map_build::empty_local_map(&config, setup.sensor, options.surface_depth())?;
+                Some(map_build::GrowingMap::new(&map_config, &names)?)
+            } else {
+                None
+            };
             let (figures, extras, held) = seeded_run::run_once(
                 world.clone(),
                 &config,
                 setup.sensor,
                 map,
                 &mut tiles,
+                growing.as_mut(),
                 seed,
                 &options,
             )?;
             map = held;
+            if let (Some(out), Some(growing)) = (&options.out, &mut growing) {
+                write_verdict(out, world_name, &world, growing.tiles_mut(), &setup.rig)?;
+            }
             progress.inc(1);
             if options.verbose {
                 deog_harness::println_above_bars!(
@@ -643,6 +700,15 @@ mod tests {
             ("--mirror-about", &["--mirror-about", "1,2,3"][..]),
             ("--mirror-about", &["--mirror-about", "1,NaN"][..]),
             ("--clean-map", &["--clean-map"][..]),
+            (
+                "--clean-map",
+                &["--sonar", "realistic", "--clean-map", "--growing-map"][..],
+            ),
+            ("--refresh-s", &["--refresh-s", "0"][..]),
+            (
+                "--map-minutes",
+                &["--growing-map", "--map-minutes", "0"][..],
+            ),
             ("--clean-map", &["--clean-map", "--sonar", "default"][..]),
             ("--json", &["--json", "no-such-folder/figures.json"][..]),
             ("--out", &["--out", "Cargo.toml"][..]),
@@ -708,6 +774,58 @@ mod tests {
         write_verdict(&folder, "worlds/map2.toml", &world, &tiles, &setup.rig).expect("written");
         assert!(folder.join("map2-map.png").is_file());
         assert_eq!(std::fs::read_dir(&folder).expect("listed").count(), 1);
+    }
+
+    #[test]
+    fn a_growing_map_is_built_while_the_robot_localizes_on_it() {
+        let options = parse(&[
+            "--worlds",
+            "map2",
+            "--growing-map",
+            "--map-minutes",
+            "0.2",
+            "--seconds",
+            "4",
+            "--kidnap-at",
+            "0",
+            "--mappers",
+            "2",
+            "--refresh-s",
+            "1",
+            "--max-particles",
+            "5000",
+        ]);
+        assert_eq!(options.validate(), Ok(()));
+        let setup = options.rig_setup().expect("the scout");
+        let world = load_world_spec("map2").expect("built in");
+        let config = map_build::sim_config(&setup.rig, SonarPreset::Default);
+        let names = seeded_run::mapping_robots(options.mappers);
+        assert_eq!(names.len(), 2);
+        let mut growing = map_build::GrowingMap::new(&config, &names).expect("cartographers");
+        let map = map_build::empty_local_map(&config, setup.sensor, options.surface_depth())
+            .expect("an empty map");
+        let mut unused = deog_grid::TileMap::new(
+            deog_grid::Resolution::DEFAULT,
+            deog_grid::TileSize::new(64).expect("a size"),
+            deog_grid::ClampLimits::default(),
+        );
+        let (figures, _, held) = seeded_run::run_once(
+            world,
+            &config,
+            setup.sensor,
+            map,
+            &mut unused,
+            Some(&mut growing),
+            1,
+            &options,
+        )
+        .expect("a run");
+        // The filter ran for the last 4 s of frames, on tiles the two
+        // robots mapped: 12 s of mapping before it, and more during.
+        assert!(figures.samples > 0, "{figures:?}");
+        assert!(held.tile_count() > 0);
+        assert!(growing.tiles_mut().tiles().count() > 0);
+        assert_eq!(unused.tiles().count(), 0, "a growing map is its own");
     }
 
     fn setup(args: &[&str]) -> RigSetup {

@@ -18,6 +18,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::LocalizeOptions;
 use super::diagnostics::{image_of, particles_near, print_beams};
+use super::map_build::GrowingMap;
 
 /// The robot's name in the simulator, whatever its rig: the name seeds the
 /// robot's draws, so the Scout's figures stay as they were.
@@ -58,12 +59,22 @@ pub(super) struct RunExtras {
 /// One seeded run on `map` (its tiles from `tiles`), the robot carrying
 /// the rig of `config` and its frames scored with `sensor`; returns its
 /// figures and the map, with the tables it built, for the next run.
+///
+/// With `growing` (`--growing-map`), the map is built during the run
+/// instead, as in `deog demo`: the robot and `--mappers` − 1 others wander
+/// from the start, each frame mapped from its true pose into `growing`;
+/// the filter starts after `--map-minutes` on the map as it then is
+/// (`map` empty), and takes in the tiles that changed every
+/// `--refresh-s` simulated seconds. `--seconds` and `--kidnap-at` count
+/// from the filter's start.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn run_once(
     world: deog_world::World,
     config: &SimConfig,
     sensor: SensorChoice,
     map: LocalMap,
     tiles: &mut TileMap,
+    mut growing: Option<&mut GrowingMap>,
     seed: u64,
     options: &LocalizeOptions,
 ) -> Result<(RunFigures, RunExtras, LocalMap)> {
@@ -71,6 +82,21 @@ pub(super) fn run_once(
     let mut state = sim.spawn(ROBOT, None)?;
     let rig = &config.rig;
     let mut wanderer = Wanderer::for_rig(WanderParams::default(), rig, seed)?;
+    // The other mapping robots, each with its wanderer and last state.
+    let mut mappers = Vec::new();
+    if growing.is_some() {
+        for k in 2..=options.mappers {
+            let name = mapper_name(k);
+            let first = sim.spawn(&name, None)?;
+            let wander = Wanderer::for_rig(WanderParams::default(), rig, seed * 1000 + k)?;
+            mappers.push((name, wander, first));
+        }
+    }
+    let start_s = if growing.is_some() {
+        options.map_minutes * 60.0
+    } else {
+        0.0
+    };
     let mut settings = filter_settings(options, seed);
     // The beam model's no-echo range is the cone's the map's tables are for.
     settings.beam.max_range = map.settings().geometry.max_range;
@@ -79,12 +105,18 @@ pub(super) fn run_once(
         .with_context(|| format!("the {sensor} model for rig {}", rig.name()))?;
     let mut mcl = Mcl::with_sensor(settings, model)?;
     mcl.set_firing(config.ring_firing());
-    // No change is ever reported: the map in memory is the whole map.
-    let mut localizer = Localizer::new(mcl, map, Duration::MAX, Instant::now());
-    let whole = tiles
-        .fetch(&tiles.tiles().map(|(k, _)| *k).collect::<Vec<_>>())
-        .map_err(|e| anyhow::anyhow!(e))?;
-    localizer.start_global(whole)?;
+    // A fixed map never changes; a growing one is taken in at the pace
+    // the clock of simulated time allows.
+    let clock = Instant::now();
+    let at = |time_s: f64| clock + Duration::from_secs_f64(time_s.max(0.0));
+    let refresh = if growing.is_some() {
+        Duration::from_secs_f64(options.refresh_s)
+    } else {
+        Duration::MAX
+    };
+    let mut localizer = Localizer::new(mcl, map, refresh, at(start_s));
+    let mut started = false;
+    let mut changed = Vec::new();
     let mut kidnap_rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6b69_646e_6170);
     let mut kidnapped_at = None;
     // The first frame after the kidnap.
@@ -101,8 +133,11 @@ pub(super) fn run_once(
     let mut mirror_scores: Option<(f64, f64)> = None;
     // Particles injected since the last trace line.
     let mut injected_since_trace = 0usize;
-    while sim.time_s() < options.seconds {
-        if options.kidnap_at > 0.0 && kidnapped_at.is_none() && sim.time_s() >= options.kidnap_at {
+    while sim.time_s() < start_s + options.seconds {
+        if options.kidnap_at > 0.0
+            && kidnapped_at.is_none()
+            && sim.time_s() >= start_s + options.kidnap_at
+        {
             let to = sim.random_free_pose(&mut kidnap_rng)?;
             sim.teleport(ROBOT, to)?;
             kidnapped_at = Some(sim.time_s());
@@ -111,11 +146,46 @@ pub(super) fn run_once(
         }
         let (v, w) = wanderer.command(&state.ranges, state.bumper, period)?;
         sim.drive(ROBOT, v, w)?;
+        for (name, wander, last) in &mut mappers {
+            let (v, w) = wander.command(&last.ranges, last.bumper, period)?;
+            sim.drive(name, v, w)?;
+        }
         fired.clear();
         while fired.is_empty() {
             sim.advance(period, &mut fired)?;
         }
-        state = fired.pop().context("a firing")?;
+        if let Some(growing) = growing.as_deref_mut() {
+            changed.clear();
+            for snapshot in &fired {
+                growing.integrate(snapshot, &mut changed)?;
+            }
+            if started {
+                for key in &changed {
+                    localizer.tile_changed(*key);
+                }
+            }
+        }
+        for snapshot in fired.drain(..) {
+            if snapshot.name == ROBOT {
+                state = snapshot;
+            } else if let Some(m) = mappers.iter_mut().find(|m| m.0 == snapshot.name) {
+                m.2 = snapshot;
+            }
+        }
+        if state.time_s < start_s {
+            continue;
+        }
+        let source: &mut TileMap = match growing.as_deref_mut() {
+            Some(g) => g.tiles_mut(),
+            None => &mut *tiles,
+        };
+        if !started {
+            let whole = source
+                .fetch(&source.tiles().map(|(k, _)| *k).collect::<Vec<_>>())
+                .map_err(|e| anyhow::anyhow!(e))?;
+            localizer.start_global(whole)?;
+            started = true;
+        }
         localizer.note_frame(&state.odometry, state.time_s);
         if kidnapped_at.is_some() && kidnap_frame.is_none() {
             kidnap_frame = Some(state.sequence);
@@ -150,7 +220,7 @@ pub(super) fn run_once(
                 state.time_s,
             )?;
         }
-        let report = localizer.step(&state.odometry, &state.ranges, Instant::now(), tiles)?;
+        let report = localizer.step(&state.odometry, &state.ranges, at(state.time_s), source)?;
         if let Some(correction) = report.correction {
             injected_since_trace += correction.injected;
             // Only the frames the filter weighs count: a robot standing
@@ -233,4 +303,18 @@ pub(super) fn run_once(
         most_particles_settled,
     };
     Ok((figures, extras, localizer.into_map()))
+}
+
+/// The name of the `k`-th mapping robot of a growing map (the robot
+/// localized is the first).
+fn mapper_name(k: u64) -> String {
+    format!("mapper-{k}")
+}
+
+/// The names of a growing map's `count` mapping robots, the robot
+/// localized first.
+pub(super) fn mapping_robots(count: u64) -> Vec<String> {
+    std::iter::once(ROBOT.to_string())
+        .chain((2..=count).map(mapper_name))
+        .collect()
 }
