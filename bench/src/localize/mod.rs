@@ -430,6 +430,11 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
         sensor: setup.sensor.name().to_string(),
         sonar: preset.name().to_string(),
         clean_map: options.clean_map,
+        map_minutes: options.map_minutes,
+        growing_map: options.growing_map.then_some(report::GrowingMapFigures {
+            mappers: options.mappers,
+            refresh_s: options.refresh_s,
+        }),
         beam_tempering: beam.map(|b| b.tempering),
         beam_hit_sigma_m: beam.map(|b| b.hit_sigma_m),
         beam_hit_sigma_per_m: beam.map(|b| b.hit_sigma_per_m),

@@ -16,6 +16,12 @@ pub(super) struct LocalizeReport {
     pub sonar: String,
     /// Whether the map came from the default sonar whatever the runs'.
     pub clean_map: bool,
+    /// Simulated minutes of mapping before the filter starts.
+    pub map_minutes: f64,
+    /// With `--growing-map`: the robots that built the map during each
+    /// run and the simulated seconds between the filter's map refreshes;
+    /// `None` for a map built before the runs.
+    pub growing_map: Option<GrowingMapFigures>,
     /// The beam model's tempering τ; `None` for the likelihood field.
     pub beam_tempering: Option<f64>,
     /// The beam model's hit spread at zero range and its growth per
@@ -32,6 +38,13 @@ pub(super) struct LocalizeReport {
     pub converge_limit_s: f64,
     /// One entry per world, in the order run.
     pub worlds: Vec<WorldFigures>,
+}
+
+/// How a growing map was built and taken in.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub(super) struct GrowingMapFigures {
+    pub mappers: u64,
+    pub refresh_s: f64,
 }
 
 /// One world's summary line and its runs.
@@ -142,6 +155,11 @@ mod tests {
             sensor: "beam".into(),
             sonar: "realistic".into(),
             clean_map: false,
+            map_minutes: 1.0,
+            growing_map: Some(GrowingMapFigures {
+                mappers: 3,
+                refresh_s: 20.0,
+            }),
             beam_tempering: Some(0.08),
             beam_hit_sigma_m: Some(0.03),
             beam_hit_sigma_per_m: Some(0.005),
@@ -178,5 +196,8 @@ mod tests {
         assert_eq!(json["beam_hit_sigma_m"], 0.03);
         assert_eq!(json["beam_hit_sigma_per_m"], 0.005);
         assert_eq!(json["surface_depth_m"], 0.1);
+        assert_eq!(json["map_minutes"], 1.0);
+        assert_eq!(json["growing_map"]["mappers"], 3);
+        assert_eq!(json["growing_map"]["refresh_s"], 20.0);
     }
 }
