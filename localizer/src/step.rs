@@ -84,6 +84,8 @@ pub struct Localizer {
     last_refresh: Instant,
     /// How long the last correction that built tables took.
     last_rebuild: Duration,
+    /// Whether slow rebuilds stretch the refresh period.
+    stretch_refresh: bool,
 }
 
 impl Localizer {
@@ -99,7 +101,16 @@ impl Localizer {
             resync: false,
             last_refresh: now,
             last_rebuild: Duration::ZERO,
+            stretch_refresh: true,
         }
+    }
+
+    /// Refreshes at exactly the period, however long table rebuilds take:
+    /// for runs in simulated time that must repeat whatever the machine's
+    /// load (the stretch measures the rebuilds by the wall clock).
+    pub fn with_steady_refresh(mut self) -> Self {
+        self.stretch_refresh = false;
+        self
     }
 
     /// The filter.
@@ -220,7 +231,7 @@ impl Localizer {
             report.tiles_fetched += fetch_into(tiles, &missing, &mut self.map)?;
             let started = Instant::now();
             let correction = self.mcl.correct(&mut self.map, readings)?;
-            if correction.tables_built > 0 {
+            if correction.tables_built > 0 && self.stretch_refresh {
                 self.last_rebuild = started.elapsed();
             }
             self.map.evict_to_budget(&needed.into_iter().collect());

@@ -274,3 +274,39 @@ fn prepared_global_start_builds_every_table_so_the_first_correction_builds_none(
         .expect("no correction in 20 frames");
     assert_eq!(first.tables_built, 0, "the first correction built tables");
 }
+
+#[test]
+fn slow_rebuilds_stretch_the_refresh_period_unless_it_is_kept_steady() {
+    let reference = room();
+    let (truth, odometry) = path(1)[0];
+    let ranges = frame(&reference, &truth);
+    // A period far shorter than building any table: the first step's
+    // rebuild stretches it to four periods, unless kept steady.
+    let period = Duration::from_micros(1);
+    for steady in [false, true] {
+        let mut source = Counting {
+            tiles: room_tiles(),
+            asked: RefCell::new(Vec::new()),
+        };
+        let start = Instant::now();
+        let mut localizer = tracking_localizer(truth, start, period);
+        if steady {
+            localizer = localizer.with_steady_refresh();
+        }
+        let first = localizer
+            .step(&odometry, &ranges, start, &mut source)
+            .unwrap();
+        assert!(first.correction.is_some_and(|c| c.tables_built > 0));
+        source.asked.borrow_mut().clear();
+        let held = TileKey::new(1, 1);
+        localizer.tile_changed(held);
+        localizer
+            .step(&odometry, &ranges, start + 2 * period, &mut source)
+            .unwrap();
+        assert_eq!(
+            source.asked.borrow().contains(&held),
+            steady,
+            "steady {steady}"
+        );
+    }
+}

@@ -91,9 +91,9 @@ pub struct LocalizeOptions {
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=8))]
     pub mappers: u64,
     /// Simulated seconds between two refreshes of a growing map's changed
-    /// tiles: `deog localize`'s `--refresh-s` (5 s) at the demo's pace of
-    /// 4 simulated seconds a second.
-    #[arg(long, default_value_t = 20.0)]
+    /// tiles, as `deog demo` has its localizers refresh (5 s of the
+    /// robots' time), never stretched by slow rebuilds.
+    #[arg(long, default_value_t = 5.0)]
     pub refresh_s: f64,
     /// Most particles.
     #[arg(long, default_value_t = FilterSettings::default().kld.max_particles)]

@@ -105,8 +105,9 @@ pub(super) fn run_once(
         .with_context(|| format!("the {sensor} model for rig {}", rig.name()))?;
     let mut mcl = Mcl::with_sensor(settings, model)?;
     mcl.set_firing(config.ring_firing());
-    // A fixed map never changes; a growing one is taken in at the pace
-    // the clock of simulated time allows.
+    // A fixed map never changes; a growing one is taken in every
+    // `--refresh-s` of simulated time, not stretched by how long rebuilds
+    // take on this machine, so that a run repeats.
     let clock = Instant::now();
     let at = |time_s: f64| clock + Duration::from_secs_f64(time_s.max(0.0));
     let refresh = if growing.is_some() {
@@ -114,7 +115,7 @@ pub(super) fn run_once(
     } else {
         Duration::MAX
     };
-    let mut localizer = Localizer::new(mcl, map, refresh, at(start_s));
+    let mut localizer = Localizer::new(mcl, map, refresh, at(start_s)).with_steady_refresh();
     let mut started = false;
     let mut changed = Vec::new();
     let mut kidnap_rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6b69_646e_6170);
