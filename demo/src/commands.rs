@@ -233,14 +233,14 @@ pub(crate) fn map(plan: &DemoPlan, robot: &PlannedRobot, addresses: &Addresses) 
     .collect()
 }
 
-/// A localizer for `robot` on the shared map, with no initial pose
-/// (but for explorers driving from its estimates: their start, within the
-/// localizer's default spread), expecting no echo past the plan's sonar's
-/// specular angle, if any.
 /// Seconds of the robots' time between two refreshes of a localizer's
 /// map.
 const LOCALIZER_REFRESH_S: f64 = 5.0;
 
+/// A localizer for `robot` on the shared map, with no initial pose
+/// (but for explorers driving from its estimates: their start, within the
+/// localizer's default spread), expecting no echo past the plan's sonar's
+/// specular angle, if any.
 pub(crate) fn localize(
     plan: &DemoPlan,
     robot: &PlannedRobot,
