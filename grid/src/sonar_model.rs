@@ -5,7 +5,10 @@
 //! with `R` the maximum range and `β` the cone's half-angle, let
 //! `u = ((R − r)/R + (β − α)/β) / 2`. Then, for a reading `d`:
 //! - Region I, `|r − d| ≤ tolerance` (probably occupied):
-//!   `P(occupied) = u · Max_occupied` (eq. 3.1);
+//!   `P(occupied) = u · Max_occupied` (eq. 3.1), where the angle factor
+//!   may be given other values on the axis and at the edge
+//!   ([`SonarModelParams::occupied_axis_factor`]): a specular sonar's
+//!   echoes come from the cone's edges more than from its axis;
 //! - Region II, `r < d − tolerance` (probably empty): `P(empty) = u` (eq. 3.4);
 //! - Region III, beyond: no information, no delta.
 //!
@@ -79,6 +82,17 @@ pub struct SonarModelParams {
     pub region_i_tolerance: f64,
     /// `Max_occupied`: the strongest belief one reading gives a region I cell.
     pub max_occupied: f64,
+    /// Region I's angle factor on the cone's axis: eq. 3.1's `(β − α)/β`
+    /// generalized to `a₀ + (a₁ − a₀) α/β`, with this as `a₀`. The thesis's
+    /// sonar (`a₀` 1, `a₁` 0) believes an echo came from along its axis.
+    pub occupied_axis_factor: f64,
+    /// Region I's angle factor at the cone's edge, `a₁`. A specular sonar
+    /// hears a flat wall only within its critical angle, from the nearest
+    /// point of the cone: a wall turned more than the half-angle from square
+    /// (two thirds of the walls it hears, with a 30° critical angle and a
+    /// 15° half-angle) echoes from the cone's edge, so its echoes come
+    /// from the edges more than from the axis.
+    pub occupied_edge_factor: f64,
     /// The weakest belief worth recording for a region I cell: where
     /// `P(occupied)` falls below it the reading leaves the cell alone.
     /// 0.5 records every belief the equation gives.
@@ -112,6 +126,8 @@ impl Default for SonarModelParams {
             half_angle: 15f64.to_radians(),
             region_i_tolerance: 0.05,
             max_occupied: 0.98,
+            occupied_axis_factor: 1.0,
+            occupied_edge_factor: 0.0,
             min_occupied: 0.5,
             max_empty: 0.98,
             min_empty: 0.5,
@@ -135,6 +151,8 @@ impl SonarModelParams {
             self.max_range,
         )?;
         within("max_occupied", self.max_occupied, 0.5, 0.9999)?;
+        within("occupied_axis_factor", self.occupied_axis_factor, 0.0, 1.0)?;
+        within("occupied_edge_factor", self.occupied_edge_factor, 0.0, 1.0)?;
         within("max_empty", self.max_empty, 0.5, 0.9999)?;
         within("min_empty", self.min_empty, 0.5, self.max_empty)?;
         within("min_occupied", self.min_occupied, 0.5, self.max_occupied)?;
@@ -192,6 +210,10 @@ pub struct SonarModel {
     // `α / (2β)` at evenly spaced `tan α` in [0, tan β], for the same reason.
     angle_table: Box<[f64]>,
     angle_table_scale: f64,
+    // Region I's angle factor as a loss from 1: `1 − a₀ + (a₀ − a₁) α/β`
+    // (for the thesis's factors exactly `α/β`, as region II's).
+    occupied_loss_at_axis: f64,
+    occupied_loss_slope: f64,
 }
 
 impl SonarModel {
@@ -224,6 +246,8 @@ impl SonarModel {
                 })
                 .collect(),
             angle_table_scale: TABLE_STEPS as f64 / params.half_angle.tan(),
+            occupied_loss_at_axis: 1.0 - params.occupied_axis_factor,
+            occupied_loss_slope: params.occupied_axis_factor - params.occupied_edge_factor,
         })
     }
 
@@ -293,23 +317,36 @@ impl SonarModel {
         }
     }
 
-    /// The thesis's `u`: the mean of the range and angle factors, in [0, 1].
+    /// The thesis's `u` for a cell of `region`: the mean of the range and
+    /// angle factors, in [0, 1]; region I's angle factor as its parameters
+    /// say ([`SonarModelParams::occupied_axis_factor`]).
     #[inline]
-    pub fn strength(&self, r: f64, alpha: f64) -> f64 {
-        (1.0 - 0.5 * (r * self.inv_max_range + alpha * self.inv_half_angle)).clamp(0.0, 1.0)
+    pub fn strength(&self, region: Region, r: f64, alpha: f64) -> f64 {
+        let angle = alpha * self.inv_half_angle;
+        (1.0 - 0.5 * (r * self.inv_max_range + self.angle_loss(region, angle))).clamp(0.0, 1.0)
+    }
+
+    /// One minus the angle factor of `region` at `angle` (`α/β`, or any
+    /// fraction of it: the loss is linear).
+    #[inline]
+    fn angle_loss(&self, region: Region, angle: f64) -> f64 {
+        match region {
+            Region::Occupied => self.occupied_loss_at_axis + self.occupied_loss_slope * angle,
+            Region::Empty => angle,
+        }
     }
 
     /// The probability of occupancy one reading gives a cell in `region`
     /// at distance `r` and angle `alpha`, exactly as the equations say (with
     /// the guards described in the module docs).
     pub fn probability(&self, region: Region, r: f64, alpha: f64) -> f64 {
-        occupied_probability(&self.params, region, self.strength(r, alpha))
+        occupied_probability(&self.params, region, self.strength(region, r, alpha))
     }
 
     /// The fixed-point log-odds delta for a cell, from the tables.
     #[inline]
     pub fn delta(&self, region: Region, r: f64, alpha: f64) -> i16 {
-        self.delta_for_strength(region, self.strength(r, alpha))
+        self.delta_for_strength(region, self.strength(region, r, alpha))
     }
 
     #[inline]
@@ -328,17 +365,25 @@ impl SonarModel {
         (value + 0.5f32.copysign(value)) as i16
     }
 
-    /// `u` for a point in a cone's own frame, angle from the table.
+    /// `u` for a point of `region` in a cone's own frame, angle from the
+    /// table.
     #[inline]
-    fn local_strength(&self, local: LocalPoint, r: f64) -> f64 {
-        let half_angle_term = if local.along > 0.0 {
+    fn local_strength(&self, region: Region, local: LocalPoint, r: f64) -> f64 {
+        // Half of α/β, as the table holds it.
+        let half_angle = if local.along > 0.0 {
             let (i, frac) =
                 table_position(local.across.abs() / local.along * self.angle_table_scale);
             self.angle_table[i] + (self.angle_table[i + 1] - self.angle_table[i]) * frac
         } else {
             0.0
         };
-        (1.0 - 0.5 * r * self.inv_max_range - half_angle_term).clamp(0.0, 1.0)
+        let half_loss = match region {
+            Region::Occupied => {
+                0.5 * self.occupied_loss_at_axis + self.occupied_loss_slope * half_angle
+            }
+            Region::Empty => half_angle,
+        };
+        (1.0 - 0.5 * r * self.inv_max_range - half_loss).clamp(0.0, 1.0)
     }
 
     /// The sector a reading from a sensor at `sensor` covers.
@@ -412,7 +457,7 @@ impl SonarModel {
             } else {
                 Region::Empty
             };
-            let delta = self.delta_for_strength(region, self.local_strength(local, r));
+            let delta = self.delta_for_strength(region, self.local_strength(region, local, r));
             if delta != 0 {
                 visit(cell, local, r, delta);
             }
@@ -626,6 +671,51 @@ mod tests {
     }
 
     #[test]
+    fn region_i_angle_factors_move_the_strongest_belief_to_the_edges() {
+        let edges = SonarModel::new(SonarModelParams {
+            occupied_axis_factor: 0.4,
+            occupied_edge_factor: 1.0,
+            ..SonarModelParams::default()
+        })
+        .unwrap();
+        let p = edges.params();
+        let (r, beta) = (2.0, p.half_angle);
+        let range_factor = (p.max_range - r) / p.max_range;
+        // Eq. 3.1 with the factor 0.4 on the axis, 1 at the edge, linear.
+        for (alpha, factor) in [(0.0, 0.4), (beta / 2.0, 0.7), (beta, 1.0)] {
+            let expected = (range_factor + factor) / 2.0 * p.max_occupied;
+            let got = edges.probability(Region::Occupied, r, alpha);
+            assert!(
+                (got - expected).abs() < 1e-12,
+                "{alpha}: {got} vs {expected}"
+            );
+        }
+        // Region II keeps the thesis's factor.
+        assert_eq!(
+            edges.probability(Region::Empty, r, beta / 2.0),
+            model().probability(Region::Empty, r, beta / 2.0)
+        );
+        // On a cone, the strongest occupied cell lies at an edge.
+        let res = Resolution::DEFAULT;
+        let deltas = cells(&edges, Pose2::new(0.0, 0.0, 0.0), r);
+        let (best, _) = deltas.iter().max_by_key(|(_, d)| **d).unwrap();
+        let (bx, by) = res.cell_center(*best);
+        let off_axis = by.atan2(bx).abs();
+        assert!(
+            off_axis > 0.8 * beta,
+            "strongest cell {off_axis} rad off the axis"
+        );
+        // Factors outside [0, 1] are refused.
+        for bad in [-0.1, 1.1, f64::NAN] {
+            let params = SonarModelParams {
+                occupied_edge_factor: bad,
+                ..SonarModelParams::default()
+            };
+            assert!(SonarModel::new(params).is_err(), "{bad} accepted");
+        }
+    }
+
+    #[test]
     fn no_echo_marks_free_space_only_out_to_its_limit() {
         let m = model();
         let deltas = cells(&m, Pose2::new(1.0, -2.0, 1.0), 50.0);
@@ -835,8 +925,18 @@ mod tests {
         #[test]
         fn fast_path_matches_reference(
             x in -20.0f64..20.0, y in -20.0f64..20.0, theta in -4.0f64..4.0, range in 0.0f64..12.0,
+            axis in 0.0f64..=1.0, edge in 0.0f64..=1.0, thesis in proptest::bool::ANY,
         ) {
-            let m = model();
+            let m = if thesis {
+                model()
+            } else {
+                SonarModel::new(SonarModelParams {
+                    occupied_axis_factor: axis,
+                    occupied_edge_factor: edge,
+                    ..SonarModelParams::default()
+                })
+                .unwrap()
+            };
             let pose = Pose2::new(x, y, theta);
             let fast = cells(&m, pose, range);
             let mut reference = HashMap::new();

@@ -33,8 +33,8 @@ pub mod map_view;
 pub mod sensors;
 
 pub use cartographer::{
-    Cartographer, FrameInput, PoseChoice, SPECULAR_MAX_FREE_RANGE, SonarMethod,
-    mapping_sonar_model, specular_sonar_mapping,
+    Cartographer, FrameInput, PoseChoice, SPECULAR_MAX_FREE_RANGE, SPECULAR_OCCUPIED_AXIS_FACTOR,
+    SonarMethod, mapping_sonar_model, specular_sonar_mapping,
 };
 pub use directional::{DEFAULT_ENCLOSURE_PERIOD, DirectionalSettings, DirectionalView};
 pub use error::MappingError;

@@ -30,6 +30,10 @@
 //! - `directional-specular-no-shadow`: `directional-specular` without
 //!   taking back the free evidence that reached cells through a wall
 //!   before it was heard (`deog map --shadow-depth 0`);
+//! - `directional-specular-axis`: `directional-specular` with the
+//!   thesis's angle factor for region I, an echo believed to come from
+//!   along the cone's axis (`deog map --occupied-axis-factor 1
+//!   --occupied-edge-factor 0`);
 //! - `octomap`: OctoMap, with one ray per reading with an echo, from its
 //!   transducer along its axis to the range read, no-echo readings left
 //!   out, OctoMap's default probabilities (hit 0.7, miss 0.4, clamping
@@ -88,7 +92,7 @@ use crate::option_error::{OptionError, require};
 use octomap_method::{OctomapDetails, OctomapRecord, OctomapSide};
 
 /// The methods compared, in the order the table lists them.
-pub const METHODS: [&str; 10] = [
+pub const METHODS: [&str; 11] = [
     "thesis",
     "thesis-no-echo-ignored",
     "keep-walls",
@@ -98,6 +102,7 @@ pub const METHODS: [&str; 10] = [
     "directional-specular",
     "directional-specular-no-enclosure",
     "directional-specular-no-shadow",
+    "directional-specular-axis",
     "octomap",
 ];
 
@@ -516,7 +521,13 @@ fn build(
     }
     let rig = deog_rig::scout();
     let (sonar_method, params) = if method.starts_with("directional-specular") {
-        specular_sonar_mapping()
+        let (sonar_method, mut params) = specular_sonar_mapping();
+        if method.ends_with("-axis") {
+            let thesis = mapping_sonar_model();
+            params.occupied_axis_factor = thesis.occupied_axis_factor;
+            params.occupied_edge_factor = thesis.occupied_edge_factor;
+        }
+        (sonar_method, params)
     } else {
         let mut params = mapping_sonar_model();
         params.max_free_range = options.max_free_range;

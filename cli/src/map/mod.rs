@@ -101,6 +101,17 @@ pub struct MapArgs {
     /// Half the depth of the sonar model's region I, metres.
     #[arg(long, default_value_t = mapping_sonar_model().region_i_tolerance)]
     pub region_tolerance: f64,
+    /// The sonar model's angle factor for region I on the cone's axis, 0 to
+    /// 1 (thesis eq. 3.1's (β − α)/β is 1 there). With
+    /// --occupied-edge-factor, the factor runs linearly from the axis to
+    /// the edge; a specular sonar hears most walls at its cone's edges
+    /// (`deog demo --sonar realistic` gives 0.4 and 1).
+    #[arg(long, default_value_t = mapping_sonar_model().occupied_axis_factor)]
+    pub occupied_axis_factor: f64,
+    /// The sonar model's angle factor for region I at the cone's edge, 0
+    /// to 1 (the thesis's is 0).
+    #[arg(long, default_value_t = mapping_sonar_model().occupied_edge_factor)]
+    pub occupied_edge_factor: f64,
     /// How far a no-echo reading marks its cone free, metres (0: no-echo
     /// readings are ignored). With a specular sonar, lost echoes are
     /// common, and marking them free erases the walls they missed.

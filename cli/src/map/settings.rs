@@ -57,6 +57,8 @@ impl MapArgs {
             min_empty: self.min_empty,
             min_occupied: self.min_occupied,
             region_i_tolerance: self.region_tolerance,
+            occupied_axis_factor: self.occupied_axis_factor,
+            occupied_edge_factor: self.occupied_edge_factor,
             no_echo_free_range: self.no_echo_free_range,
             max_mapped_range: self.max_mapped_range,
             max_free_range: self.max_free_range,
@@ -64,7 +66,8 @@ impl MapArgs {
         };
         let params = params.validate().context(
             "the sonar model's options (--max-occupied, --max-empty, --min-empty, --min-occupied, \
-             --region-tolerance, --no-echo-free-range, --max-mapped-range, --max-free-range)",
+             --region-tolerance, --occupied-axis-factor, --occupied-edge-factor, \
+             --no-echo-free-range, --max-mapped-range, --max-free-range)",
         )?;
         let ray = RayModelParams {
             hit_probability: self.hit_probability,
@@ -152,6 +155,17 @@ mod tests {
             settings(&["--firing-period", "0.1", "--max-free-range", "2"]).expect("flags given");
         assert_eq!(s.firing, RingFiring::Sequential { period_s: 0.1 });
         assert_eq!(s.sonar.max_free_range, 2.0);
+        let s = settings(&[
+            "--occupied-axis-factor",
+            "0.4",
+            "--occupied-edge-factor",
+            "1",
+        ])
+        .expect("region I's angle factors");
+        assert_eq!(
+            (s.sonar.occupied_axis_factor, s.sonar.occupied_edge_factor),
+            (0.4, 1.0)
+        );
     }
 
     #[test]
@@ -163,6 +177,7 @@ mod tests {
             (&["--estimate-wait", "NaN"], "--estimate-wait"),
             (&["--firing-period", "11"], "--firing-period"),
             (&["--max-occupied", "1.5"], "--max-occupied"),
+            (&["--occupied-edge-factor", "1.5"], "--occupied-edge-factor"),
             (&["--hit-probability", "2"], "--hit-probability"),
             (&["--shadow-depth", "11"], "--shadow-depth"),
             (&["--wall-probability", "0.2"], "--wall-probability"),
