@@ -212,10 +212,6 @@ pub(crate) fn map(plan: &DemoPlan, robot: &PlannedRobot, addresses: &Addresses) 
                 &params.no_echo_free_range.to_string(),
                 "--max-free-range",
                 &params.max_free_range.to_string(),
-                "--occupied-axis-factor",
-                &params.occupied_axis_factor.to_string(),
-                "--occupied-edge-factor",
-                &params.occupied_edge_factor.to_string(),
             ]))
             .collect()
     } else {
@@ -447,7 +443,7 @@ mod tests {
             line(&map(&plan, &plan.robots[0], &addresses)),
             "map --robot scout-1 --map demo --idle-exit 3 --server http://127.0.0.1:5001 \
              --firing-period 0.1 --sonar-method directional --no-echo-free-range 0 \
-             --max-free-range 2 --occupied-axis-factor 0.4 --occupied-edge-factor 1"
+             --max-free-range 2"
         );
         assert_eq!(
             line(&localize(&plan, &plan.robots[0], &addresses)),

@@ -85,15 +85,11 @@ impl Default for ConeGeometry {
 /// (`deog_mapping::SonarMethod::Directional`), where the occupied cell
 /// region I puts before a wall is freed only by readings from the side it
 /// was heard from, which meet it in region I again: its walls stand
-/// a little further out than a plain map's. With region I believed on
-/// the axis, 0.10 m measured best (`map2`, 20 seeds: mean error after
-/// convergence 5.7 cm at 0.025 m, 4.7 cm at 0.05 m, 3.6 cm at 0.10 m,
-/// 4.5 cm at 0.15 m); with it believed at the cone's edges
-/// (`deog_mapping::SPECULAR_OCCUPIED_AXIS_FACTOR`), whose walls stand
-/// nearer the true ones, 0.075 m (`map1`, 100 seeds: 2.1 cm at 0.05 m but
-/// 6 runs fewer converged, 2.6 cm at 0.075 m, 3.9 cm at 0.10 m;
-/// BENCHMARKS.md, localization).
-pub const SPECULAR_SURFACE_DEPTH: f64 = 0.075;
+/// about a cell further out than a plain map's. Measured in `map2` with
+/// `--sonar realistic` (20 seeds): 0.025 m gave a mean error after
+/// convergence of 5.7 cm, 0.05 m 4.7 cm, 0.075 m 3.9 cm, 0.10 m 3.6 cm,
+/// 0.125 m 3.8 cm, 0.15 m 4.5 cm (BENCHMARKS.md, localization).
+pub const SPECULAR_SURFACE_DEPTH: f64 = 0.10;
 
 impl ConeGeometry {
     /// The default geometry for a sonar that is specular past

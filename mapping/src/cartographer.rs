@@ -41,29 +41,28 @@ pub fn mapping_sonar_model() -> SonarModelParams {
 /// kept by direction ([`SonarMethod::Directional`]), no-echo readings
 /// ignored (most are echoes lost off a grazed wall, not free space),
 /// empty evidence only out to 2 m (the farther a cell, the likelier a
-/// grazed wall stands before it), and an echo believed to come from the
-/// cone's edges more than from its axis ([`SPECULAR_OCCUPIED_AXIS_FACTOR`]);
-/// echoes are still mapped out to 5 m.
+/// grazed wall stands before it); echoes are still mapped out to 5 m.
 pub fn specular_sonar_mapping() -> (SonarMethod, SonarModelParams) {
     (
         SonarMethod::Directional,
         SonarModelParams {
             no_echo_free_range: 0.0,
             max_free_range: SPECULAR_MAX_FREE_RANGE,
-            occupied_axis_factor: SPECULAR_OCCUPIED_AXIS_FACTOR,
-            occupied_edge_factor: 1.0,
             ..mapping_sonar_model()
         },
     )
 }
 
-/// Region I's angle factor on the axis in [`specular_sonar_mapping`],
-/// rising to 1 at the cone's edge. A flat wall turned from square by
-/// more than the cone's half-angle, yet within the critical angle,
-/// echoes from the cone's edge; with the thesis's factor (1 on the axis,
-/// 0 at the edge) such an echo marked a wall on the axis, in front of
-/// the true one. 0.4 measured best on the realistic sonar's readings
-/// (BENCHMARKS.md, sonar mapping: 0 to 0.75 tried).
+/// Region I's angle factor on the cone's axis that makes the most cells
+/// of a specular sonar's ten-minute maps right, rising to 1 at the edge
+/// (`deog map --occupied-axis-factor 0.4 --occupied-edge-factor 1`). A
+/// flat wall turned from square by more than the cone's half-angle, yet
+/// within the critical angle, echoes from the cone's edge; the thesis's
+/// factor (1 on the axis, 0 at the edge) marks such an echo on the axis,
+/// in front of the wall. Not [`specular_sonar_mapping`]'s: a wall marked
+/// only from the cones' edges takes more readings to build, and on the
+/// young maps `deog demo` localizes on, robots found themselves less
+/// often (BENCHMARKS.md, sonar mapping: 0 to 1 tried).
 pub const SPECULAR_OCCUPIED_AXIS_FACTOR: f64 = 0.4;
 
 /// How far a specular sonar's empty evidence reaches in

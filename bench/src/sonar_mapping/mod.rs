@@ -30,10 +30,11 @@
 //! - `directional-specular-no-shadow`: `directional-specular` without
 //!   taking back the free evidence that reached cells through a wall
 //!   before it was heard (`deog map --shadow-depth 0`);
-//! - `directional-specular-axis`: `directional-specular` with the
-//!   thesis's angle factor for region I, an echo believed to come from
-//!   along the cone's axis (`deog map --occupied-axis-factor 1
-//!   --occupied-edge-factor 0`);
+//! - `directional-specular-edges`: `directional-specular` with an echo
+//!   believed to come from the cone's edges more than from its axis
+//!   (region I's angle factor from [`SPECULAR_OCCUPIED_AXIS_FACTOR`] on
+//!   the axis to 1 at the edge, where the thesis has 1 and 0: `deog map
+//!   --occupied-axis-factor 0.4 --occupied-edge-factor 1`);
 //! - `octomap`: OctoMap, with one ray per reading with an echo, from its
 //!   transducer along its axis to the range read, no-echo readings left
 //!   out, OctoMap's default probabilities (hit 0.7, miss 0.4, clamping
@@ -80,8 +81,8 @@ use deog_evaluation::map_quality::{QualityInput, map_quality, verdict_png};
 use deog_grid::{ClampLimits, Pose2, Resolution, TileMap, TileSize};
 use deog_harness::Progress;
 use deog_mapping::{
-    Cartographer, FrameInput, MapViewSettings, PoseChoice, SonarMethod, mapping_sonar_model,
-    specular_sonar_mapping,
+    Cartographer, FrameInput, MapViewSettings, PoseChoice, SPECULAR_OCCUPIED_AXIS_FACTOR,
+    SonarMethod, mapping_sonar_model, specular_sonar_mapping,
 };
 use deog_simulator::simulation::{SimConfig, Simulation};
 use deog_simulator::{SonarPreset, WanderParams, Wanderer};
@@ -102,7 +103,7 @@ pub const METHODS: [&str; 11] = [
     "directional-specular",
     "directional-specular-no-enclosure",
     "directional-specular-no-shadow",
-    "directional-specular-axis",
+    "directional-specular-edges",
     "octomap",
 ];
 
@@ -522,10 +523,9 @@ fn build(
     let rig = deog_rig::scout();
     let (sonar_method, params) = if method.starts_with("directional-specular") {
         let (sonar_method, mut params) = specular_sonar_mapping();
-        if method.ends_with("-axis") {
-            let thesis = mapping_sonar_model();
-            params.occupied_axis_factor = thesis.occupied_axis_factor;
-            params.occupied_edge_factor = thesis.occupied_edge_factor;
+        if method.ends_with("-edges") {
+            params.occupied_axis_factor = SPECULAR_OCCUPIED_AXIS_FACTOR;
+            params.occupied_edge_factor = 1.0;
         }
         (sonar_method, params)
     } else {

@@ -105,7 +105,7 @@ pub struct MapArgs {
     /// 1 (thesis eq. 3.1's (β − α)/β is 1 there). With
     /// --occupied-edge-factor, the factor runs linearly from the axis to
     /// the edge; a specular sonar hears most walls at its cone's edges
-    /// (`deog demo --sonar realistic` gives 0.4 and 1).
+    /// (0.4 and 1 make its ten-minute maps the most right; BENCHMARKS.md).
     #[arg(long, default_value_t = mapping_sonar_model().occupied_axis_factor)]
     pub occupied_axis_factor: f64,
     /// The sonar model's angle factor for region I at the cone's edge, 0
