@@ -3,8 +3,8 @@
 //! simulator's true pose; a real robot has only its odometry).
 
 use deog_grid::{
-    GridError, Pose2, RayModelParams, Resolution, RingFiring, SensorRing, SonarModelParams,
-    TileDelta, TileKey, TileSize,
+    CellIndex, ConeGuard, GridError, Pose2, RayModelParams, Resolution, RingFiring, SensorRing,
+    SonarModelParams, TileDelta, TileKey, TileMap, TileSize,
 };
 use deog_rig::Rig;
 
@@ -40,7 +40,7 @@ pub fn mapping_sonar_model() -> SonarModelParams {
 /// simulator's realistic sonar (BENCHMARKS.md, sonar mapping): evidence
 /// kept by direction ([`SonarMethod::Directional`]), no-echo readings
 /// ignored (most are echoes lost off a grazed wall, not free space),
-/// empty evidence only out to 2 m (the farther a cell, the likelier a
+/// and empty evidence only out to 2 m (the farther a cell, the likelier a
 /// grazed wall stands before it); echoes are still mapped out to 5 m.
 pub fn specular_sonar_mapping() -> (SonarMethod, SonarModelParams) {
     (
@@ -68,6 +68,18 @@ pub const SPECULAR_OCCUPIED_AXIS_FACTOR: f64 = 0.4;
 /// How far a specular sonar's empty evidence reaches in
 /// [`specular_sonar_mapping`], metres.
 pub const SPECULAR_MAX_FREE_RANGE: f64 = 2.0;
+
+/// How far from the robot's centre a cone of `rig` mapped with `sonar`
+/// reaches, metres: its mapped range from a sensor up to the rig's reach
+/// off the centre, and one more cell for the cells its edge touches.
+fn cone_reach(rig: &Rig, sonar: &SonarModelParams, resolution: Resolution) -> f64 {
+    sonar
+        .max_mapped_range
+        .min(sonar.max_range)
+        .min(rig.max_range())
+        + rig.reach()
+        + resolution.metres()
+}
 
 /// Which pose of a frame the map is built from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -155,6 +167,31 @@ pub struct Cartographer {
     directional: Option<Directional>,
     /// When the sensors fire within a frame ([`Self::with_firing`]).
     firing: RingFiring,
+}
+
+/// A directional cartographer's guard with a view of the map it writes
+/// to: a cell hides what lies behind it if the cartographer's own beliefs
+/// or the map (every writer's) hold it a wall. Another robot's
+/// cartographer may have heard a wall this one only grazed.
+struct OwnAndMapWalls<'a> {
+    own: &'a DirectionalView,
+    map: &'a MapView,
+}
+
+impl ConeGuard for OwnAndMapWalls<'_> {
+    fn shadows(&self, cell: CellIndex) -> bool {
+        self.own.shadows(cell) || self.map.shadows(cell)
+    }
+
+    /// As the cartographer's own beliefs say: a cell the map holds a wall
+    /// still takes the evidence of the readings that reach it, in the
+    /// directions they face. Kept from any reading's empty evidence, the
+    /// arcs a sonar marks in front of a wall stayed walls for good (every
+    /// world's maps 2 to 4 points less right; BENCHMARKS.md, sonar
+    /// mapping).
+    fn keeps(&self, cell: CellIndex) -> bool {
+        self.own.keeps(cell)
+    }
 }
 
 /// What [`SonarMethod::Directional`] keeps between frames.
@@ -249,9 +286,11 @@ impl Cartographer {
     /// `settings` reaching as far as `sonar`'s cones can from the rig's
     /// sensors; with [`SonarMethod::Directional`], keeps evidence by
     /// direction in a view of `settings`' size and wall probability (a
-    /// rig with lasers too has their rays kept so as well). A rig of
-    /// lasers alone, or [`SonarMethod::Thesis`], leaves the cartographer
-    /// as it is.
+    /// rig with lasers too has their rays kept so as well), its cones
+    /// guarded also by a view of the map written to, as keep-walls has,
+    /// for the walls other robots' cartographers heard. A rig of lasers
+    /// alone, or [`SonarMethod::Thesis`], leaves the cartographer as it
+    /// is.
     pub fn with_sonar_method(
         self,
         method: SonarMethod,
@@ -276,28 +315,27 @@ impl Cartographer {
                     shadow_depth: settings.shadow_depth,
                 },
             )?;
-            return Ok(self.by_direction(view));
+            // And a view of the map written to, for the walls other
+            // robots' cartographers heard.
+            return Ok(self.by_direction(view).keeping_walls(
+                MapView::new(resolution, tile_size, settings)?,
+                cone_reach(rig, sonar, resolution),
+            ));
         }
         let view = MapView::new(resolution, tile_size, settings)?;
-        // A cone reaches its mapped range from a sensor up to `reach` off
-        // the centre; one more cell for the cells its edge touches.
-        let reach = sonar
-            .max_mapped_range
-            .min(sonar.max_range)
-            .min(rig.max_range())
-            + rig.reach()
-            + resolution.metres();
-        Ok(self.keeping_walls(view, reach))
+        Ok(self.keeping_walls(view, cone_reach(rig, sonar, resolution)))
     }
 
-    /// The view of the map being written, when walls are kept.
+    /// The view of the map being written, when walls are kept or
+    /// evidence is kept by direction.
     pub fn view_mut(&mut self) -> Option<&mut MapView> {
         self.guard.as_mut().map(|(view, _)| view)
     }
 
     /// The tiles a frame may reach that the view lacks: the process
     /// fetches them from the map server (or marks them unknown) before
-    /// [`Self::integrate`]. Empty when walls are not kept.
+    /// [`Self::integrate`]. Empty without a view of the map
+    /// ([`Self::view_mut`]).
     pub fn missing_tiles(&mut self, frame: &FrameInput<'_>) -> Result<Vec<TileKey>, MappingError> {
         if self.guard.is_none() {
             return Ok(Vec::new());
@@ -307,6 +345,27 @@ impl Cartographer {
             Some((view, reach)) => view.missing_around(&pose, *reach),
             None => Ok(Vec::new()),
         }
+    }
+
+    /// For a map held in this process (benchmarks, tests): puts into the
+    /// view of the map ([`Self::view_mut`]) the tiles `frame` may reach
+    /// that it lacks, from `map`, the map being written, as `deog map`
+    /// fetches them from the map server.
+    pub fn read_missing_tiles(
+        &mut self,
+        frame: &FrameInput<'_>,
+        map: &TileMap,
+    ) -> Result<(), MappingError> {
+        let missing = self.missing_tiles(frame)?;
+        if let Some((view, _)) = self.guard.as_mut() {
+            for key in missing {
+                match map.tile(key) {
+                    Some(tile) => view.insert(key, tile.clone())?,
+                    None => view.insert_unknown(key)?,
+                }
+            }
+        }
+        Ok(())
     }
 
     /// The pose the map is built from.
@@ -335,11 +394,21 @@ impl Cartographer {
         };
         if let Some(d) = &mut self.directional {
             d.plain.clear();
-            let cells = self
-                .sensor
-                .integrate_guarded(&pose, frame.ranges, &d.view, &mut d.plain)
-                .map_err(invalid)?;
+            let cells = match &self.guard {
+                Some((map, _)) => {
+                    let guard = OwnAndMapWalls { own: &d.view, map };
+                    self.sensor
+                        .integrate_guarded(&pose, frame.ranges, &guard, &mut d.plain)
+                }
+                None => self
+                    .sensor
+                    .integrate_guarded(&pose, frame.ranges, &d.view, &mut d.plain),
+            }
+            .map_err(invalid)?;
             d.view.absorb(&pose, &d.plain, out)?;
+            if let Some((map, _)) = &mut self.guard {
+                map.apply(&out[start..])?;
+            }
             return Ok(cells);
         }
         let cells = match &self.guard {
@@ -650,6 +719,19 @@ mod tests {
     }
 
     /// The Scout facing a wall 2 m ahead along +x, at `y`.
+    /// A frame read at `pose`, its true pose and odometry alike.
+    fn at_true_pose(sequence: u64, pose: Pose2, ranges: &[f64]) -> FrameInput<'_> {
+        FrameInput {
+            sequence,
+            pace: None,
+            true_pose: Some(pose),
+            odometry: pose,
+            reference_pose: None,
+            estimate: None,
+            ranges,
+        }
+    }
+
     fn facing_wall(sequence: u64, y: f64, range0: f64) -> (Pose2, Vec<f64>, u64) {
         let mut ranges = vec![10.668; 16];
         ranges[0] = range0;
@@ -676,15 +758,7 @@ mod tests {
                 .map(|k| facing_wall(k, 0.0, 1.8))
                 .chain((15..35).map(|k| facing_wall(k, 0.0, 4.0)));
             for (pose, ranges, sequence) in frames {
-                let frame = FrameInput {
-                    sequence,
-                    pace: None,
-                    true_pose: Some(pose),
-                    odometry: pose,
-                    reference_pose: None,
-                    estimate: None,
-                    ranges: &ranges,
-                };
+                let frame = at_true_pose(sequence, pose, &ranges);
                 assert!(cartographer.missing_tiles(&frame).is_ok());
                 let mut out = Vec::new();
                 cartographer.integrate(&frame, &mut out).expect("frame");
@@ -713,6 +787,68 @@ mod tests {
             p(&thesis, behind).is_some(),
             "the thesis's model maps through it"
         );
+    }
+
+    #[test]
+    fn a_wall_another_robot_heard_stops_a_directional_cone() {
+        let (res, size) = (Resolution::DEFAULT, TileSize::DEFAULT);
+        let (method, params) = specular_sonar_mapping();
+        let rig = deog_rig::scout();
+        // The map written to: a wall across x = 1 m that another robot's
+        // cartographer heard; this one has heard nothing yet.
+        let mut written = deog_grid::TileMap::new(res, size, deog_grid::ClampLimits::default());
+        let mut wall = Vec::new();
+        for y in -20..=20 {
+            let cell = res.cell_of(1.0, f64::from(y) * 0.05).expect("cell");
+            let (key, offset) = size.split(cell);
+            let mut delta = TileDelta::zero(key, size);
+            delta.raw_mut()[offset.index(size)] = 2000;
+            written.apply(&delta).expect("apply");
+            wall.push(cell);
+        }
+        // The front sonar grazes nothing and hears 1.8 m: a reading that
+        // passed the wall (a multipath echo, a neighbour's ping).
+        let (pose, ranges, sequence) = facing_wall(1, 0.0, 1.8);
+        let frame = at_true_pose(sequence, pose, &ranges);
+        let behind = res.cell_of(1.4, 0.0).expect("cell");
+        let in_front = res.cell_of(0.6, 0.0).expect("cell");
+        let delta_at = |reads_the_map: bool| {
+            let mut cartographer = Cartographer::with_model(res, size, PoseChoice::True, params)
+                .expect("cartographer")
+                .with_sonar_method(method, &rig, &params, MapViewSettings::default(), res, size)
+                .expect("method");
+            assert!(cartographer.view_mut().is_some(), "a view of the map");
+            if reads_the_map {
+                cartographer
+                    .read_missing_tiles(&frame, &written)
+                    .expect("read");
+            }
+            let mut out = Vec::new();
+            cartographer.integrate(&frame, &mut out).expect("frame");
+            let mut map = deog_grid::TileMap::new(res, size, deog_grid::ClampLimits::default());
+            for delta in &out {
+                map.apply(delta).expect("apply");
+            }
+            let p = |cell| map.get(cell).map(|b| b.probability());
+            (
+                p(in_front),
+                p(behind),
+                wall.iter().filter_map(|&c| p(c)).count(),
+            )
+        };
+        let (front, past, on_wall) = delta_at(false);
+        assert!(front.is_some_and(|p| p < 0.5), "freed in front: {front:?}");
+        assert!(
+            past.is_some_and(|p| p < 0.5),
+            "alone, it frees past the wall: {past:?}"
+        );
+        assert!(on_wall > 0);
+        let (front, past, _) = delta_at(true);
+        assert!(
+            front.is_some_and(|p| p < 0.5),
+            "still freed in front: {front:?}"
+        );
+        assert_eq!(past, None, "nothing past the wall the map holds");
     }
 
     #[test]

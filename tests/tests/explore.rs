@@ -7,6 +7,7 @@
 //! pillars of the TurtleBot3 world's map_server map.
 
 use std::process::Command;
+use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
 use deog_tests::{RunningDeog, ServerProcess, deog_binary, json_field};
@@ -17,9 +18,22 @@ fn field(json: &str, name: &str) -> f64 {
         .unwrap_or_else(|_| panic!("{name} is a number in {json}"))
 }
 
+/// Held by each test while its explorers drive: they steer in real time
+/// at 8x, and two runs at once on a small machine starve each other's
+/// steering of the CPU (a late stop is a bump no faster machine makes).
+static DRIVING: Mutex<()> = Mutex::new(());
+
+fn driving_alone() -> MutexGuard<'static, ()> {
+    // A test that failed holding it poisons it; the next still runs alone.
+    DRIVING
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
 /// Runs `deog demo --explore --no-localize` at 8x in a temp folder and
 /// returns its report.json, parsed and as text.
 fn explore_demo(world: &str, robots: &str, duration: &str) -> (serde_json::Value, String) {
+    let _alone = driving_alone();
     let out = tempfile::tempdir().expect("temp dir");
     let output = Command::new(deog_binary())
         .args([
@@ -55,6 +69,7 @@ fn explore_demo(world: &str, robots: &str, duration: &str) -> (serde_json::Value
 
 #[test]
 fn one_explorer_maps_a_room_and_stops_by_itself() {
+    let _alone = driving_alone();
     let runtime = tokio::runtime::Runtime::new().expect("runtime");
     let dir = tempfile::tempdir().expect("temp dir");
     let server = runtime.block_on(ServerProcess::start(&dir.path().join("data"), &[]));

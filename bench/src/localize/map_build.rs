@@ -127,7 +127,9 @@ pub(crate) fn empty_local_map(
 /// each mapping robot's cartographer turns its frames into deltas on one
 /// map.
 pub(crate) struct GrowingMap {
-    cartographers: Vec<(String, Cartographer, deog_grid::FrameMotion)>,
+    /// Each mapping robot's cartographer, its pace, and its frames since
+    /// its view of the map was last read.
+    cartographers: Vec<(String, Cartographer, deog_grid::FrameMotion, u32)>,
     tiles: TileMap,
     deltas: Vec<deog_grid::TileDelta>,
 }
@@ -138,7 +140,7 @@ impl GrowingMap {
         Ok(Self {
             cartographers: names
                 .iter()
-                .map(|n| Ok((n.clone(), cartographer_for(config)?, Default::default())))
+                .map(|n| Ok((n.clone(), cartographer_for(config)?, Default::default(), 0)))
                 .collect::<Result<_>>()?,
             tiles: TileMap::new(
                 Resolution::DEFAULT,
@@ -161,26 +163,34 @@ impl GrowingMap {
         state: &deog_simulator::simulation::RobotSnapshot,
         changed: &mut Vec<deog_grid::TileKey>,
     ) -> Result<()> {
-        let Some((_, cartographer, motion)) = self
+        let Some((_, cartographer, motion, since_read)) = self
             .cartographers
             .iter_mut()
-            .find(|(n, _, _)| *n == state.name)
+            .find(|(n, _, _, _)| *n == state.name)
         else {
             return Ok(());
         };
         self.deltas.clear();
-        cartographer.integrate(
-            &FrameInput {
-                sequence: state.sequence,
-                pace: motion.observe(&state.odometry, state.time_s),
-                true_pose: Some(state.true_pose),
-                odometry: state.odometry,
-                reference_pose: None,
-                estimate: None,
-                ranges: &state.ranges,
-            },
-            &mut self.deltas,
-        )?;
+        let input = FrameInput {
+            sequence: state.sequence,
+            pace: motion.observe(&state.odometry, state.time_s),
+            true_pose: Some(state.true_pose),
+            odometry: state.odometry,
+            reference_pose: None,
+            estimate: None,
+            ranges: &state.ranges,
+        };
+        // The view of the map read again as `deog map` reads it from the
+        // server, with what the other robots' cartographers wrote.
+        *since_read += 1;
+        if *since_read >= crate::sonar_mapping::VIEW_REFRESH_FRAMES {
+            *since_read = 0;
+            if let Some(view) = cartographer.view_mut() {
+                view.clear();
+            }
+        }
+        cartographer.read_missing_tiles(&input, &self.tiles)?;
+        cartographer.integrate(&input, &mut self.deltas)?;
         for d in &self.deltas {
             self.tiles.apply(d)?;
             changed.push(d.key);

@@ -4,9 +4,12 @@
 //! Per world, `N` Scouts (the `world:N` of `--worlds`) wander the
 //! simulator together for `--minutes`, with the sonar `--sonar` names; their
 //! frames are recorded in the order they fire. Each method then maps exactly
-//! those frames, from the true pose, into a map of its own, and the map is
-//! judged against the world (`deog-evaluation`'s map quality, with the
-//! robots' starting points as the seeds of the reachable free space):
+//! those frames, from the true pose, into a map of its own, each robot's
+//! through a cartographer of its own as `deog demo` maps them (one `deog
+//! map` per robot; `--one-cartographer`: all through one, its views
+//! shared), and the map is judged against the world (`deog-evaluation`'s
+//! map quality, with the robots' starting points as the seeds of the
+//! reachable free space):
 //! - `thesis`: the thesis's model alone ([`SonarMethod::Thesis`]), with the
 //!   mapping defaults of `deog map` (no-echo readings free their cone to
 //!   3 m);
@@ -107,6 +110,11 @@ pub const METHODS: [&str; 11] = [
     "octomap",
 ];
 
+/// A robot's frames between two readings of its cartographer's view of
+/// the map from the map being written: the 5 s `deog map` waits by
+/// default, at a Scout's 10 frames a second.
+pub(crate) const VIEW_REFRESH_FRAMES: u32 = 50;
+
 /// The method OctoMap runs as.
 const OCTOMAP: &str = "octomap";
 
@@ -157,6 +165,13 @@ pub struct SonarMappingOptions {
     /// deog's methods alone.
     #[arg(long)]
     pub octomap: bool,
+    /// Map every robot's frames through one cartographer, whose views
+    /// (walls kept, beliefs by direction) then hold what all the robots
+    /// read. No process of deog's maps so: `deog demo` runs one `deog map`
+    /// per robot, each with views of its own, as this bench does by
+    /// default. Figures recorded before 2026-11-30 were measured so.
+    #[arg(long)]
+    pub one_cartographer: bool,
 }
 
 impl SonarMappingOptions {
@@ -296,11 +311,14 @@ struct OptionsRecord {
     wall_probability: f64,
     max_free_range: f64,
     seed: u64,
+    one_cartographer: bool,
 }
 
 /// A frame as recorded: where the robot really was, what it read.
 struct RecordedFrame {
     sequence: u64,
+    /// Which robot read it, 0 to `robots − 1`.
+    robot: usize,
     /// The robot's pace by its odometry ([`deog_mapping::FrameInput::pace`]).
     pace: Option<Pose2>,
     true_pose: Pose2,
@@ -439,6 +457,7 @@ pub fn run(options: SonarMappingOptions) -> Result<()> {
                 wall_probability: options.wall_probability,
                 max_free_range: options.max_free_range,
                 seed: options.seed,
+                one_cartographer: options.one_cartographer,
             },
             octomap: octomap_record,
             octomap_skipped: octomap_skipped.as_deref(),
@@ -487,12 +506,14 @@ fn record(
         fired.clear();
         sim.advance(period, &mut fired)?;
         for state in fired.drain(..) {
-            let motion = &mut motions[latest
+            let robot = latest
                 .iter()
                 .position(|s| s.name == state.name)
-                .unwrap_or(0)];
+                .unwrap_or(0);
+            let motion = &mut motions[robot];
             frames.push(RecordedFrame {
                 sequence: frames.len() as u64 + 1,
+                robot,
                 pace: motion.observe(&state.odometry, state.time_s),
                 true_pose: state.true_pose,
                 ranges: state.ranges.clone(),
@@ -565,27 +586,53 @@ fn build(
         ..SimConfig::default()
     }
     .ring_firing();
-    let mut cartographer = Cartographer::with_model(res, size, PoseChoice::True, params)?
-        .with_sonar_method(sonar_method, &rig, &params, view, res, size)?
-        .with_firing(firing);
+    // One cartographer per robot, as `deog demo` runs one `deog map` per
+    // robot; their deltas go to one map, as the map server adds them.
+    let robots = if options.one_cartographer {
+        1
+    } else {
+        frames.iter().map(|f| f.robot + 1).max().unwrap_or(1)
+    };
+    let mut cartographers = (0..robots)
+        .map(|_| {
+            Ok(
+                Cartographer::with_model(res, size, PoseChoice::True, params)?
+                    .with_sonar_method(sonar_method, &rig, &params, view, res, size)?
+                    .with_firing(firing),
+            )
+        })
+        .collect::<Result<Vec<_>>>()?;
     let mut map = TileMap::new(res, size, ClampLimits::default());
     let mut deltas = Vec::new();
     let mut cell_updates = 0;
     let began = Instant::now();
+    let mut since_read = vec![0u32; robots];
     for frame in frames {
         deltas.clear();
-        cell_updates += cartographer.integrate(
-            &FrameInput {
-                sequence: frame.sequence,
-                pace: frame.pace,
-                true_pose: Some(frame.true_pose),
-                odometry: frame.true_pose,
-                reference_pose: None,
-                estimate: None,
-                ranges: &frame.ranges,
-            },
-            &mut deltas,
-        )? as u64;
+        let robot = frame.robot.min(robots - 1);
+        let cartographer = &mut cartographers[robot];
+        let input = FrameInput {
+            sequence: frame.sequence,
+            pace: frame.pace,
+            true_pose: Some(frame.true_pose),
+            odometry: frame.true_pose,
+            reference_pose: None,
+            estimate: None,
+            ranges: &frame.ranges,
+        };
+        // A view of the map being written, read again every 5 s of the
+        // robot's frames as `deog map` reads it from the server
+        // (`--view-refresh-s`): what the other robots' cartographers
+        // wrote since.
+        since_read[robot] += 1;
+        if since_read[robot] >= VIEW_REFRESH_FRAMES {
+            since_read[robot] = 0;
+            if let Some(view) = cartographer.view_mut() {
+                view.clear();
+            }
+        }
+        cartographer.read_missing_tiles(&input, &map)?;
+        cell_updates += cartographer.integrate(&input, &mut deltas)? as u64;
         for delta in &deltas {
             map.apply(delta)?;
         }
@@ -798,6 +845,7 @@ mod tests {
         ranges[12] = 7.0;
         let frames = [RecordedFrame {
             sequence: 1,
+            robot: 0,
             pace: None,
             true_pose: Pose2::new(0.01, 0.01, 0.0),
             ranges,
@@ -834,6 +882,45 @@ mod tests {
         near(belief(0.01, -5.0), 0.4); // sonar 12's ray, freed to 5 m
         assert_eq!(belief(0.01, -5.25), None, "nothing past the cut");
         assert_eq!(belief(-1.0, 0.01), None, "sonar 8 heard nothing");
+    }
+
+    #[test]
+    fn each_robot_has_a_cartographer_of_its_own_unless_one_is_asked_for() {
+        let options = |one: bool| {
+            let mut args = vec!["--worlds", "map2:2", "--minutes", "0.3"];
+            if one {
+                args.push("--one-cartographer");
+            }
+            parse(&args)
+        };
+        let world = load_world_spec("map2").expect("map2");
+        let (frames, _) = record(&world, 2, &options(false)).expect("record");
+        assert!(frames.iter().any(|f| f.robot == 0) && frames.iter().any(|f| f.robot == 1));
+        let (res, size) = (Resolution::DEFAULT, TileSize::new(64).expect("size"));
+        let cells = |method: &str, one: bool| {
+            let built = build(method, &frames, &options(one), res, size).expect("build");
+            let mut cells: Vec<_> = built
+                .map
+                .tiles()
+                .flat_map(|(key, tile)| {
+                    tile.raw_cells()
+                        .iter()
+                        .enumerate()
+                        .map(move |(i, v)| (*key, i, *v))
+                })
+                .collect();
+            cells.sort();
+            cells
+        };
+        // The thesis's model keeps nothing between frames: one
+        // cartographer or two, the map server's sums are the same.
+        assert_eq!(cells("thesis", false), cells("thesis", true));
+        // Beliefs by direction are a cartographer's own: two robots' views
+        // apart make another map than one view of both.
+        assert_ne!(
+            cells("directional-specular", false),
+            cells("directional-specular", true)
+        );
     }
 
     #[test]

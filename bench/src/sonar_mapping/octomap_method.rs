@@ -280,6 +280,7 @@ mod tests {
         }
         RecordedFrame {
             sequence: 1,
+            robot: 0,
             pace: None,
             true_pose: pose,
             ranges,

@@ -24,7 +24,8 @@ pub struct ModelSettings {
     pub tile_size: TileSize,
     /// How sonar readings become evidence.
     pub method: SonarMethod,
-    /// With [`SonarMethod::KeepWalls`], the view of the map cones stop in.
+    /// With [`SonarMethod::KeepWalls`] or [`SonarMethod::Directional`],
+    /// the view of the map cones stop in.
     pub view: MapViewSettings,
     /// When a frame's sensors fire.
     pub firing: RingFiring,

@@ -158,8 +158,9 @@ pub struct MapArgs {
     /// How sonar readings become evidence: `thesis` (the thesis's model
     /// alone), `directional` (evidence kept per direction of the surface
     /// normal, so that a reading that glanced off a wall cannot erase the
-    /// echoes it returned head-on: for a specular sonar, best with
-    /// --no-echo-free-range 0 --max-free-range 2) or `keep-walls` (each
+    /// echoes it returned head-on, its cones stopping also at the walls
+    /// the map holds, other robots' among them: for a specular sonar, best
+    /// with --no-echo-free-range 0 --max-free-range 2) or `keep-walls` (each
     /// cone stopping at the cells the map already holds as walls).
     #[arg(long, value_enum, default_value_t = SonarMethodChoice::Thesis)]
     pub sonar_method: SonarMethodChoice,
@@ -188,9 +189,9 @@ pub struct MapArgs {
     /// nothing else is sent as a wall. 0: never.
     #[arg(long, default_value_t = MapViewSettings::default().shadow_depth)]
     pub shadow_depth: f64,
-    /// With --sonar-method keep-walls: how often the tiles kept are read
-    /// again from the map server, seconds, so that other robots' walls
-    /// count too.
+    /// With --sonar-method keep-walls or directional: how often the tiles
+    /// of the map kept are read again from the map server, seconds, so
+    /// that other robots' walls count too.
     #[arg(long, default_value_t = 5.0)]
     pub view_refresh_s: f64,
     #[command(flatten)]
