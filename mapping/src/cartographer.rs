@@ -187,7 +187,7 @@ impl ConeGuard for OwnAndMapWalls<'_> {
     /// still takes the evidence of the readings that reach it, in the
     /// directions they face. Kept from any reading's empty evidence, the
     /// arcs a sonar marks in front of a wall stayed walls for good (every
-    /// world's maps 2 to 4 points less right; BENCHMARKS.md, sonar
+    /// world's maps 1.8 to 3.7 points less right; BENCHMARKS.md, sonar
     /// mapping).
     fn keeps(&self, cell: CellIndex) -> bool {
         self.own.keeps(cell)
