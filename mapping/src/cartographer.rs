@@ -167,6 +167,10 @@ pub struct Cartographer {
     directional: Option<Directional>,
     /// When the sensors fire within a frame ([`Self::with_firing`]).
     firing: RingFiring,
+    /// With a map held in the same process: every how many frames the
+    /// view of it is read anew ([`Self::reading_map_every`]), and the
+    /// frames since it last was.
+    map_reread: Option<(u32, u32)>,
 }
 
 /// A directional cartographer's guard with a view of the map it writes
@@ -249,6 +253,7 @@ impl Cartographer {
             guard: None,
             directional: None,
             firing: RingFiring::Together,
+            map_reread: None,
         }
     }
 
@@ -347,15 +352,35 @@ impl Cartographer {
         }
     }
 
+    /// With [`Self::read_missing_tiles`]: forgets the view of the map
+    /// every `frames` frames (at least 1), so that it is read anew with
+    /// what other writers (other robots' cartographers) wrote since, as
+    /// `deog map` reads it from the server every `--view-refresh-s`. By
+    /// default the view is only filled, never read anew.
+    pub fn reading_map_every(mut self, frames: u32) -> Self {
+        self.map_reread = Some((frames.max(1), 0));
+        self
+    }
+
     /// For a map held in this process (benchmarks, tests): puts into the
     /// view of the map ([`Self::view_mut`]) the tiles `frame` may reach
     /// that it lacks, from `map`, the map being written, as `deog map`
-    /// fetches them from the map server.
+    /// fetches them from the map server; the whole view anew every so
+    /// many frames ([`Self::reading_map_every`]).
     pub fn read_missing_tiles(
         &mut self,
         frame: &FrameInput<'_>,
         map: &TileMap,
     ) -> Result<(), MappingError> {
+        if let Some((every, since)) = &mut self.map_reread {
+            *since += 1;
+            if *since >= *every {
+                *since = 0;
+                if let Some((view, _)) = self.guard.as_mut() {
+                    view.clear();
+                }
+            }
+        }
         let missing = self.missing_tiles(frame)?;
         if let Some((view, _)) = self.guard.as_mut() {
             for key in missing {
@@ -849,6 +874,55 @@ mod tests {
             "still freed in front: {front:?}"
         );
         assert_eq!(past, None, "nothing past the wall the map holds");
+    }
+
+    #[test]
+    fn the_view_of_a_map_in_the_process_is_read_anew_every_so_many_frames() {
+        use deog_grid::ConeGuard;
+        let (res, size) = (Resolution::DEFAULT, TileSize::DEFAULT);
+        let (method, params) = specular_sonar_mapping();
+        let rig = deog_rig::scout();
+        let (pose, ranges, sequence) = facing_wall(1, 0.0, 1.8);
+        let frame = at_true_pose(sequence, pose, &ranges);
+        let wall = res.cell_of(1.0, 0.0).expect("cell");
+        // How many reads see the wall another writer puts into the map
+        // after the first read.
+        let reads_seeing_the_wall = |every: Option<u32>| {
+            let mut cartographer = Cartographer::with_model(res, size, PoseChoice::True, params)
+                .expect("cartographer")
+                .with_sonar_method(method, &rig, &params, MapViewSettings::default(), res, size)
+                .expect("method");
+            if let Some(every) = every {
+                cartographer = cartographer.reading_map_every(every);
+            }
+            let mut written = deog_grid::TileMap::new(res, size, deog_grid::ClampLimits::default());
+            let mut seen = Vec::new();
+            for read in 0..7 {
+                if read == 1 {
+                    let (key, offset) = size.split(wall);
+                    let mut delta = TileDelta::zero(key, size);
+                    delta.raw_mut()[offset.index(size)] = 2000;
+                    written.apply(&delta).expect("apply");
+                }
+                cartographer
+                    .read_missing_tiles(&frame, &written)
+                    .expect("read");
+                let view = cartographer.view_mut().expect("a view of the map");
+                seen.push(view.shadows(wall));
+            }
+            seen
+        };
+        assert_eq!(reads_seeing_the_wall(None), [false; 7], "filled once");
+        assert_eq!(
+            reads_seeing_the_wall(Some(3)),
+            [false, false, true, true, true, true, true],
+            "the third read reads the whole view anew"
+        );
+        assert_eq!(
+            reads_seeing_the_wall(Some(0)),
+            [false, true, true, true, true, true, true],
+            "0 is taken as 1: every read anew"
+        );
     }
 
     #[test]

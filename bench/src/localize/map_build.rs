@@ -93,7 +93,11 @@ pub(crate) fn cartographer_for(config: &SimConfig) -> Result<Cartographer> {
         res,
         size,
     )?;
-    Ok(cartographer.with_firing(config.ring_firing()))
+    // The view of the map read again as `deog map` reads it from the
+    // server, with what the other robots' cartographers wrote.
+    Ok(cartographer
+        .with_firing(config.ring_firing())
+        .reading_map_every(crate::sonar_mapping::VIEW_REFRESH_FRAMES))
 }
 
 /// A localizer's map with no tile yet, its range tables for the sonar of
@@ -129,7 +133,7 @@ pub(crate) fn empty_local_map(
 pub(crate) struct GrowingMap {
     /// Each mapping robot's cartographer, its pace, and its frames since
     /// its view of the map was last read.
-    cartographers: Vec<(String, Cartographer, deog_grid::FrameMotion, u32)>,
+    cartographers: Vec<(String, Cartographer, deog_grid::FrameMotion)>,
     tiles: TileMap,
     deltas: Vec<deog_grid::TileDelta>,
 }
@@ -140,7 +144,7 @@ impl GrowingMap {
         Ok(Self {
             cartographers: names
                 .iter()
-                .map(|n| Ok((n.clone(), cartographer_for(config)?, Default::default(), 0)))
+                .map(|n| Ok((n.clone(), cartographer_for(config)?, Default::default())))
                 .collect::<Result<_>>()?,
             tiles: TileMap::new(
                 Resolution::DEFAULT,
@@ -163,10 +167,10 @@ impl GrowingMap {
         state: &deog_simulator::simulation::RobotSnapshot,
         changed: &mut Vec<deog_grid::TileKey>,
     ) -> Result<()> {
-        let Some((_, cartographer, motion, since_read)) = self
+        let Some((_, cartographer, motion)) = self
             .cartographers
             .iter_mut()
-            .find(|(n, _, _, _)| *n == state.name)
+            .find(|(n, _, _)| *n == state.name)
         else {
             return Ok(());
         };
@@ -180,15 +184,6 @@ impl GrowingMap {
             estimate: None,
             ranges: &state.ranges,
         };
-        // The view of the map read again as `deog map` reads it from the
-        // server, with what the other robots' cartographers wrote.
-        *since_read += 1;
-        if *since_read >= crate::sonar_mapping::VIEW_REFRESH_FRAMES {
-            *since_read = 0;
-            if let Some(view) = cartographer.view_mut() {
-                view.clear();
-            }
-        }
         cartographer.read_missing_tiles(&input, &self.tiles)?;
         cartographer.integrate(&input, &mut self.deltas)?;
         for d in &self.deltas {

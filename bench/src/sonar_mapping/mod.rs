@@ -598,7 +598,8 @@ fn build(
             Ok(
                 Cartographer::with_model(res, size, PoseChoice::True, params)?
                     .with_sonar_method(sonar_method, &rig, &params, view, res, size)?
-                    .with_firing(firing),
+                    .with_firing(firing)
+                    .reading_map_every(VIEW_REFRESH_FRAMES),
             )
         })
         .collect::<Result<Vec<_>>>()?;
@@ -606,7 +607,6 @@ fn build(
     let mut deltas = Vec::new();
     let mut cell_updates = 0;
     let began = Instant::now();
-    let mut since_read = vec![0u32; robots];
     for frame in frames {
         deltas.clear();
         let robot = frame.robot.min(robots - 1);
@@ -620,17 +620,6 @@ fn build(
             estimate: None,
             ranges: &frame.ranges,
         };
-        // A view of the map being written, read again every 5 s of the
-        // robot's frames as `deog map` reads it from the server
-        // (`--view-refresh-s`): what the other robots' cartographers
-        // wrote since.
-        since_read[robot] += 1;
-        if since_read[robot] >= VIEW_REFRESH_FRAMES {
-            since_read[robot] = 0;
-            if let Some(view) = cartographer.view_mut() {
-                view.clear();
-            }
-        }
         cartographer.read_missing_tiles(&input, &map)?;
         cell_updates += cartographer.integrate(&input, &mut deltas)? as u64;
         for delta in &deltas {
