@@ -885,8 +885,8 @@ mod tests {
         let (pose, ranges, sequence) = facing_wall(1, 0.0, 1.8);
         let frame = at_true_pose(sequence, pose, &ranges);
         let wall = res.cell_of(1.0, 0.0).expect("cell");
-        // How many reads see the wall another writer puts into the map
-        // after the first read.
+        // Which of seven reads see the wall another writer puts into the
+        // map after the first read.
         let reads_seeing_the_wall = |every: Option<u32>| {
             let mut cartographer = Cartographer::with_model(res, size, PoseChoice::True, params)
                 .expect("cartographer")

@@ -131,8 +131,7 @@ pub(crate) fn empty_local_map(
 /// each mapping robot's cartographer turns its frames into deltas on one
 /// map.
 pub(crate) struct GrowingMap {
-    /// Each mapping robot's cartographer, its pace, and its frames since
-    /// its view of the map was last read.
+    /// Each mapping robot's cartographer and its pace.
     cartographers: Vec<(String, Cartographer, deog_grid::FrameMotion)>,
     tiles: TileMap,
     deltas: Vec<deog_grid::TileDelta>,
