@@ -10,8 +10,8 @@
 //! before the frame is mapped ([`MapView::missing_around`]).
 
 use deog_grid::{
-    CellBox, CellIndex, ClampLimits, ConeGuard, KeyMap, LogOdds, Pose2, Resolution, Tile,
-    TileDelta, TileKey, TileSize,
+    CellBox, CellIndex, CellOffset, ClampLimits, ConeGuard, KeyMap, LogOdds, Pose2, Resolution,
+    Tile, TileDelta, TileKey, TileSize,
 };
 
 use crate::error::MappingError;
@@ -273,6 +273,20 @@ impl MapView {
             .get(&key)
             .and_then(|t| t.tile.get(offset))
             .map(LogOdds::raw)
+    }
+}
+
+impl MapView {
+    /// Tile `key`, if held: for a caller that asks about many cells of
+    /// one tile in turn ([`Self::tile_shadows`]).
+    pub(crate) fn tile(&self, key: TileKey) -> Option<&Tile> {
+        self.tiles.get(&key).map(|held| &held.tile)
+    }
+
+    /// Whether the cell at `offset` of `tile` (one of this view's) hides
+    /// what lies behind it, as [`ConeGuard::shadows`] says of the cell.
+    pub(crate) fn tile_shadows(&self, tile: &Tile, offset: CellOffset) -> bool {
+        tile.get(offset).is_some_and(|b| b.raw() >= self.shadow)
     }
 }
 

@@ -170,7 +170,7 @@ const JUDGED_FOR_PERIODS: u64 = 10;
 /// judged enclosed, which were seen only through a wall, and when it was
 /// last used.
 #[derive(Debug, Clone)]
-struct DirectionalTile {
+pub(crate) struct DirectionalTile {
     bins: Box<[i16]>,
     combined: Box<[i16]>,
     /// Each cell's [`leaning`] belief, which the flood of [`enclosure`]
@@ -278,6 +278,23 @@ impl DirectionalView {
         let (key, offset) = self.tile_size.split(cell);
         let tile = self.tiles.get(&key)?;
         LogOdds::from_raw(tile.held(offset.index(self.tile_size), self.wall))
+    }
+
+    /// Tile `key`, if held: for a caller that asks about many cells of
+    /// one tile in turn ([`Self::tile_shadows`]).
+    pub(crate) fn tile(&self, key: TileKey) -> Option<&DirectionalTile> {
+        self.tiles.get(&key)
+    }
+
+    /// Whether cell `index` of `tile` (one of this view's) hides what lies
+    /// behind it, as [`ConeGuard::shadows`] says of the cell.
+    pub(crate) fn tile_shadows(&self, tile: &DirectionalTile, index: usize) -> bool {
+        tile.held(index, self.wall) >= self.wall
+    }
+
+    /// The tiles' size.
+    pub(crate) fn tile_size(&self) -> TileSize {
+        self.tile_size
     }
 
     /// Whether `cell` is judged walled off from every robot's path.
