@@ -773,7 +773,6 @@ mod tests {
         assert!(error.to_string().contains("frame 3"), "{error}");
     }
 
-    /// The Scout facing a wall 2 m ahead along +x, at `y`.
     /// A frame read at `pose`, its true pose and odometry alike.
     fn at_true_pose(sequence: u64, pose: Pose2, ranges: &[f64]) -> FrameInput<'_> {
         FrameInput {
@@ -787,6 +786,7 @@ mod tests {
         }
     }
 
+    /// The Scout facing a wall 2 m ahead along +x, at `y`.
     fn facing_wall(sequence: u64, y: f64, range0: f64) -> (Pose2, Vec<f64>, u64) {
         let mut ranges = vec![10.668; 16];
         ranges[0] = range0;

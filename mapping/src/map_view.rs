@@ -274,9 +274,7 @@ impl MapView {
             .and_then(|t| t.tile.get(offset))
             .map(LogOdds::raw)
     }
-}
 
-impl MapView {
     /// Tile `key`, if held: for a caller that asks about many cells of
     /// one tile in turn ([`Self::tile_shadows`]).
     pub(crate) fn tile(&self, key: TileKey) -> Option<&Tile> {
@@ -292,7 +290,8 @@ impl MapView {
 
 impl ConeGuard for MapView {
     fn shadows(&self, cell: CellIndex) -> bool {
-        self.belief(cell).is_some_and(|b| b >= self.shadow)
+        let (key, offset) = self.tile_size.split(cell);
+        self.tile(key).is_some_and(|t| self.tile_shadows(t, offset))
     }
 
     fn keeps(&self, cell: CellIndex) -> bool {

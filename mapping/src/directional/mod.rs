@@ -631,7 +631,9 @@ fn combined(bins: &[i16]) -> i16 {
 
 impl ConeGuard for DirectionalView {
     fn shadows(&self, cell: CellIndex) -> bool {
-        self.belief(cell).is_some_and(|b| b.raw() >= self.wall)
+        let (key, offset) = self.tile_size.split(cell);
+        self.tile(key)
+            .is_some_and(|t| self.tile_shadows(t, offset.index(self.tile_size)))
     }
 
     /// A wall's cells still take the evidence of the readings that reach
