@@ -221,8 +221,9 @@ impl DirectionalTile {
     fn change_bins<R>(&mut self, index: usize, change: impl FnOnce(&mut [i16]) -> R) -> R {
         let bins = &mut self.bins[index * DIRECTIONS..(index + 1) * DIRECTIONS];
         let result = change(bins);
-        self.combined[index] = combined(bins);
-        self.leaning[index] = leaning(bins);
+        let extremes = Extremes::of(bins);
+        self.combined[index] = combined(extremes);
+        self.leaning[index] = leaning(extremes);
         result
     }
 }
@@ -321,7 +322,6 @@ impl DirectionalView {
         let start = out.len();
         let size = self.tile_size;
         let cells_per_tile = size.area();
-        let bin_width = std::f64::consts::TAU / DIRECTIONS as f64;
         let wall = self.wall;
         let mut new_walls: Vec<(CellIndex, usize)> = Vec::new();
         for delta in plain {
@@ -346,9 +346,7 @@ impl DirectionalView {
                 let (cx, cy) = self.resolution.cell_center(cell);
                 // The direction back at the robot, in bins: the normal of
                 // a surface this cell could have echoed from.
-                let back = (robot.y - cy).atan2(robot.x - cx);
-                let position = back.rem_euclid(std::f64::consts::TAU) / bin_width;
-                let below = (position.floor() as usize) % DIRECTIONS;
+                let below = direction_bin(robot.x - cx, robot.y - cy);
                 let above = (below + 1) % DIRECTIONS;
                 let before = tile.held(index, wall);
                 let limits = self.settings.limits;
@@ -578,6 +576,70 @@ fn step(before: i16, after: i16) -> i16 {
     (i32::from(after) - i32::from(base)) as i16
 }
 
+/// tan 30° and tan 60°: where [`direction_bin`]'s bins part within a
+/// quarter turn.
+const TAN_30: f64 = 0.577_350_269_189_625_8;
+const TAN_60: f64 = 1.732_050_807_568_877_2;
+
+/// The bin of direction `(dx, dy)`, `⌊atan2(dy, dx) / 30°⌋` with the angle
+/// taken in `[0°, 360°)`, by comparisons rather than an arctangent (a
+/// twelfth of the mapping's time in `atan2` and its remainder): the
+/// quarter turn from the signs, the third of it from `tan 30°` and
+/// `tan 60°`. The same bin as the arctangent's but within a rounding
+/// error of a boundary; `(0, 0)` is bin 0, as `atan2(0, 0)` is 0.
+#[inline]
+fn direction_bin(dx: f64, dy: f64) -> usize {
+    const _: () = assert!(DIRECTIONS == 12, "direction_bin parts the turn in twelfths");
+    // Turned back by the quarter turns before it, the direction lies in
+    // [0°, 90°): along u, v towards it.
+    let (quarter, u, v) = if dx > 0.0 && dy >= 0.0 {
+        (0, dx, dy)
+    } else if dx <= 0.0 && dy > 0.0 {
+        (1, dy, -dx)
+    } else if dx < 0.0 {
+        (2, -dx, -dy)
+    } else if dy < 0.0 {
+        (3, -dy, dx)
+    } else {
+        return 0;
+    };
+    let third = if v < u * TAN_30 {
+        0
+    } else if v < u * TAN_60 {
+        1
+    } else {
+        2
+    };
+    quarter * 3 + third
+}
+
+/// A cell's most occupied direction and its freest observed one, read in
+/// one pass over its directions: what [`combined`] and [`leaning`] decide
+/// by. Both [`UNSEEN`] if no direction was observed.
+#[derive(Debug, Clone, Copy)]
+struct Extremes {
+    most: i16,
+    freest: i16,
+}
+
+impl Extremes {
+    #[inline]
+    fn of(bins: &[i16]) -> Self {
+        let mut most = UNSEEN;
+        let mut freest = i16::MAX;
+        for &b in bins {
+            most = most.max(b);
+            if b != UNSEEN {
+                freest = freest.min(b);
+            }
+        }
+        if most == UNSEEN {
+            freest = UNSEEN;
+        }
+        Self { most, freest }
+    }
+}
+
 /// A cell's belief as its directions lean: the most occupied if any
 /// leans occupied, else the freest observed; [`UNSEEN`] if none was
 /// observed. The flood of [`enclosure`] goes by it: a cell any direction
@@ -585,16 +647,8 @@ fn step(before: i16, after: i16) -> i16 {
 /// fringe are not walled off. Going by [`combined`] there cost map1's
 /// localizer (BENCHMARKS.md, sonar mapping).
 #[inline]
-fn leaning(bins: &[i16]) -> i16 {
-    let most = bins.iter().copied().max().unwrap_or(UNSEEN);
-    if most > 0 {
-        return most;
-    }
-    bins.iter()
-        .copied()
-        .filter(|&b| b != UNSEEN)
-        .min()
-        .unwrap_or(UNSEEN)
+fn leaning(Extremes { most, freest }: Extremes) -> i16 {
+    if most > 0 { most } else { freest }
 }
 
 /// A cell's belief from its directions, decided as the map's readers
@@ -611,17 +665,10 @@ fn leaning(bins: &[i16]) -> i16 {
 /// left them uncertain, the largest share of wrong cells (BENCHMARKS.md,
 /// sonar mapping).
 #[inline]
-fn combined(bins: &[i16]) -> i16 {
-    let most = bins.iter().copied().max().unwrap_or(UNSEEN);
+fn combined(Extremes { most, freest }: Extremes) -> i16 {
     if most > DECIDED_OCCUPIED {
         return most;
     }
-    let freest = bins
-        .iter()
-        .copied()
-        .filter(|&b| b != UNSEEN)
-        .min()
-        .unwrap_or(UNSEEN);
     if most > 0 && freest >= DECIDED_FREE {
         most
     } else {
@@ -948,6 +995,42 @@ mod tests {
     }
 
     #[test]
+    fn a_directions_bin_is_its_arctangents() {
+        let by_arctangent = |dx: f64, dy: f64| {
+            let angle = dy.atan2(dx).rem_euclid(std::f64::consts::TAU);
+            (angle / (std::f64::consts::TAU / DIRECTIONS as f64)).floor() as usize % DIRECTIONS
+        };
+        // Along the axes and every bin's middle, both ways round.
+        for quarter in 0..4 {
+            let angle = f64::from(quarter) * std::f64::consts::FRAC_PI_2;
+            let (dx, dy) = (angle.cos().round(), angle.sin().round());
+            assert_eq!(direction_bin(dx, dy), quarter as usize * 3, "{dx}, {dy}");
+        }
+        assert_eq!(
+            direction_bin(-1.0, -0.0),
+            6,
+            "minus zero is half a turn too"
+        );
+        for bin in 0..DIRECTIONS {
+            let angle = (bin as f64 + 0.5) * std::f64::consts::TAU / DIRECTIONS as f64;
+            assert_eq!(direction_bin(angle.cos(), angle.sin()), bin);
+        }
+        // Cells around a robot anywhere, as absorb asks.
+        let mut state = 99u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..100_000 {
+            let (dx, dy) = (next() * 20.0 - 10.0, next() * 20.0 - 10.0);
+            assert_eq!(direction_bin(dx, dy), by_arctangent(dx, dy), "{dx}, {dy}");
+        }
+        assert_eq!(direction_bin(0.0, 0.0), by_arctangent(0.0, 0.0));
+    }
+
+    #[test]
     fn the_decided_beliefs_are_the_map_readers_thresholds() {
         let thresholds = deog_grid::OccupancyThresholds::default();
         assert_eq!(DECIDED_OCCUPIED, thresholds.occupied().raw());
@@ -957,22 +1040,22 @@ mod tests {
     #[test]
     fn a_direction_that_decides_outweighs_one_that_leans() {
         let mut bins = [UNSEEN; DIRECTIONS];
-        assert_eq!(combined(&bins), UNSEEN, "nothing observed");
+        assert_eq!(combined(Extremes::of(&bins)), UNSEEN, "nothing observed");
         // Leaning occupied one way, decided free another: free.
         bins[0] = 300;
         bins[3] = -2000;
-        assert_eq!(combined(&bins), -2000);
+        assert_eq!(combined(Extremes::of(&bins)), -2000);
         // Leaning free is no decision: the lean to occupied stands.
         bins[3] = -1000;
-        assert_eq!(combined(&bins), 300);
+        assert_eq!(combined(Extremes::of(&bins)), 300);
         // A wall one way is a wall, whatever the others decided.
         bins[0] = 900;
         bins[3] = -2000;
-        assert_eq!(combined(&bins), 900);
+        assert_eq!(combined(Extremes::of(&bins)), 900);
         // Nothing leans occupied: the freest.
         bins[0] = -200;
         bins[3] = -1000;
-        assert_eq!(combined(&bins), -1000);
+        assert_eq!(combined(Extremes::of(&bins)), -1000);
     }
 
     #[test]
@@ -1008,12 +1091,9 @@ mod tests {
         assert!(!v.is_empty());
         for tile in v.tiles.values() {
             for (index, &kept) in tile.combined.iter().enumerate() {
-                assert_eq!(kept, combined(tile.bins(index)), "cell {index}");
-                assert_eq!(
-                    tile.leaning[index],
-                    leaning(tile.bins(index)),
-                    "cell {index}"
-                );
+                let extremes = Extremes::of(tile.bins(index));
+                assert_eq!(kept, combined(extremes), "cell {index}");
+                assert_eq!(tile.leaning[index], leaning(extremes), "cell {index}");
             }
         }
     }
