@@ -31,6 +31,7 @@ pub(crate) fn build_map(
     sensor: SensorChoice,
     minutes: f64,
     surface_depth: f64,
+    thresholds: OccupancyThresholds,
 ) -> Result<(TileMap, LocalMap)> {
     const NAME: &str = "cartographer";
     let mut sim = Simulation::new(world, config.clone(), 1000)?;
@@ -52,7 +53,7 @@ pub(crate) fn build_map(
         growing.integrate(&state, &mut changed)?;
     }
     let tiles = growing.tiles;
-    let mut map = empty_local_map(localize_config, sensor, surface_depth)?;
+    let mut map = empty_local_map(localize_config, sensor, surface_depth, thresholds)?;
     for (key, tile) in tiles.tiles() {
         map.insert_tile(*key, 1, Some(tile))?;
     }
@@ -101,11 +102,13 @@ pub(crate) fn cartographer_for(config: &SimConfig) -> Result<Cartographer> {
 }
 
 /// A localizer's map with no tile yet, its range tables for the sonar of
-/// `localize_config` as `sensor`'s cone sees it.
+/// `localize_config` as `sensor`'s cone sees it, its cells classed by
+/// `thresholds`.
 pub(crate) fn empty_local_map(
     localize_config: &SimConfig,
     sensor: SensorChoice,
     surface_depth: f64,
+    thresholds: OccupancyThresholds,
 ) -> Result<LocalMap> {
     // The localizer knows its sonar: specular past the same angle.
     let base = ConeGeometry {
@@ -121,7 +124,7 @@ pub(crate) fn empty_local_map(
     Ok(LocalMap::new(MapSettings {
         resolution: Resolution::DEFAULT,
         tile_size: TileSize::new(64)?,
-        thresholds: OccupancyThresholds::default(),
+        thresholds,
         geometry: sensor.cone_geometry(&localize_config.rig, base)?,
         budget_bytes: 512 << 20,
     })?)

@@ -36,6 +36,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::Args;
 use deog_evaluation::runs::summarize;
+use deog_grid::OccupancyThresholds;
 use deog_harness::Progress;
 use deog_localizer::beam_model::BeamModelParams;
 use deog_localizer::filter::FilterSettings;
@@ -146,6 +147,13 @@ pub struct LocalizeOptions {
     /// 0.05, or 0.1 with a specular sonar.
     #[arg(long)]
     pub surface_depth: Option<f64>,
+    /// The probability above which the localizer takes a map's cell for a
+    /// wall (ROS map_server's `occupied_thresh`). Above 0.7, the walls a
+    /// cartographer inferred rather than heard (space walled off from
+    /// every path, what was seen only through a wall; sent at 0.7) echo
+    /// nothing in the range tables
+    #[arg(long, default_value_t = DEFAULT_OCCUPIED_THRESHOLD)]
+    pub occupied_threshold: f64,
     /// Scale of the motion model's four noise parameters (1: the filter's
     /// defaults).
     #[arg(long, default_value_t = 1.0)]
@@ -217,6 +225,11 @@ impl LocalizeOptions {
                 || "--mirror-about takes a point in metres, \"x,y\"".into(),
             )?;
         }
+        require(
+            OccupancyThresholds::new(self.occupied_threshold, DEFAULT_FREE_THRESHOLD).is_ok(),
+            "--occupied-threshold",
+            || "--occupied-threshold must be a probability from 0.5 up to, not including, 1".into(),
+        )?;
         require(
             self.refresh_s.is_finite() && self.refresh_s > 0.0,
             "--refresh-s",
@@ -328,6 +341,13 @@ impl LocalizeOptions {
             .unwrap_or(ConeGeometry::for_sonar(angle).surface_depth)
     }
 
+    /// How the runs' localizer classes the map's cells:
+    /// `--occupied-threshold` and map_server's free threshold.
+    pub fn thresholds(&self) -> Result<OccupancyThresholds> {
+        OccupancyThresholds::new(self.occupied_threshold, DEFAULT_FREE_THRESHOLD)
+            .context("--occupied-threshold")
+    }
+
     /// Whether the runs' sonar loses echoes off grazed walls.
     fn specular_sonar(&self) -> bool {
         self.sonar_preset().specular_angle_deg().is_some()
@@ -418,6 +438,11 @@ fn rig_error_line(error: RigError) -> String {
 /// seconds.
 const CONVERGE_LIMIT_S: f64 = 60.0;
 
+/// ROS map_server's thresholds, the localizer's defaults
+/// ([`OccupancyThresholds::default`]).
+const DEFAULT_OCCUPIED_THRESHOLD: f64 = 0.65;
+const DEFAULT_FREE_THRESHOLD: f64 = 0.196;
+
 /// Runs `deog bench localize`: per world, a line when its map is built,
 /// with `--verbose` a line per run, and a summary line.
 pub fn run(options: LocalizeOptions) -> Result<()> {
@@ -439,6 +464,7 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
         beam_hit_sigma_m: beam.map(|b| b.hit_sigma_m),
         beam_hit_sigma_per_m: beam.map(|b| b.hit_sigma_per_m),
         surface_depth_m: beam.map(|_| options.surface_depth()),
+        occupied_threshold: options.occupied_threshold,
         seconds: options.seconds,
         kidnap_at_s: options.kidnap_at,
         converge_limit_s: CONVERGE_LIMIT_S,
@@ -466,7 +492,12 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
                     deog_grid::TileSize::new(64)?,
                     deog_grid::ClampLimits::default(),
                 ),
-                map_build::empty_local_map(&config, setup.sensor, options.surface_depth())?,
+                map_build::empty_local_map(
+                    &config,
+                    setup.sensor,
+                    options.surface_depth(),
+                    options.thresholds()?,
+                )?,
             )
         } else {
             let built = map_build::build_map(
@@ -476,6 +507,7 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
                 setup.sensor,
                 options.map_minutes,
                 options.surface_depth(),
+                options.thresholds()?,
             )?;
             deog_harness::println_above_bars!(
                 "{world_name}: map built in {:.1} s ({} tiles)",
@@ -494,7 +526,12 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
             // A growing map starts anew each run, from nothing.
             let mut growing = if options.growing_map {
                 let names = seeded_run::mapping_robots(options.mappers);
-                map = map_build::empty_local_map(&config, setup.sensor, options.surface_depth())?;
+                map = map_build::empty_local_map(
+                    &config,
+                    setup.sensor,
+                    options.surface_depth(),
+                    options.thresholds()?,
+                )?;
                 Some(map_build::GrowingMap::new(&map_config, &names)?)
             } else {
                 None
@@ -710,6 +747,9 @@ mod tests {
                 &["--sonar", "realistic", "--clean-map", "--growing-map"][..],
             ),
             ("--refresh-s", &["--refresh-s", "0"][..]),
+            ("--occupied-threshold", &["--occupied-threshold", "0.4"][..]),
+            ("--occupied-threshold", &["--occupied-threshold", "1"][..]),
+            ("--occupied-threshold", &["--occupied-threshold", "NaN"][..]),
             (
                 "--map-minutes",
                 &["--growing-map", "--map-minutes", "0"][..],
@@ -768,6 +808,7 @@ mod tests {
             setup.sensor,
             0.2,
             options.surface_depth(),
+            options.thresholds().expect("the default"),
         )
         .expect("a map from 12 simulated seconds");
         let out = tempfile::tempdir().expect("temp dir");
@@ -807,8 +848,13 @@ mod tests {
         let names = seeded_run::mapping_robots(options.mappers);
         assert_eq!(names.len(), 2);
         let mut growing = map_build::GrowingMap::new(&config, &names).expect("cartographers");
-        let map = map_build::empty_local_map(&config, setup.sensor, options.surface_depth())
-            .expect("an empty map");
+        let map = map_build::empty_local_map(
+            &config,
+            setup.sensor,
+            options.surface_depth(),
+            options.thresholds().expect("the default"),
+        )
+        .expect("an empty map");
         let mut unused = deog_grid::TileMap::new(
             deog_grid::Resolution::DEFAULT,
             deog_grid::TileSize::new(64).expect("a size"),

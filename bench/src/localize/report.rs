@@ -31,6 +31,9 @@ pub(super) struct LocalizeReport {
     /// How far past the first occupied cell echoes were expected, metres;
     /// `None` for the likelihood field.
     pub surface_depth_m: Option<f64>,
+    /// The probability above which the localizer took a map's cell for
+    /// a wall (`--occupied-threshold`).
+    pub occupied_threshold: f64,
     /// Seconds of a run, and its kidnap (0: none).
     pub seconds: f64,
     pub kidnap_at_s: f64,
@@ -164,6 +167,7 @@ mod tests {
             beam_hit_sigma_m: Some(0.03),
             beam_hit_sigma_per_m: Some(0.005),
             surface_depth_m: Some(0.1),
+            occupied_threshold: 0.65,
             seconds: 180.0,
             kidnap_at_s: 90.0,
             converge_limit_s: 60.0,
@@ -196,6 +200,7 @@ mod tests {
         assert_eq!(json["beam_hit_sigma_m"], 0.03);
         assert_eq!(json["beam_hit_sigma_per_m"], 0.005);
         assert_eq!(json["surface_depth_m"], 0.1);
+        assert_eq!(json["occupied_threshold"], 0.65);
         assert_eq!(json["map_minutes"], 1.0);
         assert_eq!(json["growing_map"]["mappers"], 3);
         assert_eq!(json["growing_map"]["refresh_s"], 20.0);

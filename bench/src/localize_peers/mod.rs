@@ -271,6 +271,7 @@ pub fn run(options: LocalizePeersOptions) -> Result<()> {
             SensorChoice::Beam,
             options.map_minutes,
             ConeGeometry::default().surface_depth,
+            deog_grid::OccupancyThresholds::default(),
         )?;
         let export = deog_mapping::export_map(&tiles)?;
         deog_harness::println_above_bars!(
