@@ -151,7 +151,7 @@ pub struct LocalizeOptions {
     /// wall (ROS map_server's `occupied_thresh`). Above 0.7, the walls a
     /// cartographer inferred rather than heard (space walled off from
     /// every path, what was seen only through a wall; sent at 0.7) echo
-    /// nothing in the range tables
+    /// nothing in the range tables.
     #[arg(long, default_value_t = DEFAULT_OCCUPIED_THRESHOLD)]
     pub occupied_threshold: f64,
     /// Scale of the motion model's four noise parameters (1: the filter's

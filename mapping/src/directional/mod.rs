@@ -583,7 +583,8 @@ const TAN_60: f64 = 1.732_050_807_568_877_2;
 
 /// The bin of direction `(dx, dy)`, `⌊atan2(dy, dx) / 30°⌋` with the angle
 /// taken in `[0°, 360°)`, by comparisons rather than an arctangent (a
-/// twelfth of the mapping's time in `atan2` and its remainder): the
+/// tenth of the mapping's time went to `atan2`, its remainder and its
+/// `floor`): the
 /// quarter turn from the signs, the third of it from `tan 30°` and
 /// `tan 60°`. The same bin as the arctangent's but within a rounding
 /// error of a boundary; `(0, 0)` is bin 0, as `atan2(0, 0)` is 0.
@@ -1000,7 +1001,7 @@ mod tests {
             let angle = dy.atan2(dx).rem_euclid(std::f64::consts::TAU);
             (angle / (std::f64::consts::TAU / DIRECTIONS as f64)).floor() as usize % DIRECTIONS
         };
-        // Along the axes and every bin's middle, both ways round.
+        // Along the axes, and in every bin's middle.
         for quarter in 0..4 {
             let angle = f64::from(quarter) * std::f64::consts::FRAC_PI_2;
             let (dx, dy) = (angle.cos().round(), angle.sin().round());
