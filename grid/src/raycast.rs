@@ -33,6 +33,12 @@ pub struct OccupancyThresholds {
 }
 
 impl OccupancyThresholds {
+    /// ROS map_server's `occupied_thresh`, the default occupied threshold.
+    pub const DEFAULT_OCCUPIED: f64 = 0.65;
+
+    /// ROS map_server's `free_thresh`, the default free threshold.
+    pub const DEFAULT_FREE: f64 = 0.196;
+
     /// Cells above `occupied` are occupied, below `free` free.
     pub fn new(occupied: f64, free: f64) -> Result<Self, GridError> {
         within("occupied_thresh", occupied, 0.5, 1.0)?;
@@ -65,7 +71,8 @@ impl OccupancyThresholds {
 
 impl Default for OccupancyThresholds {
     fn default() -> Self {
-        Self::new(0.65, 0.196).expect("map_server's thresholds are valid")
+        Self::new(Self::DEFAULT_OCCUPIED, Self::DEFAULT_FREE)
+            .expect("map_server's thresholds are valid")
     }
 }
 

@@ -68,6 +68,30 @@ const RASTER_EIGHTHS: usize = 2;
 const ALLOCATOR_EIGHTHS: usize = 2;
 const TABLE_EIGHTHS: usize = 4;
 
+/// The probability above which a localizer takes a cell of a specular
+/// sonar's map for a wall. Such maps are built by direction
+/// (`deog_mapping::SonarMethod::Directional`), whose cartographer sends at
+/// exactly 0.7 the walls it inferred rather than heard: space walled off
+/// from every path, and what was seen only through a wall. A sonar never
+/// hears them (a heard face stands in front where they are right), and
+/// where they are wrong the range tables would expect echoes from them.
+/// Above 0.7 they are unknown space to the tables. Measured with `deog
+/// bench localize --sonar realistic` (BENCHMARKS.md, localization): the
+/// mean error after convergence 3.1 to 2.6 cm in map1 and 2.8 to 2.3 cm
+/// in map2, convergence unchanged over 80 map1 seeds.
+pub const SPECULAR_OCCUPIED_THRESHOLD: f64 = 0.75;
+
+/// The thresholds a localizer classes a map's cells by: ROS map_server's,
+/// with the occupied one [`SPECULAR_OCCUPIED_THRESHOLD`] on a map built
+/// from a specular sonar's readings.
+pub fn occupied_threshold_for_sonar(specular: bool) -> f64 {
+    if specular {
+        SPECULAR_OCCUPIED_THRESHOLD
+    } else {
+        OccupancyThresholds::DEFAULT_OCCUPIED
+    }
+}
+
 /// How the map is cut and judged, and how much memory the cache may use.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MapSettings {

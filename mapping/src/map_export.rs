@@ -20,17 +20,17 @@
 
 use std::sync::OnceLock;
 
-use deog_grid::{CellIndex, LogOdds, TileMap};
+use deog_grid::{CellIndex, LogOdds, OccupancyThresholds, TileMap};
 use deog_mapfile::{Cell, MapImage, Mode};
 
 use crate::error::MappingError;
 
 /// Probability above which an exported cell is occupied (map_server's
 /// default `occupied_thresh`).
-pub const OCCUPIED_THRESH: f64 = 0.65;
+pub const OCCUPIED_THRESH: f64 = OccupancyThresholds::DEFAULT_OCCUPIED;
 /// Probability below which an exported cell is free (map_server's default
 /// `free_thresh`).
-pub const FREE_THRESH: f64 = 0.196;
+pub const FREE_THRESH: f64 = OccupancyThresholds::DEFAULT_FREE;
 /// Pixel of an occupied cell: black, p = 1.
 pub const OCCUPIED_PIXEL: u8 = 0;
 /// Pixel of a free cell: map_saver's near white, p = 1/255.

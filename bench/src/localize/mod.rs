@@ -40,6 +40,7 @@ use deog_grid::OccupancyThresholds;
 use deog_harness::Progress;
 use deog_localizer::beam_model::BeamModelParams;
 use deog_localizer::filter::FilterSettings;
+use deog_localizer::local_map::occupied_threshold_for_sonar;
 use deog_localizer::range_table::ConeGeometry;
 use deog_localizer::sensors::{LikelihoodFieldParams, SensorChoice};
 use deog_rig::{BUILT_IN_RIGS, Rig, RigError, load_rig_spec};
@@ -148,12 +149,13 @@ pub struct LocalizeOptions {
     #[arg(long)]
     pub surface_depth: Option<f64>,
     /// The probability above which the localizer takes a map's cell for a
-    /// wall (ROS map_server's `occupied_thresh`). Above 0.7, the walls a
-    /// cartographer inferred rather than heard (space walled off from
-    /// every path, what was seen only through a wall; sent at 0.7) echo
-    /// nothing in the range tables.
-    #[arg(long, default_value_t = DEFAULT_OCCUPIED_THRESHOLD)]
-    pub occupied_threshold: f64,
+    /// wall (see `deog localize --occupied-threshold`). Default: 0.65 (ROS
+    /// map_server's `occupied_thresh`), or 0.75 on a specular sonar's map
+    /// (not a `--clean-map`): above 0.7, the walls a cartographer inferred
+    /// rather than heard (space walled off from every path, what was seen
+    /// only through a wall; sent at 0.7) echo nothing in the range tables.
+    #[arg(long)]
+    pub occupied_threshold: Option<f64>,
     /// Scale of the motion model's four noise parameters (1: the filter's
     /// defaults).
     #[arg(long, default_value_t = 1.0)]
@@ -225,11 +227,9 @@ impl LocalizeOptions {
                 || "--mirror-about takes a point in metres, \"x,y\"".into(),
             )?;
         }
-        require(
-            OccupancyThresholds::new(self.occupied_threshold, DEFAULT_FREE_THRESHOLD).is_ok(),
-            "--occupied-threshold",
-            || "--occupied-threshold must be a probability from 0.5 up to, not including, 1".into(),
-        )?;
+        require(self.thresholds().is_ok(), "--occupied-threshold", || {
+            "--occupied-threshold must be a probability from 0.5 up to, not including, 1".into()
+        })?;
         require(
             self.refresh_s.is_finite() && self.refresh_s > 0.0,
             "--refresh-s",
@@ -326,25 +326,39 @@ impl LocalizeOptions {
         beam
     }
 
-    /// How far past the first occupied cell's near face the runs expect
-    /// echoes: `--surface-depth`, or that of the map's sonar
-    /// ([`ConeGeometry::for_sonar`]; a `--clean-map` is the default
-    /// sonar's).
-    pub fn surface_depth(&self) -> f64 {
-        let angle = if self.clean_map {
+    /// The specular angle of the sonar the map is built from, radians (a
+    /// `--clean-map` is the default sonar's).
+    fn map_sonar_angle(&self) -> Option<f64> {
+        if self.clean_map {
             None
         } else {
             self.sonar_preset().specular_angle_deg()
         }
-        .map(f64::to_radians);
+        .map(f64::to_radians)
+    }
+
+    /// How far past the first occupied cell's near face the runs expect
+    /// echoes: `--surface-depth`, or that of the map's sonar
+    /// ([`ConeGeometry::for_sonar`]).
+    pub fn surface_depth(&self) -> f64 {
         self.surface_depth
-            .unwrap_or(ConeGeometry::for_sonar(angle).surface_depth)
+            .unwrap_or(ConeGeometry::for_sonar(self.map_sonar_angle()).surface_depth)
+    }
+
+    /// The probability above which the runs' localizer takes a cell for a
+    /// wall: `--occupied-threshold`, or that for the map's sonar
+    /// ([`occupied_threshold_for_sonar`]).
+    pub fn occupied_threshold(&self) -> f64 {
+        self.occupied_threshold
+            .unwrap_or(occupied_threshold_for_sonar(
+                self.map_sonar_angle().is_some(),
+            ))
     }
 
     /// How the runs' localizer classes the map's cells:
-    /// `--occupied-threshold` and map_server's free threshold.
+    /// [`Self::occupied_threshold`] and map_server's free threshold.
     pub fn thresholds(&self) -> Result<OccupancyThresholds> {
-        OccupancyThresholds::new(self.occupied_threshold, DEFAULT_FREE_THRESHOLD)
+        OccupancyThresholds::new(self.occupied_threshold(), OccupancyThresholds::DEFAULT_FREE)
             .context("--occupied-threshold")
     }
 
@@ -438,11 +452,6 @@ fn rig_error_line(error: RigError) -> String {
 /// seconds.
 const CONVERGE_LIMIT_S: f64 = 60.0;
 
-/// ROS map_server's thresholds, the localizer's defaults
-/// ([`OccupancyThresholds::default`]).
-const DEFAULT_OCCUPIED_THRESHOLD: f64 = 0.65;
-const DEFAULT_FREE_THRESHOLD: f64 = 0.196;
-
 /// Runs `deog bench localize`: per world, a line when its map is built,
 /// with `--verbose` a line per run, and a summary line.
 pub fn run(options: LocalizeOptions) -> Result<()> {
@@ -464,7 +473,7 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
         beam_hit_sigma_m: beam.map(|b| b.hit_sigma_m),
         beam_hit_sigma_per_m: beam.map(|b| b.hit_sigma_per_m),
         surface_depth_m: beam.map(|_| options.surface_depth()),
-        occupied_threshold: options.occupied_threshold,
+        occupied_threshold: options.occupied_threshold(),
         seconds: options.seconds,
         kidnap_at_s: options.kidnap_at,
         converge_limit_s: CONVERGE_LIMIT_S,
@@ -659,6 +668,7 @@ fn fmt_opt(v: Option<f64>) -> String {
 #[cfg(test)]
 mod tests {
     use clap::Parser;
+    use deog_localizer::local_map::SPECULAR_OCCUPIED_THRESHOLD;
 
     use super::*;
 
@@ -729,6 +739,24 @@ mod tests {
         assert_eq!(
             parse(&["--sonar", "realistic", "--surface-depth", "0.2"]).surface_depth(),
             0.2
+        );
+    }
+
+    #[test]
+    fn a_specular_sonars_map_leaves_its_inferred_walls_out_unless_it_is_clean() {
+        let plain = OccupancyThresholds::DEFAULT_OCCUPIED;
+        assert_eq!(parse(&[]).occupied_threshold(), plain);
+        assert_eq!(
+            parse(&["--sonar", "realistic"]).occupied_threshold(),
+            SPECULAR_OCCUPIED_THRESHOLD
+        );
+        assert_eq!(
+            parse(&["--sonar", "realistic", "--clean-map"]).occupied_threshold(),
+            plain
+        );
+        assert_eq!(
+            parse(&["--sonar", "realistic", "--occupied-threshold", "0.65"]).occupied_threshold(),
+            0.65
         );
     }
 

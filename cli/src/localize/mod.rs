@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail, ensure};
 use clap::{Args, ValueEnum};
-use deog_grid::{CellBox, CellIndex, OccupancyThresholds, Resolution, TileSize};
+use deog_grid::{CellBox, CellIndex, Resolution, TileSize};
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::preset::Preset;
@@ -122,6 +122,14 @@ pub struct LocalizeArgs {
     /// laser-built map_server maps.
     #[arg(long)]
     pub surface_depth: Option<f64>,
+    /// The probability above which a map's cell is taken for a wall.
+    /// Default: 0.65 (ROS map_server's `occupied_thresh`), or 0.75 with
+    /// --specular-angle: above 0.7, the walls a sonar cartographer
+    /// inferred rather than heard (space walled off from every path, what
+    /// was seen only through a wall; sent at 0.7) echo nothing in the
+    /// range tables.
+    #[arg(long)]
+    pub occupied_threshold: Option<f64>,
     /// The rig the robot's frames come from (a built-in name or a rig
     /// file): frames of another rig are refused. Without it, the rig the
     /// first frame names, as the map server keeps it.
@@ -229,6 +237,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         field,
         sonar_cone,
         firing,
+        thresholds,
         expected_rig,
     } = args.settings()?;
     // One thread: the filter is sequential, and its allocations then come
@@ -299,7 +308,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     let map = LocalMap::new(MapSettings {
         resolution,
         tile_size,
-        thresholds: OccupancyThresholds::default(),
+        thresholds,
         geometry: cone,
         budget_bytes: args.cache_mb << 20,
     })?;

@@ -2,9 +2,10 @@
 //! before anything connects: a bad flag is refused at once, named.
 
 use anyhow::{Context, Result, ensure};
-use deog_grid::RingFiring;
+use deog_grid::{OccupancyThresholds, RingFiring};
 use deog_localizer::beam_model::BeamModelParams;
 use deog_localizer::filter::FilterSettings;
+use deog_localizer::local_map::occupied_threshold_for_sonar;
 use deog_localizer::preset::Preset;
 use deog_localizer::range_table::ConeGeometry;
 use deog_localizer::sensors::LikelihoodFieldParams;
@@ -26,6 +27,8 @@ pub(super) struct LocalizeSettings {
     pub sonar_cone: ConeGeometry,
     /// When each of the ring's sonars fired.
     pub firing: RingFiring,
+    /// How the map's cells are classed.
+    pub thresholds: OccupancyThresholds,
     /// The rig `--rig` names, which the frames must come from.
     pub expected_rig: Option<Rig>,
 }
@@ -56,6 +59,11 @@ impl LocalizeArgs {
             self.refresh_s
         );
         let firing = RingFiring::over(self.firing_period).context("--firing-period (seconds)")?;
+        let occupied = self
+            .occupied_threshold
+            .unwrap_or(occupied_threshold_for_sonar(self.specular_angle.is_some()));
+        let thresholds = OccupancyThresholds::new(occupied, OccupancyThresholds::DEFAULT_FREE)
+            .context("--occupied-threshold (a probability from 0.5 up to 1)")?;
         if let Some(angle) = self.specular_angle {
             ensure!(
                 angle.is_finite() && (0.0..=90.0).contains(&angle),
@@ -130,6 +138,7 @@ impl LocalizeArgs {
             field,
             sonar_cone,
             firing,
+            thresholds,
             expected_rig,
         })
     }
@@ -139,6 +148,7 @@ impl LocalizeArgs {
 mod tests {
     use super::*;
     use clap::Parser;
+    use deog_localizer::local_map::SPECULAR_OCCUPIED_THRESHOLD;
     use deog_localizer::range_table::SPECULAR_SURFACE_DEPTH;
 
     #[derive(Debug, Parser)]
@@ -172,6 +182,7 @@ mod tests {
         assert_eq!(s.field.max_beams, sim.field_beams);
         assert_eq!(s.sonar_cone, ConeGeometry::for_sonar(None));
         assert_eq!(s.firing, RingFiring::Together);
+        assert_eq!(s.thresholds, OccupancyThresholds::default());
         assert!(s.expected_rig.is_none());
     }
 
@@ -186,6 +197,14 @@ mod tests {
         );
         assert_eq!(s.sonar_cone.surface_depth, SPECULAR_SURFACE_DEPTH);
         assert_eq!(s.firing, RingFiring::Sequential { period_s: 0.1 });
+        assert_eq!(
+            s.thresholds,
+            OccupancyThresholds::new(
+                SPECULAR_OCCUPIED_THRESHOLD,
+                OccupancyThresholds::DEFAULT_FREE
+            )
+            .unwrap()
+        );
     }
 
     #[test]
@@ -201,11 +220,17 @@ mod tests {
             "real-laser",
             "--min-particles",
             "300",
+            "--occupied-threshold",
+            "0.7",
         ])
         .expect("flags that override");
         assert_eq!(s.sonar_cone.surface_depth, 0.07);
         assert_eq!(s.filter.beam.tempering, 0.2);
         assert_eq!(s.filter.kld.min_particles, 300);
+        assert_eq!(
+            s.thresholds.occupied(),
+            OccupancyThresholds::new(0.7, 0.196).unwrap().occupied()
+        );
         assert_eq!(s.field.max_beams, Preset::RealLaser.tuning().field_beams);
     }
 
@@ -225,6 +250,9 @@ mod tests {
             (&["--motion-noise-scale", "1000"], "--motion-noise-scale"),
             (&["--field-sigma=-1"], "--field-sigma"),
             (&["--rig", "no-such-rig"], "no-such-rig"),
+            (&["--occupied-threshold", "0.4"], "--occupied-threshold"),
+            (&["--occupied-threshold", "1"], "--occupied-threshold"),
+            (&["--occupied-threshold", "NaN"], "--occupied-threshold"),
         ] {
             let error = refused(flags);
             assert!(error.contains(named), "{flags:?}: {error}");

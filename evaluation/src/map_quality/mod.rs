@@ -51,7 +51,7 @@
 //! figure whose denominator is zero otherwise (no map-occupied cell, no
 //! surface, nothing reachable) is `None`, `null` in JSON.
 
-use deog_grid::{CellIndex, LogOdds, SCOUT_BODY_RADIUS_M, TileMap};
+use deog_grid::{CellIndex, LogOdds, OccupancyThresholds, SCOUT_BODY_RADIUS_M, TileMap};
 use deog_world::{Point2, World};
 
 use crate::error::EvaluationError;
@@ -62,9 +62,9 @@ pub use verdict::{
 };
 
 /// Probability above which a map cell is occupied (map_server's default).
-pub const OCCUPIED_ABOVE: f64 = 0.65;
+pub const OCCUPIED_ABOVE: f64 = OccupancyThresholds::DEFAULT_OCCUPIED;
 /// Probability below which a map cell is free (map_server's default).
-pub const FREE_BELOW: f64 = 0.196;
+pub const FREE_BELOW: f64 = OccupancyThresholds::DEFAULT_FREE;
 /// The default robot radius: the Nomad Super Scout's body, metres.
 pub const DEFAULT_ROBOT_RADIUS_M: f64 = SCOUT_BODY_RADIUS_M;
 /// Largest ground-truth raster judged, in cells (the world's bounds at the
