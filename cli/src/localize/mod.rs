@@ -8,14 +8,14 @@ mod server;
 mod settings;
 
 use carry::{Carrier, worth_carrying};
-use server::{ServerTiles, estimate_message, log_estimate};
+use server::{EstimateSink, ServerTiles, log_estimate};
 use settings::LocalizeSettings;
 
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail, ensure};
 use clap::{Args, ValueEnum};
-use deog_grid::{CellBox, CellIndex, Resolution, TileSize};
+use deog_grid::{CellBox, CellIndex, Pose2, Resolution, TileSize};
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::preset::Preset;
@@ -29,6 +29,7 @@ use crate::pose_args::InitialPose;
 use crate::rig_args::publish_rig;
 use deog_localizer::sensors::{LikelihoodFieldParams, SensorChoice};
 use deog_proto::rig::frame_rig_name;
+use deog_proto::v1 as pb;
 
 /// A sensor update that takes this long is logged with what it did: the
 /// robot's frames come ten a second.
@@ -328,61 +329,8 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         map: &args.map,
         tile_size,
     };
-    let refresh = Duration::from_secs_f64(args.refresh_s);
-    let initial_pose = match args.initial_pose {
-        None => None,
-        Some(InitialPose::Given(pose)) => Some(pose),
-        Some(InitialPose::Reference) => Some(first.reference_pose.map(pose_from_wire).with_context(|| {
-            format!(
-                "--initial-pose reference: frame {} of {} has no reference pose (only recordings with corrected poses have one)",
-                first.sequence, args.robot
-            )
-        })?),
-        Some(InitialPose::True) => Some(first.true_pose.map(pose_from_wire).with_context(|| {
-            format!(
-                "--initial-pose true: frame {} of {} has no true pose (only the simulator's frames have one)",
-                first.sequence, args.robot
-            )
-        })?),
-    };
-    let mut localizer = match &initial_pose {
-        Some(pose) => {
-            mcl.start_at(*pose, args.initial_std_xy, args.initial_std_theta)
-                .context("--initial-pose")?;
-            tracing::info!(
-                x = pose.x,
-                y = pose.y,
-                theta = pose.theta,
-                "tracking from the given pose"
-            );
-            Localizer::new(mcl, map, refresh, Instant::now())
-        }
-        None => {
-            let Some(region) = info.bounds_cells else {
-                bail!(
-                    "map {} has no observed cell yet: nothing to localize on",
-                    args.map
-                );
-            };
-            let region = cell_box_from_wire("bounds_cells", region)?;
-            let whole = runtime
-                .block_on(client.tiles_in_region(&args.map, tile_size, region))
-                .context("reading the map")?
-                .into_iter()
-                .map(|(key, version, tile)| FetchedTile { key, version, tile });
-            let mut localizer = Localizer::new(mcl, map, refresh, Instant::now());
-            localizer
-                .start_global(whole)
-                .context("spreading particles over the map")?;
-            tracing::info!(
-                tiles = localizer.map().tile_count(),
-                free_cells = localizer.map().free_cell_count(),
-                particles = localizer.mcl().particles().len(),
-                "global localization: particles spread over every known-free cell"
-            );
-            localizer
-        }
-    };
+    let initial_pose = initial_pose(args.initial_pose, &first, &args.robot)?;
+    let mut localizer = start(mcl, map, initial_pose, &args, &info, &tiles)?;
     // The tables the first correction needs are built before it takes its
     // frame: with a global start that is the whole map's.
     let started = Instant::now();
@@ -401,6 +349,12 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     let mut first = Some(first);
     let mut catch_up = CatchUp::new(args.max_skip_s);
     let carrier = Carrier {
+        client: &client,
+        robot: &args.robot,
+        map: &args.map,
+    };
+    let sink = EstimateSink {
+        runtime: &runtime,
         client: &client,
         robot: &args.robot,
         map: &args.map,
@@ -434,17 +388,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
                     .map(pose_from_wire)
                     .and_then(|odometry| localizer.mcl().estimate(&odometry));
                 if let Some(estimate) = estimate {
-                    runtime
-                        .block_on(client.publish_pose(estimate_message(
-                            &args.robot,
-                            &args.map,
-                            &passed,
-                            &estimate,
-                            &[],
-                        )))
-                        .with_context(|| {
-                            format!("publishing the estimate of frame {}", passed.sequence)
-                        })?;
+                    sink.publish(&passed, &estimate, &[])?;
                 }
             }
         }
@@ -522,15 +466,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
             } else {
                 Vec::new()
             };
-            runtime
-                .block_on(client.publish_pose(estimate_message(
-                    &args.robot,
-                    &args.map,
-                    &frame,
-                    &estimate,
-                    &sample,
-                )))
-                .with_context(|| format!("publishing the estimate of frame {}", frame.sequence))?;
+            sink.publish(&frame, &estimate, &sample)?;
             log_estimate(&frame, &estimate, processed, localizer.map().bytes());
         }
         progress.reached(frame.sequence);
@@ -550,4 +486,83 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         map.bytes() as f64 / f64::from(1 << 20)
     );
     Ok(())
+}
+
+/// The pose `--initial-pose` names (`choice`), read from the robot's first
+/// frame where it names the frame's reference or true pose; `None` for a
+/// global start.
+fn initial_pose(
+    choice: Option<InitialPose>,
+    first: &pb::SonarFrame,
+    robot: &str,
+) -> Result<Option<Pose2>> {
+    Ok(match choice {
+        None => None,
+        Some(InitialPose::Given(pose)) => Some(pose),
+        Some(InitialPose::Reference) => Some(first.reference_pose.map(pose_from_wire).with_context(|| {
+            format!(
+                "--initial-pose reference: frame {} of {robot} has no reference pose (only recordings with corrected poses have one)",
+                first.sequence
+            )
+        })?),
+        Some(InitialPose::True) => Some(first.true_pose.map(pose_from_wire).with_context(|| {
+            format!(
+                "--initial-pose true: frame {} of {robot} has no true pose (only the simulator's frames have one)",
+                first.sequence
+            )
+        })?),
+    })
+}
+
+/// The localizer, its particles spread: around `initial_pose` if given,
+/// else over every known-free cell of the whole map as `tiles` serves it
+/// now (`info` says where its observed cells lie).
+fn start(
+    mut mcl: Mcl,
+    map: LocalMap,
+    initial_pose: Option<Pose2>,
+    args: &LocalizeArgs,
+    info: &pb::MapInfo,
+    tiles: &ServerTiles<'_>,
+) -> Result<Localizer> {
+    let refresh = Duration::from_secs_f64(args.refresh_s);
+    if let Some(pose) = initial_pose {
+        mcl.start_at(pose, args.initial_std_xy, args.initial_std_theta)
+            .context("--initial-pose")?;
+        tracing::info!(
+            x = pose.x,
+            y = pose.y,
+            theta = pose.theta,
+            "tracking from the given pose"
+        );
+        return Ok(Localizer::new(mcl, map, refresh, Instant::now()));
+    }
+    let Some(region) = info.bounds_cells else {
+        bail!(
+            "map {} has no observed cell yet: nothing to localize on",
+            args.map
+        );
+    };
+    let region = cell_box_from_wire("bounds_cells", region)?;
+    let whole = tiles
+        .runtime
+        .block_on(
+            tiles
+                .client
+                .tiles_in_region(&args.map, tiles.tile_size, region),
+        )
+        .context("reading the map")?
+        .into_iter()
+        .map(|(key, version, tile)| FetchedTile { key, version, tile });
+    let mut localizer = Localizer::new(mcl, map, refresh, Instant::now());
+    localizer
+        .start_global(whole)
+        .context("spreading particles over the map")?;
+    tracing::info!(
+        tiles = localizer.map().tile_count(),
+        free_cells = localizer.map().free_cell_count(),
+        particles = localizer.mcl().particles().len(),
+        "global localization: particles spread over every known-free cell"
+    );
+    Ok(localizer)
 }

@@ -1,6 +1,7 @@
 //! The localizer's ends at the map server: the tiles it fetches and the
 //! estimates it publishes (and logs).
 
+use anyhow::Context;
 use deog_grid::{Pose2, TileKey, TileSize};
 use deog_localizer::filter::Estimate;
 use deog_localizer::step::{FetchedTile, TileSource};
@@ -29,6 +30,30 @@ impl TileSource for ServerTiles<'_> {
             .into_iter()
             .map(|(key, version, tile)| FetchedTile { key, version, tile })
             .collect())
+    }
+}
+
+/// Where one robot's estimates on one map go: the map server.
+pub(super) struct EstimateSink<'a> {
+    pub(super) runtime: &'a tokio::runtime::Runtime,
+    pub(super) client: &'a MapClient,
+    pub(super) robot: &'a str,
+    pub(super) map: &'a str,
+}
+
+impl EstimateSink<'_> {
+    /// Publishes the estimate made after `frame`, with `sample`, a sample
+    /// of the particles (often empty).
+    pub(super) fn publish(
+        &self,
+        frame: &pb::SonarFrame,
+        estimate: &Estimate,
+        sample: &[Pose2],
+    ) -> anyhow::Result<()> {
+        let message = estimate_message(self.robot, self.map, frame, estimate, sample);
+        self.runtime
+            .block_on(self.client.publish_pose(message))
+            .with_context(|| format!("publishing the estimate of frame {}", frame.sequence))
     }
 }
 
