@@ -154,6 +154,11 @@ fn a_demo_on_two_servers_sharing_postgresql_maps_and_localizes() {
             "--seed",
             "3",
             "--every-frame",
+            // The realistic sonar through the real processes: the
+            // cartographers map by direction, the localizers expect
+            // specular walls and leave the inferred ones out.
+            "--sonar",
+            "realistic",
             "--out",
         ])
         .arg(out.path())
@@ -165,6 +170,7 @@ fn a_demo_on_two_servers_sharing_postgresql_maps_and_localizes() {
     let text = std::fs::read_to_string(out.path().join("report.json")).expect("report.json");
     let report: Value = serde_json::from_str(&text).expect("report.json is JSON");
     let context = format!("{stdout}\n{text}");
+    assert_eq!(report["sonar"], "realistic", "{context}");
     for robot in report["robots"].as_array().expect("robots") {
         assert_eq!(robot["converged"], Value::Bool(true), "{context}");
     }
@@ -173,10 +179,15 @@ fn a_demo_on_two_servers_sharing_postgresql_maps_and_localizes() {
         map["cells_observed"].as_u64().expect("cells") > 10_000,
         "{context}"
     );
+    // A minute of the realistic sonar maps 91 to 95 % right (seeds 1 to
+    // 5, release); the plain sonar's map is judged by the demo test above.
     assert!(
-        map["fraction_correct"].as_f64().expect("fraction") > 0.93,
+        map["fraction_correct"].as_f64().expect("fraction") > 0.9,
         "{context}"
     );
+    let localizer = std::fs::read_to_string(out.path().join("logs/localize-scout-1.log"))
+        .expect("the localizer's log");
+    assert!(localizer.contains("walls_above=\"0.750\""), "{localizer}");
     for log in ["logs/server.log", "logs/server-2.log"] {
         let log = std::fs::read_to_string(out.path().join(log)).expect("log");
         assert!(log.contains("store flushed"), "{log}");

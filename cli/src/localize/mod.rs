@@ -301,7 +301,13 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     let sensor = choice
         .build(&rig, settings.beam, field)
         .with_context(|| format!("the {choice} model for rig {}", rig.name()))?;
-    tracing::info!(rig = rig.name(), readings = rig.readings(), sensor = %choice, "localizing with the frames' rig");
+    tracing::info!(
+        rig = rig.name(),
+        readings = rig.readings(),
+        sensor = %choice,
+        walls_above = format!("{:.3}", thresholds.occupied().probability()),
+        "localizing with the frames' rig"
+    );
     let mut mcl = Mcl::with_sensor(settings, sensor).context("the filter's settings")?;
     mcl.set_firing(firing);
     let resolution = Resolution::new(info.resolution_m)?;
