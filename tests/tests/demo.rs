@@ -132,6 +132,70 @@ fn a_short_demo_localizes_every_robot_and_maps_the_room() {
 }
 
 #[test]
+fn a_demo_on_the_realistic_sonar_maps_by_direction_and_localizes() {
+    let out = tempfile::tempdir().expect("temp dir");
+    let output = Command::new(deog_binary())
+        .args([
+            "demo",
+            "--no-view",
+            "--sonar",
+            "realistic",
+            "--robots",
+            "2",
+            "--duration",
+            "50",
+            "--localize-at",
+            "20",
+            "--no-kidnap",
+            "--seed",
+            "3",
+            "--every-frame",
+            "--out",
+        ])
+        .arg(out.path())
+        .output()
+        .expect("deog runs");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "demo failed:\n{stdout}\n{stderr}");
+    let text = std::fs::read_to_string(out.path().join("report.json")).expect("report.json");
+    let report: Value = serde_json::from_str(&text).expect("report.json is JSON");
+    let context = format!("{stdout}\n{text}");
+    assert_eq!(report["sonar"], "realistic", "{context}");
+    // Every localizer followed its robot to the end. A young map from a
+    // specular sonar does not promise every robot its pose within half a
+    // minute (BENCHMARKS.md: 95 of 100 within a minute), so one is asked.
+    let robots = report["robots"].as_array().expect("robots");
+    assert_eq!(robots.len(), 2, "{context}");
+    for robot in robots {
+        let estimates = robot["estimates"].as_u64().expect("estimates");
+        assert!(estimates > 100, "{context}");
+    }
+    assert!(
+        robots.iter().any(|r| r["converged"] == Value::Bool(true)),
+        "{context}"
+    );
+    // The cartographers map by direction: the walls are kept (a minute of
+    // this sonar maps 91 to 95 % right, seeds 1 to 5, release).
+    let map = &report["map"];
+    assert!(
+        map["cells_observed"].as_u64().expect("cells") > 5_000,
+        "{context}"
+    );
+    assert!(
+        map["fraction_correct"].as_f64().expect("fraction") > 0.85,
+        "{context}"
+    );
+    let cartographer = std::fs::read_to_string(out.path().join("logs/map-scout-1.log"))
+        .expect("the cartographer's log");
+    let localizer = std::fs::read_to_string(out.path().join("logs/localize-scout-1.log"))
+        .expect("the localizer's log");
+    // The localizers expect specular walls and leave the inferred ones out.
+    assert!(localizer.contains("walls_above=\"0.750\""), "{localizer}");
+    assert!(!cartographer.contains("ERROR"), "{cartographer}");
+}
+
+#[test]
 fn a_demo_on_two_servers_sharing_postgresql_maps_and_localizes() {
     let cluster = deog_pg_cluster::LocalCluster::start().expect("start PostgreSQL");
     let url = cluster.create_database("demo").expect("database");
@@ -154,11 +218,6 @@ fn a_demo_on_two_servers_sharing_postgresql_maps_and_localizes() {
             "--seed",
             "3",
             "--every-frame",
-            // The realistic sonar through the real processes: the
-            // cartographers map by direction, the localizers expect
-            // specular walls and leave the inferred ones out.
-            "--sonar",
-            "realistic",
             "--out",
         ])
         .arg(out.path())
@@ -170,7 +229,6 @@ fn a_demo_on_two_servers_sharing_postgresql_maps_and_localizes() {
     let text = std::fs::read_to_string(out.path().join("report.json")).expect("report.json");
     let report: Value = serde_json::from_str(&text).expect("report.json is JSON");
     let context = format!("{stdout}\n{text}");
-    assert_eq!(report["sonar"], "realistic", "{context}");
     for robot in report["robots"].as_array().expect("robots") {
         assert_eq!(robot["converged"], Value::Bool(true), "{context}");
     }
@@ -179,15 +237,13 @@ fn a_demo_on_two_servers_sharing_postgresql_maps_and_localizes() {
         map["cells_observed"].as_u64().expect("cells") > 10_000,
         "{context}"
     );
-    // A minute of the realistic sonar maps 91 to 95 % right (seeds 1 to
-    // 5, release); the plain sonar's map is judged by the demo test above.
     assert!(
-        map["fraction_correct"].as_f64().expect("fraction") > 0.9,
+        map["fraction_correct"].as_f64().expect("fraction") > 0.93,
         "{context}"
     );
     let localizer = std::fs::read_to_string(out.path().join("logs/localize-scout-1.log"))
         .expect("the localizer's log");
-    assert!(localizer.contains("walls_above=\"0.750\""), "{localizer}");
+    assert!(localizer.contains("walls_above=\"0.650\""), "{localizer}");
     for log in ["logs/server.log", "logs/server-2.log"] {
         let log = std::fs::read_to_string(out.path().join(log)).expect("log");
         assert!(log.contains("store flushed"), "{log}");
