@@ -81,9 +81,9 @@ const TABLE_EIGHTHS: usize = 4;
 /// in map2, convergence unchanged over 80 map1 seeds.
 pub const SPECULAR_OCCUPIED_THRESHOLD: f64 = 0.75;
 
-/// The thresholds a localizer classes a map's cells by: ROS map_server's,
-/// with the occupied one [`SPECULAR_OCCUPIED_THRESHOLD`] on a map built
-/// from a specular sonar's readings.
+/// The probability above which a localizer takes a map's cell for a wall:
+/// ROS map_server's occupied threshold, or [`SPECULAR_OCCUPIED_THRESHOLD`]
+/// on a map built from a specular sonar's readings.
 pub fn occupied_threshold_for_sonar(specular: bool) -> f64 {
     if specular {
         SPECULAR_OCCUPIED_THRESHOLD
