@@ -7,58 +7,90 @@ use std::time::Instant;
 
 use deog_tests::deog_binary;
 use serde_json::Value;
+use tempfile::TempDir;
+
+/// A demo that ran to its end: its output folder, what it printed and
+/// its report.json.
+struct DemoRun {
+    out: TempDir,
+    stdout: String,
+    report: Value,
+    /// What a failed assertion shows: the printout and report.json.
+    context: String,
+}
+
+impl DemoRun {
+    /// The log the demo kept of one of its processes, `logs/NAME.log`.
+    fn log(&self, name: &str) -> String {
+        let path = self.out.path().join(format!("logs/{name}.log"));
+        std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+    }
+}
+
+/// Runs `deog demo ARGS --out DIR` in a fresh temp folder and asks that it
+/// succeeded and wrote its report.
+fn run_demo(args: &[&str]) -> DemoRun {
+    let out = tempfile::tempdir().expect("temp dir");
+    let output = Command::new(deog_binary())
+        .arg("demo")
+        .args(args)
+        .arg("--out")
+        .arg(out.path())
+        .output()
+        .expect("deog runs");
+    let stdout = String::from_utf8_lossy(&output.stdout).into_owned();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "demo failed:\n{stdout}\n{stderr}");
+    let text = std::fs::read_to_string(out.path().join("report.json")).expect("report.json");
+    let report: Value = serde_json::from_str(&text).expect("report.json is JSON");
+    let context = format!("{stdout}\n{text}");
+    DemoRun {
+        out,
+        stdout,
+        report,
+        context,
+    }
+}
 
 #[test]
 fn a_short_demo_localizes_every_robot_and_maps_the_room() {
-    let out = tempfile::tempdir().expect("temp dir");
     let started = Instant::now();
     // A port of its own: other tests' demos may run at the same time.
     let view = deog_tests::free_loopback_addr().to_string();
     let foxglove = deog_tests::free_loopback_addr().to_string();
-    let output = Command::new(deog_binary())
-        .args([
-            "demo",
-            "--view",
-            &view,
-            "--foxglove",
-            &foxglove,
-            "--robots",
-            "2",
-            "--duration",
-            "100",
-            "--localize-at",
-            "50",
-            "--kidnap-at",
-            "75",
-            "--seed",
-            "2",
-            // This binary is a debug build sharing the machine with the rest
-            // of the suite: it cannot keep the demo's pace, and a localizer
-            // that skips frames to keep up reaches its pose later. The test
-            // is of the poses; keeping time is the release build's (the
-            // demo's figures in BENCHMARKS.md).
-            "--every-frame",
-            "--out",
-        ])
-        .arg(out.path())
-        .output()
-        .expect("deog runs");
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(output.status.success(), "demo failed:\n{stdout}\n{stderr}");
+    let run = run_demo(&[
+        "--view",
+        &view,
+        "--foxglove",
+        &foxglove,
+        "--robots",
+        "2",
+        "--duration",
+        "100",
+        "--localize-at",
+        "50",
+        "--kidnap-at",
+        "75",
+        "--seed",
+        "2",
+        // This binary is a debug build sharing the machine with the rest
+        // of the suite: it cannot keep the demo's pace, and a localizer
+        // that skips frames to keep up reaches its pose later. The test
+        // is of the poses; keeping time is the release build's (the
+        // demo's figures in BENCHMARKS.md).
+        "--every-frame",
+    ]);
     let elapsed = started.elapsed().as_secs_f64();
+    let (stdout, report, context) = (&run.stdout, &run.report, &run.context);
     assert!(
         stdout.contains(&format!(
             "watch it live at http://{view}/ (in Foxglove: ws://{foxglove})"
         )),
         "{stdout}"
     );
-    let view_log = std::fs::read_to_string(out.path().join("logs/view.log")).unwrap_or_default();
+    let view_log = run.log("view");
     assert!(!view_log.contains("ERROR"), "the view's log:\n{view_log}");
 
-    let text = std::fs::read_to_string(out.path().join("report.json")).expect("report.json");
-    let report: Value = serde_json::from_str(&text).expect("report.json is JSON");
-    let context = format!("{stdout}\n{text}");
     let robots = report["robots"].as_array().expect("robots");
     assert_eq!(robots.len(), 2, "{context}");
     for robot in robots {
@@ -120,47 +152,35 @@ fn a_short_demo_localizes_every_robot_and_maps_the_room() {
         "scout-1.png",
         "scout-2.png",
     ] {
-        let len = std::fs::metadata(out.path().join(file)).map_or(0, |m| m.len());
+        let len = std::fs::metadata(run.out.path().join(file)).map_or(0, |m| m.len());
         assert!(len > 100, "{file}: {len} bytes");
     }
-    let markdown = std::fs::read_to_string(out.path().join("report.md")).expect("report.md");
+    let markdown = std::fs::read_to_string(run.out.path().join("report.md")).expect("report.md");
     assert!(markdown.contains("kidnapped"), "{markdown}");
     assert!(markdown.contains("| robot | converged after"), "{markdown}");
     // Every process was stopped: the logs say the server flushed its store.
-    let server_log = std::fs::read_to_string(out.path().join("logs/server.log")).expect("log");
+    let server_log = run.log("server");
     assert!(server_log.contains("store flushed"), "{server_log}");
 }
 
 #[test]
 fn a_demo_on_the_realistic_sonar_maps_by_direction_and_localizes() {
-    let out = tempfile::tempdir().expect("temp dir");
-    let output = Command::new(deog_binary())
-        .args([
-            "demo",
-            "--no-view",
-            "--sonar",
-            "realistic",
-            "--robots",
-            "2",
-            "--duration",
-            "50",
-            "--localize-at",
-            "20",
-            "--no-kidnap",
-            "--seed",
-            "3",
-            "--every-frame",
-            "--out",
-        ])
-        .arg(out.path())
-        .output()
-        .expect("deog runs");
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(output.status.success(), "demo failed:\n{stdout}\n{stderr}");
-    let text = std::fs::read_to_string(out.path().join("report.json")).expect("report.json");
-    let report: Value = serde_json::from_str(&text).expect("report.json is JSON");
-    let context = format!("{stdout}\n{text}");
+    let run = run_demo(&[
+        "--no-view",
+        "--sonar",
+        "realistic",
+        "--robots",
+        "2",
+        "--duration",
+        "50",
+        "--localize-at",
+        "20",
+        "--no-kidnap",
+        "--seed",
+        "3",
+        "--every-frame",
+    ]);
+    let (report, context) = (&run.report, &run.context);
     assert_eq!(report["sonar"], "realistic", "{context}");
     // Every localizer followed its robot to the end. A young map from a
     // specular sonar does not promise every robot its pose within half a
@@ -186,10 +206,8 @@ fn a_demo_on_the_realistic_sonar_maps_by_direction_and_localizes() {
         map["fraction_correct"].as_f64().expect("fraction") > 0.85,
         "{context}"
     );
-    let cartographer = std::fs::read_to_string(out.path().join("logs/map-scout-1.log"))
-        .expect("the cartographer's log");
-    let localizer = std::fs::read_to_string(out.path().join("logs/localize-scout-1.log"))
-        .expect("the localizer's log");
+    let cartographer = run.log("map-scout-1");
+    let localizer = run.log("localize-scout-1");
     // The localizers expect specular walls and leave the inferred ones out.
     assert!(localizer.contains("walls_above=\"0.750\""), "{localizer}");
     assert!(!cartographer.contains("ERROR"), "{cartographer}");
@@ -199,36 +217,24 @@ fn a_demo_on_the_realistic_sonar_maps_by_direction_and_localizes() {
 fn a_demo_on_two_servers_sharing_postgresql_maps_and_localizes() {
     let cluster = deog_pg_cluster::LocalCluster::start().expect("start PostgreSQL");
     let url = cluster.create_database("demo").expect("database");
-    let out = tempfile::tempdir().expect("temp dir");
-    let output = Command::new(deog_binary())
-        .args([
-            "demo",
-            "--no-view",
-            "--store",
-            &url,
-            "--servers",
-            "2",
-            "--robots",
-            "2",
-            "--duration",
-            "60",
-            "--localize-at",
-            "30",
-            "--no-kidnap",
-            "--seed",
-            "3",
-            "--every-frame",
-            "--out",
-        ])
-        .arg(out.path())
-        .output()
-        .expect("deog runs");
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(output.status.success(), "demo failed:\n{stdout}\n{stderr}");
-    let text = std::fs::read_to_string(out.path().join("report.json")).expect("report.json");
-    let report: Value = serde_json::from_str(&text).expect("report.json is JSON");
-    let context = format!("{stdout}\n{text}");
+    let run = run_demo(&[
+        "--no-view",
+        "--store",
+        &url,
+        "--servers",
+        "2",
+        "--robots",
+        "2",
+        "--duration",
+        "60",
+        "--localize-at",
+        "30",
+        "--no-kidnap",
+        "--seed",
+        "3",
+        "--every-frame",
+    ]);
+    let (report, context) = (&run.report, &run.context);
     for robot in report["robots"].as_array().expect("robots") {
         assert_eq!(robot["converged"], Value::Bool(true), "{context}");
     }
@@ -241,17 +247,16 @@ fn a_demo_on_two_servers_sharing_postgresql_maps_and_localizes() {
         map["fraction_correct"].as_f64().expect("fraction") > 0.93,
         "{context}"
     );
-    let localizer = std::fs::read_to_string(out.path().join("logs/localize-scout-1.log"))
-        .expect("the localizer's log");
+    let localizer = run.log("localize-scout-1");
     assert!(localizer.contains("walls_above=\"0.650\""), "{localizer}");
-    for log in ["logs/server.log", "logs/server-2.log"] {
-        let log = std::fs::read_to_string(out.path().join(log)).expect("log");
+    for log in ["server", "server-2"] {
+        let log = run.log(log);
         assert!(log.contains("store flushed"), "{log}");
     }
     // The same database again is refused: the demo judges its own robots.
     let again = Command::new(deog_binary())
         .args(["demo", "--store", &url, "--duration", "10", "--out"])
-        .arg(out.path().join("again"))
+        .arg(run.out.path().join("again"))
         .output()
         .expect("deog runs");
     let stderr = String::from_utf8_lossy(&again.stderr);

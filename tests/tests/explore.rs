@@ -21,6 +21,8 @@ fn field(json: &str, name: &str) -> f64 {
 /// Held by each test while its explorers drive: they steer in real time
 /// at 8x, and two runs at once on a small machine starve each other's
 /// steering of the CPU (a late stop is a bump no faster machine makes).
+/// Under `cargo test`; cargo-nextest runs each test in a process of its
+/// own, and `.config/nextest.toml` runs these alone.
 static DRIVING: Mutex<()> = Mutex::new(());
 
 fn driving_alone() -> MutexGuard<'static, ()> {
