@@ -3,6 +3,7 @@
 //! a resend through another server is not applied twice, and watchers on
 //! one server (tiles, poses, frames) hear what was written through another.
 
+#[path = "suite/common/mod.rs"]
 mod common;
 
 use common::{TestServer, all_tiles, batch, create_map, dense_delta, send_batches};

@@ -1,8 +1,6 @@
 //! Frames and pose estimates: stored per robot, read by range, followed live.
 
-mod common;
-
-use common::{TestServer, create_map};
+use crate::common::{TestServer, create_map};
 use deog_proto::v1 as pb;
 use std::time::Duration;
 

@@ -1,9 +1,7 @@
 //! Every call refuses bad input with the right code and a message naming the
 //! field, and a refused call changes nothing stored.
 
-mod common;
-
-use common::{TestServer, all_tiles, batch, create_map, dense_delta, send_batches};
+use crate::common::{TestServer, all_tiles, batch, create_map, dense_delta, send_batches};
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_client::MapServiceClient;
 use tonic::Code;

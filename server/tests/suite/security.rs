@@ -2,9 +2,7 @@
 //! bearer token, TLS, health and reflection, and a graceful stop that keeps
 //! every acknowledged batch.
 
-mod common;
-
-use common::{TestServer, all_tiles, batch, create_map, dense_delta};
+use crate::common::{TestServer, all_tiles, batch, create_map, dense_delta};
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_client::MapServiceClient;
 use deog_robot_client::{ClientConfig, ClientError, MapClient, RetryPolicy};

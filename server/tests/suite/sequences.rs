@@ -1,9 +1,10 @@
 //! Sequence numbers of batches and frames: the highest one cannot lock a
 //! client out of a map or make frame subscribers replay a robot's history.
 
-mod common;
-
-use common::{SuiteBackend, TestBackend, TestServer, batch, create_map, dense_delta, send_batches};
+use crate::common;
+use crate::common::{
+    SuiteBackend, TestBackend, TestServer, batch, create_map, dense_delta, send_batches,
+};
 use deog_proto::v1 as pb;
 use deog_server::Store;
 use deog_server::store::{FrameWrite, RobotSummary};

@@ -1,9 +1,7 @@
 //! The map service over real TCP and a real sled directory: maps, updates
 //! from many clients, exactly-once resends, tiles, watches.
 
-mod common;
-
-use common::{TestServer, all_tiles, batch, create_map, dense_delta, send_batches};
+use crate::common::{TestServer, all_tiles, batch, create_map, dense_delta, send_batches};
 use deog_grid::{ClampLimits, Tile, TileDelta, TileKey, TileSize};
 use deog_proto::v1 as pb;
 use rand::{Rng, SeedableRng};

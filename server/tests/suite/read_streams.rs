@@ -3,9 +3,7 @@
 //! hang), a stalled one ends after the stall timeout and frees its place,
 //! and meanwhile the server's other reads (a SubscribeFrames catch-up) go on.
 
-mod common;
-
-use common::{TestServer, batch, create_map, dense_delta, send_batches};
+use crate::common::{TestServer, batch, create_map, dense_delta, send_batches};
 use deog_proto::v1 as pb;
 use deog_server::{ReadStreamLimits, ServerConfig};
 use std::time::{Duration, Instant};

@@ -2,9 +2,7 @@
 //! batch, never with OK: the batches before it stay acknowledged and applied,
 //! none after it is.
 
-mod common;
-
-use common::{TestServer, all_tiles, batch, create_map, dense_delta, send_batches};
+use crate::common::{TestServer, all_tiles, batch, create_map, dense_delta, send_batches};
 use deog_proto::v1 as pb;
 use prost::Message;
 use prost::bytes::BufMut;
