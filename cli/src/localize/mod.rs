@@ -335,8 +335,13 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         map: &args.map,
         tile_size,
     };
-    let initial_pose = initial_pose(args.initial_pose, &first, &args.robot)?;
-    let mut localizer = start(mcl, map, initial_pose, &args, &info, &tiles)?;
+    let around = initial_pose(args.initial_pose, &first, &args.robot)?.map(|pose| AroundPose {
+        pose,
+        std_xy: args.initial_std_xy,
+        std_theta: args.initial_std_theta,
+    });
+    let refresh = Duration::from_secs_f64(args.refresh_s);
+    let mut localizer = start(mcl, map, around, refresh, &info, &tiles)?;
     // The tables the first correction needs are built before it takes its
     // frame: with a global start that is the whole map's.
     let started = Instant::now();
@@ -520,20 +525,34 @@ fn initial_pose(
     })
 }
 
-/// The localizer, its particles spread: around `initial_pose` if given,
-/// else over every known-free cell of the whole map as `tiles` serves it
-/// now (`info` says where its observed cells lie).
+/// A start around a known pose: the particles' spread about it.
+struct AroundPose {
+    pose: Pose2,
+    /// Standard deviation of x and y, metres.
+    std_xy: f64,
+    /// Standard deviation of the heading, radians.
+    std_theta: f64,
+}
+
+/// The localizer, its particles spread: `around` a pose if given, else
+/// over every known-free cell of the whole map as `tiles` serves it now
+/// (`info` says where its observed cells lie). Tiles the server reports
+/// changed are read again at most every `refresh`.
 fn start(
     mut mcl: Mcl,
     map: LocalMap,
-    initial_pose: Option<Pose2>,
-    args: &LocalizeArgs,
+    around: Option<AroundPose>,
+    refresh: Duration,
     info: &pb::MapInfo,
     tiles: &ServerTiles<'_>,
 ) -> Result<Localizer> {
-    let refresh = Duration::from_secs_f64(args.refresh_s);
-    if let Some(pose) = initial_pose {
-        mcl.start_at(pose, args.initial_std_xy, args.initial_std_theta)
+    if let Some(AroundPose {
+        pose,
+        std_xy,
+        std_theta,
+    }) = around
+    {
+        mcl.start_at(pose, std_xy, std_theta)
             .context("--initial-pose")?;
         tracing::info!(
             x = pose.x,
@@ -546,7 +565,7 @@ fn start(
     let Some(region) = info.bounds_cells else {
         bail!(
             "map {} has no observed cell yet: nothing to localize on",
-            args.map
+            tiles.map
         );
     };
     let region = cell_box_from_wire("bounds_cells", region)?;
@@ -555,7 +574,7 @@ fn start(
         .block_on(
             tiles
                 .client
-                .tiles_in_region(&args.map, tiles.tile_size, region),
+                .tiles_in_region(tiles.map, tiles.tile_size, region),
         )
         .context("reading the map")?
         .into_iter()

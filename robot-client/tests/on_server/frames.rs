@@ -9,8 +9,7 @@ use deog_robot_client::convert::{pose_from_wire, pose_to_wire};
 use deog_server::ServerConfig;
 use std::time::Duration;
 
-mod common;
-use common::Server;
+use crate::common::Server;
 
 const ROBOT: &str = "scout-1";
 

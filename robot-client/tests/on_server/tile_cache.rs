@@ -8,27 +8,15 @@ use deog_robot_client::{TileCache, TileChange, TileWatch, UpdateSender, UpdateSe
 use deog_server::ServerConfig;
 use std::time::Duration;
 
-mod common;
-use common::Server;
+use crate::common::Server;
 
 const MAP: &str = "cache";
 /// Cells per tile side of the test map.
 const SIDE: u32 = 8;
 
-/// A map server in-process, stopped when dropped.
 /// The common server with the test map created.
 async fn server_with_map(config: ServerConfig) -> Server {
-    let server = Server::start(config).await;
-    server
-        .client
-        .ensure_map(pb::CreateMapRequest {
-            name: MAP.into(),
-            tile_size: SIDE,
-            ..Default::default()
-        })
-        .await
-        .expect("map");
-    server
+    Server::with_map(config, MAP, SIDE).await
 }
 
 /// What the tests below ask of the server.

@@ -3,6 +3,7 @@
 
 use std::sync::Arc;
 
+use deog_proto::v1 as pb;
 use deog_robot_client::{ClientConfig, MapClient};
 use deog_server::{ServerConfig, SledConfig, SledStore};
 use tokio::sync::oneshot;
@@ -41,6 +42,22 @@ impl Server {
             stop: Some(stop),
             _dir: dir,
         }
+    }
+
+    /// Starts a server with `config` and creates map `name` on it, with
+    /// tiles of `tile_size` cells a side.
+    pub async fn with_map(config: ServerConfig, name: &str, tile_size: u32) -> Self {
+        let server = Self::start(config).await;
+        server
+            .client
+            .ensure_map(pb::CreateMapRequest {
+                name: name.into(),
+                tile_size,
+                ..Default::default()
+            })
+            .await
+            .expect("map");
+        server
     }
 }
 

@@ -8,25 +8,15 @@ use deog_robot_client::{ClientError, UpdateSenderConfig};
 use deog_server::{Limits, ServerConfig};
 use std::time::Duration;
 
-mod common;
-use common::Server;
+use crate::common::Server;
 
 const MAP: &str = "errors";
 /// Cells per tile side: 64 x 64 cells are 8 KiB a tile when dense.
 const SIDE: u32 = 64;
 
+/// The common server with the test map created.
 async fn server_with_map(config: ServerConfig) -> Server {
-    let server = Server::start(config).await;
-    server
-        .client
-        .ensure_map(pb::CreateMapRequest {
-            name: MAP.into(),
-            tile_size: SIDE,
-            ..Default::default()
-        })
-        .await
-        .expect("map");
-    server
+    Server::with_map(config, MAP, SIDE).await
 }
 
 /// A delta of `value` in every cell of tile (x, 0).
