@@ -245,6 +245,32 @@ impl<S: Store> MapServer<S> {
         });
         Ok(ReceiverStream::new(rx))
     }
+
+    /// [`Self::blocking_stream`] of the records `read` visits in the store,
+    /// each decoded as `T` (`what` names it in the error), `limit` at most;
+    /// one that does not decode ends the stream with that error.
+    fn decoded_stream<T: prost::Message + Default + Send + 'static>(
+        &self,
+        what: &'static str,
+        limit: usize,
+        read: impl FnOnce(&mut dyn FnMut(u64, &[u8]) -> bool) -> Result<(), StoreError> + Send + 'static,
+    ) -> Result<ResponseStream<T>, Status> {
+        self.blocking_stream(move |tx| {
+            let mut sent = 0usize;
+            let mut failure = None;
+            read(&mut |_, bytes| match decode::<T>(bytes, what) {
+                Ok(record) => {
+                    sent += 1;
+                    tx.send(Ok(record)) && sent < limit
+                }
+                Err(e) => {
+                    failure = Some(e);
+                    false
+                }
+            })?;
+            failure.map_or(Ok(()), Err)
+        })
+    }
 }
 
 fn decode<T: prost::Message + Default>(bytes: &[u8], what: &str) -> Result<T, StoreError> {
@@ -711,26 +737,11 @@ impl<S: Store> MapService for MapServer<S> {
             request.limit as usize
         };
         let store = self.store.clone();
-        Ok(Response::new(self.blocking_stream(move |tx| {
-            let mut sent = 0usize;
-            let mut failure = None;
-            store.read_frames(
-                &robot,
-                from,
-                to,
-                &mut |_, bytes| match decode::<pb::SonarFrame>(bytes, "frame") {
-                    Ok(frame) => {
-                        sent += 1;
-                        tx.send(Ok(frame)) && sent < limit
-                    }
-                    Err(e) => {
-                        failure = Some(e);
-                        false
-                    }
-                },
-            )?;
-            failure.map_or(Ok(()), Err)
-        })?))
+        Ok(Response::new(self.decoded_stream(
+            "frame",
+            limit,
+            move |visit| store.read_frames(&robot, from, to, visit),
+        )?))
     }
 
     type SubscribeFramesStream = ResponseStream<pb::SonarFrame>;
@@ -850,22 +861,11 @@ impl<S: Store> MapService for MapServer<S> {
         let robot = convert::robot_name("robot", &request.robot)?;
         let (from, to) = convert::sequence_range(request.from_sequence, request.to_sequence)?;
         let store = self.store.clone();
-        Ok(Response::new(self.blocking_stream(move |tx| {
-            let mut failure = None;
-            store.read_poses(
-                &robot,
-                from,
-                to,
-                &mut |_, bytes| match decode::<pb::PoseEstimate>(bytes, "pose") {
-                    Ok(pose) => tx.send(Ok(pose)),
-                    Err(e) => {
-                        failure = Some(e);
-                        false
-                    }
-                },
-            )?;
-            failure.map_or(Ok(()), Err)
-        })?))
+        Ok(Response::new(self.decoded_stream(
+            "pose",
+            usize::MAX,
+            move |visit| store.read_poses(&robot, from, to, visit),
+        )?))
     }
 
     type WatchPosesStream = ResponseStream<pb::PoseEstimate>;
