@@ -18,46 +18,72 @@ use std::time::Duration;
 /// Path of a freshly built `deog` binary (the debug profile), building it
 /// with the same cargo that runs the tests on first use. Panics with cargo's
 /// output if the build fails: the tests cannot run without it.
+///
+/// The build is the workspace's test build (`cargo test --workspace
+/// --no-run`): `deog`'s own tests (`cli/tests`) make cargo build the binary
+/// there, its dependencies with the features every test of the workspace
+/// unifies. After `cargo test --workspace` or `cargo nextest run
+/// --workspace` it is fresh, and the call only checks it; `cargo build -p
+/// deog` would unify fewer features and rebuild half the dependencies.
+/// Under cargo-nextest, where every test is a process of its own, the
+/// first check of a run is noted in the target folder and the later
+/// processes of the same run trust it.
 pub fn deog_binary() -> PathBuf {
     static BINARY: OnceLock<PathBuf> = OnceLock::new();
     BINARY
         .get_or_init(|| {
-            let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-            let mut build = Command::new(cargo);
-            build
-                .args(["build", "--quiet", "-p", "deog", "--bin", "deog"])
-                .current_dir(env!("CARGO_MANIFEST_DIR"));
-            // Cargo sets these for the test; some build scripts (ring's)
-            // rebuild when they change. Without them the build is the one a
-            // plain `cargo build` made, reused rather than redone.
-            for (key, _) in std::env::vars() {
-                let per_crate = [
-                    "CARGO_PKG_",
-                    "CARGO_MANIFEST_",
-                    "CARGO_CRATE_",
-                    "CARGO_BIN_",
-                ]
-                .iter()
-                .any(|prefix| key.starts_with(prefix));
-                let single = ["CARGO_PRIMARY_PACKAGE", "CARGO_TARGET_TMPDIR", "OUT_DIR"];
-                if per_crate || single.contains(&key.as_str()) {
-                    build.env_remove(key);
-                }
-            }
-            let output = build.output().expect("cargo runs");
-            assert!(
-                output.status.success(),
-                "building deog failed:\n{}",
-                String::from_utf8_lossy(&output.stderr)
-            );
             let target = std::env::var_os("CARGO_TARGET_DIR")
                 .map(PathBuf::from)
                 .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target"));
-            target
+            let binary = target
                 .join("debug")
-                .join(format!("deog{}", std::env::consts::EXE_SUFFIX))
+                .join(format!("deog{}", std::env::consts::EXE_SUFFIX));
+            let run = std::env::var("NEXTEST_RUN_ID").ok();
+            let checked = target.join("debug").join("deog-binary-checked-for-run");
+            if run.is_some() && std::fs::read_to_string(&checked).ok() == run {
+                return binary;
+            }
+            build_workspace_tests();
+            if let Some(run) = run {
+                // Only a shortcut: a process that cannot write it builds too.
+                let _ = std::fs::write(&checked, run);
+            }
+            binary
         })
         .clone()
+}
+
+/// `cargo test --workspace --no-run`, quietly, with the variables cargo
+/// set for this test removed.
+fn build_workspace_tests() {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let mut build = Command::new(cargo);
+    build
+        .args(["test", "--workspace", "--no-run", "--quiet"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"));
+    // Cargo sets these for the test; some build scripts (ring's) rebuild
+    // when they change. Without them the build is the one the test run
+    // made, reused rather than redone.
+    for (key, _) in std::env::vars() {
+        let per_crate = [
+            "CARGO_PKG_",
+            "CARGO_MANIFEST_",
+            "CARGO_CRATE_",
+            "CARGO_BIN_",
+        ]
+        .iter()
+        .any(|prefix| key.starts_with(prefix));
+        let single = ["CARGO_PRIMARY_PACKAGE", "CARGO_TARGET_TMPDIR", "OUT_DIR"];
+        if per_crate || single.contains(&key.as_str()) {
+            build.env_remove(key);
+        }
+    }
+    let output = build.output().expect("cargo runs");
+    assert!(
+        output.status.success(),
+        "building deog failed:\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
 }
 
 /// A tile's cells, decoded from the wire's little-endian `i16`s.
