@@ -15,6 +15,7 @@ use crate::binaries::tool;
 use crate::error::tail;
 use crate::port::free_port;
 use crate::process::{self, Runner};
+use crate::template;
 use crate::watchdog::Watchdog;
 use crate::{ClusterError, ClusterOptions, binaries};
 
@@ -211,8 +212,21 @@ impl LocalCluster {
         tail(&read_from(&self.data_dir.join(LOG_FILE), 0), 20)
     }
 
-    /// Runs `initdb` into the data folder.
+    /// Initialises the data folder: a copy of the template an earlier
+    /// `initdb` of the same binaries left, or else `initdb`, whose folder
+    /// then becomes the template.
     fn init(&self) -> Result<(), ClusterError> {
+        let template = template::dir(&self.bin_dir, &self.runner);
+        if template::copy_into(&template, &self.data_dir, &self.runner) {
+            return Ok(());
+        }
+        self.initdb()?;
+        template::keep(&self.data_dir, &template, &self.runner);
+        Ok(())
+    }
+
+    /// Runs `initdb` into the data folder.
+    fn initdb(&self) -> Result<(), ClusterError> {
         let mut command = self.runner.server(&self.bin_dir.join("initdb"));
         command
             .arg("-D")

@@ -1,7 +1,9 @@
 //! A private, throwaway PostgreSQL server for tests, benchmarks and demos.
 //!
 //! [`LocalCluster::start`] finds the server binaries, runs `initdb` into a
-//! fresh temporary folder, starts `postgres` on a free loopback port with
+//! fresh temporary folder (or copies the data folder a first `initdb` of
+//! the same binaries left in the system's temporary folder as
+//! `deog-pg-template-...`), starts `postgres` on a free loopback port with
 //! trust authentication for the user `deog`, and waits until it accepts
 //! connections. Nothing depends on a server that is already running.
 //!
@@ -71,6 +73,7 @@ pub mod options;
 mod port;
 mod process;
 pub mod standby;
+mod template;
 mod watchdog;
 
 pub use binaries::binaries;

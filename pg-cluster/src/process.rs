@@ -105,7 +105,7 @@ pub(crate) fn show(command: &Command) -> String {
 }
 
 /// This process's effective user id, from `/proc/self/status`, else `id -u`.
-fn effective_uid() -> Option<u32> {
+pub(crate) fn effective_uid() -> Option<u32> {
     let from_proc = fs::read_to_string("/proc/self/status")
         .ok()
         .and_then(|status| {

@@ -185,3 +185,31 @@ fn accepts(port: u16) -> bool {
     let address = SocketAddr::from(([127, 0, 0, 1], port));
     TcpStream::connect_timeout(&address, Duration::from_secs(1)).is_ok()
 }
+
+#[test]
+fn clusters_after_the_first_start_from_its_template_and_are_their_own() -> anyhow::Result<()> {
+    let first = LocalCluster::start()?;
+    // The first start (this one, or another test's) left the template.
+    let templates: Vec<PathBuf> = [PathBuf::from("/tmp"), std::env::temp_dir()]
+        .iter()
+        .filter_map(|dir| std::fs::read_dir(dir).ok())
+        .flatten()
+        .filter_map(|entry| entry.ok().map(|e| e.path()))
+        .filter(|path| {
+            path.file_name()
+                .is_some_and(|n| n.to_string_lossy().starts_with("deog-pg-template"))
+                && path.join("PG_VERSION").is_file()
+        })
+        .collect();
+    assert!(!templates.is_empty(), "no template in the temporary folder");
+
+    let second = LocalCluster::start()?;
+    assert_ne!(first.data_dir(), second.data_dir());
+    first.create_database("only_in_the_first")?;
+    second.create_database("maps")?;
+    assert_eq!(second.psql("maps", "SELECT 1")?, "1");
+    let databases = "SELECT count(*) FROM pg_database WHERE datname = 'only_in_the_first'";
+    assert_eq!(first.psql("postgres", databases)?, "1");
+    assert_eq!(second.psql("postgres", databases)?, "0");
+    Ok(())
+}
