@@ -155,21 +155,34 @@ fn the_page_shows_the_map_growing_and_the_robot_driving() {
             .eval("return window.deogView.robots()[0];", json!([]))
             .expect("robots")
     };
-    let first = robot(&browser);
-    let colour = first["color"].as_str().expect("a colour").to_string();
     let at = |v: &Value| {
         (
             v["marker"][0].as_f64().unwrap_or(0.0),
             v["marker"][1].as_f64().unwrap_or(0.0),
         )
     };
+    // The page draws on its next animation frame: a pose that came just
+    // before the read may not be on the canvas yet, so a few reads, each
+    // of a pose and the pixels there, are allowed.
+    let mut first = robot(&browser);
+    let colour = first["color"].as_str().expect("a colour").to_string();
+    let mut drawn = false;
+    for _ in 0..20 {
+        let (x, y) = at(&first);
+        drawn = browser
+            .eval(COLOUR_NEAR, json!([x, y, colour]))
+            .expect("colour")
+            == Value::Bool(true);
+        if drawn {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(250));
+        first = robot(&browser);
+    }
     let (x0, y0) = at(&first);
-    assert_eq!(
-        browser
-            .eval(COLOUR_NEAR, json!([x0, y0, colour]))
-            .expect("colour"),
-        Value::Bool(true),
-        "the robot's marker is drawn in its colour at {x0:.0}, {y0:.0}"
+    assert!(
+        drawn,
+        "the robot's marker is not drawn in its colour at {x0:.0}, {y0:.0}"
     );
     let deadline = Instant::now() + Duration::from_secs(60);
     let moved = loop {
