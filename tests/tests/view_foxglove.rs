@@ -382,8 +382,12 @@ fn foxglove_shows_the_map_poses_scans_and_cones_of_a_running_system() {
         map_times.iter().any(|&t| t > map_times[0] + 1.0),
         "no grid after the first second: {map_times:?}"
     );
+    // Arrival times carry the transport's jitter (a grid is a megabyte or
+    // two): one that came late brings the next nearer. So the rate is
+    // judged over the whole run, and no two may come as one resend would.
+    let spacing = (map_times[map_times.len() - 1] - map_times[0]) / (map_times.len() - 1) as f64;
     assert!(
-        map_times.windows(2).all(|w| w[1] - w[0] >= 0.4),
+        spacing >= 0.45 && map_times.windows(2).all(|w| w[1] - w[0] >= 0.2),
         "grids closer than the 2 Hz throttle: {map_times:?}"
     );
 
