@@ -50,6 +50,8 @@ pub struct LocalCluster {
     pub(crate) root: PathBuf,
     pub(crate) data_dir: PathBuf,
     pub(crate) port: u16,
+    /// Whether the data folder is a copy of the template, not `initdb`'s.
+    from_template: bool,
     /// The running server: the postmaster, or `runuser` above it when root.
     server: Option<Child>,
     watchdog: Watchdog,
@@ -69,10 +71,11 @@ impl LocalCluster {
     pub fn start_with(options: &ClusterOptions) -> Result<Self, ClusterError> {
         let started = Instant::now();
         let mut cluster = Self::prepare(options)?;
-        cluster.init()?;
+        cluster.from_template = cluster.init()?;
         cluster.launch(options.port)?;
         tracing::debug!(
             port = cluster.port,
+            from_template = cluster.from_template,
             data_dir = %cluster.data_dir.display(),
             elapsed_ms = started.elapsed().as_millis(),
             "PostgreSQL cluster started"
@@ -108,6 +111,7 @@ impl LocalCluster {
             root,
             data_dir,
             port: 0,
+            from_template: false,
             server: None,
             watchdog,
             _temp: temp,
@@ -117,6 +121,12 @@ impl LocalCluster {
     /// The TCP port on 127.0.0.1.
     pub fn port(&self) -> u16 {
         self.port
+    }
+
+    /// Whether the data folder was copied from the template an earlier
+    /// start kept, rather than made by `initdb`.
+    pub fn from_template(&self) -> bool {
+        self.from_template
     }
 
     /// `postgres://deog@127.0.0.1:PORT/DATABASE`, the database name
@@ -214,15 +224,15 @@ impl LocalCluster {
 
     /// Initialises the data folder: a copy of the template an earlier
     /// `initdb` of the same binaries left, or else `initdb`, whose folder
-    /// then becomes the template.
-    fn init(&self) -> Result<(), ClusterError> {
+    /// then becomes the template. True if it was a copy.
+    fn init(&self) -> Result<bool, ClusterError> {
         let template = template::dir(&self.bin_dir, &self.runner);
         if template::copy_into(&template, &self.data_dir, &self.runner) {
-            return Ok(());
+            return Ok(true);
         }
         self.initdb()?;
         template::keep(&self.data_dir, &template, &self.runner);
-        Ok(())
+        Ok(false)
     }
 
     /// Runs `initdb` into the data folder.

@@ -204,6 +204,10 @@ fn clusters_after_the_first_start_from_its_template_and_are_their_own() -> anyho
     assert!(!templates.is_empty(), "no template in the temporary folder");
 
     let second = LocalCluster::start()?;
+    assert!(
+        second.from_template(),
+        "the second cluster ran initdb rather than copying the template"
+    );
     assert_ne!(first.data_dir(), second.data_dir());
     first.create_database("only_in_the_first")?;
     second.create_database("maps")?;
