@@ -273,6 +273,51 @@ impl<S: Store> MapServer<S> {
     }
 }
 
+impl<S> MapServer<S> {
+    /// A watcher's stream of the events `events` carries that it `keeps`,
+    /// until it hangs up or the server shuts down. A watcher that falls
+    /// behind skips to the newest event (`what` names them in the log):
+    /// the events relayed this way are stored, and can be read again.
+    fn relay<T: Clone + Send + Sync + 'static>(
+        &self,
+        mut events: broadcast::Receiver<Arc<T>>,
+        what: &'static str,
+        keeps: impl Fn(&T) -> bool + Send + 'static,
+    ) -> ResponseStream<T> {
+        let (tx, rx) = mpsc::channel(self.stream_buffer);
+        let shutdown = self.shutdown.clone();
+        tokio::spawn(async move {
+            loop {
+                let event = tokio::select! {
+                    () = shutdown.cancelled() => {
+                        let _ = tx.send(Err(shutting_down())).await;
+                        break;
+                    }
+                    () = tx.closed() => break,
+                    event = events.recv() => event,
+                };
+                match event {
+                    Ok(event) => {
+                        if keeps(&event) && tx.send(Ok((*event).clone())).await.is_err() {
+                            break;
+                        }
+                    }
+                    Err(broadcast::error::RecvError::Lagged(missed)) => {
+                        tracing::debug!(missed, what, "a watcher fell behind");
+                    }
+                    Err(broadcast::error::RecvError::Closed) => break,
+                }
+            }
+        });
+        ReceiverStream::new(rx)
+    }
+}
+
+/// What ends a stream when the server shuts down.
+fn shutting_down() -> Status {
+    Status::unavailable("the map server is shutting down")
+}
+
 fn decode<T: prost::Message + Default>(bytes: &[u8], what: &str) -> Result<T, StoreError> {
     T::decode(bytes).map_err(|e| StoreError::Corrupt {
         what: what.to_string(),
@@ -432,7 +477,7 @@ impl<S: Store> MapService for MapServer<S> {
             loop {
                 let message = tokio::select! {
                     () = server.shutdown.cancelled() => {
-                        let _ = pending_tx.send(Pending::Fail(Status::unavailable("the map server is shutting down"))).await;
+                        let _ = pending_tx.send(Pending::Fail(shutting_down())).await;
                         break;
                     }
                     message = inbound.message() => message,
@@ -607,7 +652,7 @@ impl<S: Store> MapService for MapServer<S> {
             loop {
                 let event = tokio::select! {
                     () = server.shutdown.cancelled() => {
-                        let _ = tx.send(Err(Status::unavailable("the map server is shutting down"))).await;
+                        let _ = tx.send(Err(shutting_down())).await;
                         break;
                     }
                     () = tx.closed() => break,
@@ -772,7 +817,7 @@ impl<S: Store> MapService for MapServer<S> {
                 }
                 let note = tokio::select! {
                     () = server.shutdown.cancelled() => {
-                        let _ = tx.send(Err(Status::unavailable("the map server is shutting down"))).await;
+                        let _ = tx.send(Err(shutting_down())).await;
                         break;
                     }
                     () = tx.closed() => break,
@@ -879,38 +924,12 @@ impl<S: Store> MapService for MapServer<S> {
             "" => None,
             name => Some(convert::robot_name("robot", name)?),
         };
-        let mut poses = self.events.watch_poses();
-        let (tx, rx) = mpsc::channel(self.stream_buffer);
-        let server = self.clone();
-        tokio::spawn(async move {
-            loop {
-                let pose = tokio::select! {
-                    () = server.shutdown.cancelled() => {
-                        let _ = tx.send(Err(Status::unavailable("the map server is shutting down"))).await;
-                        break;
-                    }
-                    () = tx.closed() => break,
-                    pose = poses.recv() => pose,
-                };
-                match pose {
-                    Ok(pose) => {
-                        if robot.as_ref().is_some_and(|r| *r != pose.robot) {
-                            continue;
-                        }
-                        if tx.send(Ok((*pose).clone())).await.is_err() {
-                            break;
-                        }
-                    }
-                    // Estimates are stored; a watcher that fell behind skips
-                    // to the newest and can read the gap with ReadPoses.
-                    Err(broadcast::error::RecvError::Lagged(missed)) => {
-                        tracing::debug!(missed, "pose watcher fell behind");
-                    }
-                    Err(broadcast::error::RecvError::Closed) => break,
-                }
-            }
+        // Estimates are stored; a watcher that fell behind skips to the
+        // newest and can read the gap with ReadPoses.
+        let poses = self.relay(self.events.watch_poses(), "pose", move |pose| {
+            robot.as_ref().is_none_or(|r| *r == pose.robot)
         });
-        Ok(Response::new(ReceiverStream::new(rx)))
+        Ok(Response::new(poses))
     }
 
     async fn publish_goal(
@@ -956,37 +975,10 @@ impl<S: Store> MapService for MapServer<S> {
         request: Request<pb::ListGoalsRequest>,
     ) -> Result<Response<Self::WatchGoalsStream>, Status> {
         let map = convert::map_name("map", &request.into_inner().map)?;
-        let mut goals = self.events.watch_goals();
-        let (tx, rx) = mpsc::channel(self.stream_buffer);
-        let server = self.clone();
-        tokio::spawn(async move {
-            loop {
-                let goal = tokio::select! {
-                    () = server.shutdown.cancelled() => {
-                        let _ = tx.send(Err(Status::unavailable("the map server is shutting down"))).await;
-                        break;
-                    }
-                    () = tx.closed() => break,
-                    goal = goals.recv() => goal,
-                };
-                match goal {
-                    Ok(goal) => {
-                        if goal.map != map {
-                            continue;
-                        }
-                        if tx.send(Ok((*goal).clone())).await.is_err() {
-                            break;
-                        }
-                    }
-                    // Goals are stored: ListGoals has what a lagging
-                    // watcher skipped.
-                    Err(broadcast::error::RecvError::Lagged(missed)) => {
-                        tracing::debug!(missed, "goal watcher fell behind");
-                    }
-                    Err(broadcast::error::RecvError::Closed) => break,
-                }
-            }
+        // Goals are stored: ListGoals has what a lagging watcher skipped.
+        let goals = self.relay(self.events.watch_goals(), "goal", move |goal| {
+            goal.map == map
         });
-        Ok(Response::new(ReceiverStream::new(rx)))
+        Ok(Response::new(goals))
     }
 }
