@@ -54,19 +54,37 @@ impl MapClient {
         &self.config
     }
 
+    /// One unary call under the retry policy: after a transient failure
+    /// `call` is made again, with a copy of `request`.
+    async fn unary<Request, Reply, Call, Fut>(
+        &self,
+        request: Request,
+        call: Call,
+    ) -> Result<Reply, ClientError>
+    where
+        Request: Clone,
+        Call: Fn(RawMapClient, Request) -> Fut,
+        Fut: std::future::Future<Output = Result<tonic::Response<Reply>, tonic::Status>>,
+    {
+        let reply = with_retry(&self.config.retry, || {
+            call(self.raw.clone(), request.clone())
+        })
+        .await?;
+        Ok(reply.into_inner())
+    }
+
     /// Creates a map, or returns the existing one of that name.
     pub async fn ensure_map(
         &self,
         request: pb::CreateMapRequest,
     ) -> Result<pb::MapInfo, ClientError> {
-        let raw = self.raw.clone();
-        let created = with_retry(&self.config.retry, || {
-            let (mut raw, request) = (raw.clone(), request.clone());
-            async move { raw.create_map(request).await }
-        })
-        .await;
+        let created = self
+            .unary(request.clone(), |mut raw, request| async move {
+                raw.create_map(request).await
+            })
+            .await;
         match created {
-            Ok(info) => Ok(info.into_inner()),
+            Ok(info) => Ok(info),
             Err(ClientError::Status(s)) if s.code() == tonic::Code::AlreadyExists => {
                 self.map_info(&request.name).await
             }
@@ -149,44 +167,37 @@ impl MapClient {
 
     /// A map's settings and counts.
     pub async fn map_info(&self, name: &str) -> Result<pb::MapInfo, ClientError> {
-        let raw = self.raw.clone();
         let request = pb::MapRef {
             name: name.to_string(),
         };
-        Ok(with_retry(&self.config.retry, || {
-            let (mut raw, request) = (raw.clone(), request.clone());
-            async move { raw.get_map_info(request).await }
+        self.unary(request, |mut raw, request| async move {
+            raw.get_map_info(request).await
         })
-        .await?
-        .into_inner())
+        .await
     }
 
     /// Every map the server holds.
     pub async fn maps(&self) -> Result<Vec<pb::MapInfo>, ClientError> {
-        let raw = self.raw.clone();
-        Ok(with_retry(&self.config.retry, || {
-            let mut raw = raw.clone();
-            async move { raw.list_maps(pb::ListMapsRequest {}).await }
-        })
-        .await?
-        .into_inner()
-        .maps)
+        Ok(self
+            .unary((), |mut raw, ()| async move {
+                raw.list_maps(pb::ListMapsRequest {}).await
+            })
+            .await?
+            .maps)
     }
 
     /// The highest batch sequence the server applied for `client_id`.
     pub async fn update_cursor(&self, map: &str, client_id: &str) -> Result<u64, ClientError> {
-        let raw = self.raw.clone();
         let request = pb::UpdateCursorRequest {
             map: map.to_string(),
             client_id: client_id.to_string(),
         };
-        Ok(with_retry(&self.config.retry, || {
-            let (mut raw, request) = (raw.clone(), request.clone());
-            async move { raw.get_update_cursor(request).await }
-        })
-        .await?
-        .into_inner()
-        .last_sequence)
+        Ok(self
+            .unary(request, |mut raw, request| async move {
+                raw.get_update_cursor(request).await
+            })
+            .await?
+            .last_sequence)
     }
 
     /// Every client that applied batches to map `map`, with its highest
@@ -280,14 +291,12 @@ impl MapClient {
         &self,
         frames: Vec<pb::SonarFrame>,
     ) -> Result<(u32, u32), ClientError> {
-        let raw = self.raw.clone();
         let request = pb::PublishFramesRequest { frames };
-        let reply = with_retry(&self.config.retry, || {
-            let (mut raw, request) = (raw.clone(), request.clone());
-            async move { raw.publish_frames(request).await }
-        })
-        .await?
-        .into_inner();
+        let reply = self
+            .unary(request, |mut raw, request| async move {
+                raw.publish_frames(request).await
+            })
+            .await?;
         Ok((reply.stored, reply.duplicates))
     }
 
@@ -333,16 +342,14 @@ impl MapClient {
     }
 
     /// The robots whose frames the server holds, with their sequence
-    /// ranges. One attempt, no retry: callers that poll it ask again anyway.
+    /// ranges.
     pub async fn robots(&self) -> Result<Vec<pb::RobotFrames>, ClientError> {
-        let raw = self.raw.clone();
-        Ok(with_retry(&self.config.retry, || {
-            let mut raw = raw.clone();
-            async move { raw.list_robots(pb::ListRobotsRequest {}).await }
-        })
-        .await?
-        .into_inner()
-        .robots)
+        Ok(self
+            .unary((), |mut raw, ()| async move {
+                raw.list_robots(pb::ListRobotsRequest {}).await
+            })
+            .await?
+            .robots)
     }
 
     /// Stores `rig` on the server, so that consumers of this robot's frames
@@ -350,54 +357,45 @@ impl MapClient {
     /// before, is accepted as it is; a different rig under a known name is
     /// refused (ALREADY_EXISTS).
     pub async fn put_rig(&self, rig: &Rig) -> Result<(), ClientError> {
-        let raw = self.raw.clone();
         let wire = rig_to_wire(rig);
-        with_retry(&self.config.retry, || {
-            let (mut raw, wire) = (raw.clone(), wire.clone());
-            async move { raw.put_rig(wire).await }
-        })
-        .await?;
+        self.unary(wire, |mut raw, wire| async move { raw.put_rig(wire).await })
+            .await?;
         Ok(())
     }
 
     /// Stores an explorer's current goal on its map, replacing its earlier
     /// one. Safe to retry: the same goal again changes nothing.
     pub async fn publish_goal(&self, goal: pb::ExplorationGoal) -> Result<(), ClientError> {
-        let raw = self.raw.clone();
-        with_retry(&self.config.retry, || {
-            let (mut raw, goal) = (raw.clone(), goal.clone());
-            async move { raw.publish_goal(goal).await }
-        })
+        self.unary(
+            goal,
+            |mut raw, goal| async move { raw.publish_goal(goal).await },
+        )
         .await?;
         Ok(())
     }
 
     /// Every explorer's latest goal on `map`, active or given up.
     pub async fn goals(&self, map: &str) -> Result<Vec<pb::ExplorationGoal>, ClientError> {
-        let raw = self.raw.clone();
         let request = pb::ListGoalsRequest {
             map: map.to_string(),
         };
-        Ok(with_retry(&self.config.retry, || {
-            let (mut raw, request) = (raw.clone(), request.clone());
-            async move { raw.list_goals(request).await }
-        })
-        .await?
-        .into_inner()
-        .goals)
+        Ok(self
+            .unary(request, |mut raw, request| async move {
+                raw.list_goals(request).await
+            })
+            .await?
+            .goals)
     }
 
     /// The rig a frame's `rig` field names (empty: the Scout's), as the
     /// server knows it.
     pub async fn rig(&self, frame_rig: &str) -> Result<Rig, ClientError> {
         let name = frame_rig_name(frame_rig).to_owned();
-        let raw = self.raw.clone();
-        let wire = with_retry(&self.config.retry, || {
-            let (mut raw, name) = (raw.clone(), name.clone());
-            async move { raw.get_rig(pb::RigRef { name }).await }
-        })
-        .await?
-        .into_inner();
+        let wire = self
+            .unary(name, |mut raw, name| async move {
+                raw.get_rig(pb::RigRef { name }).await
+            })
+            .await?;
         rig_from_wire(&wire).map_err(|e| ClientError::wire("rig", e.to_string()))
     }
 
@@ -418,10 +416,8 @@ impl MapClient {
 
     /// Stores a pose estimate.
     pub async fn publish_pose(&self, estimate: pb::PoseEstimate) -> Result<(), ClientError> {
-        let raw = self.raw.clone();
-        with_retry(&self.config.retry, || {
-            let (mut raw, estimate) = (raw.clone(), estimate.clone());
-            async move { raw.publish_pose(estimate).await }
+        self.unary(estimate, |mut raw, estimate| async move {
+            raw.publish_pose(estimate).await
         })
         .await?;
         Ok(())
