@@ -4,11 +4,13 @@
 //! memory budget), and publishes an estimate per frame.
 
 mod carry;
+mod follow;
 mod server;
 mod settings;
 
-use carry::{Carrier, worth_carrying};
-use server::{EstimateSink, ServerTiles, log_estimate};
+use carry::Carrier;
+use follow::{Ends, FollowSettings, follow, next_frame};
+use server::{EstimateSink, ServerTiles};
 use settings::LocalizeSettings;
 
 use std::time::{Duration, Instant};
@@ -21,19 +23,15 @@ use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::preset::Preset;
 use deog_localizer::step::{FetchedTile, Localizer};
 use deog_robot_client::convert::{cell_box_from_wire, pose_from_wire};
-use deog_robot_client::{MapClient, TileChange, TileWatch};
+use deog_robot_client::{MapClient, TileWatch};
 
 use crate::connection::ConnectionArgs;
-use crate::frame_queue::{CatchUp, FrameQueue};
+use crate::frame_queue::FrameQueue;
 use crate::pose_args::InitialPose;
 use crate::rig_args::publish_rig;
 use deog_localizer::sensors::{LikelihoodFieldParams, SensorChoice};
 use deog_proto::rig::frame_rig_name;
 use deog_proto::v1 as pb;
-
-/// A sensor update that takes this long is logged with what it did: the
-/// robot's frames come ten a second.
-const SLOW_STEP: Duration = Duration::from_millis(100);
 
 /// Options of `deog localize`.
 #[derive(Debug, Args)]
@@ -270,17 +268,10 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     ))?;
     let progress = queue.replay_progress("localizing frames", args.from, args.to, args.idle_exit);
     let mut shutdown = Box::pin(deog_harness::shutdown_signal());
-    let first = runtime.block_on(async {
-        tokio::select! {
-            () = &mut shutdown => Ok(None),
-            frame = queue.next() => frame,
-        }
-    })?;
-    let Some(first) = first else {
+    let Some(first) = next_frame(&runtime, &mut queue, &mut shutdown)? else {
         println!("{} on {}: no frame arrived", args.robot, args.map);
         return Ok(());
     };
-    let first_rig_field = first.rig.clone();
     let rig_name = frame_rig_name(&first.rig).to_owned();
     if let Some(rig) = &expected_rig {
         ensure!(
@@ -328,7 +319,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     let watch = runtime
         .block_on(client.watch_tiles(&args.map, plane, false))
         .context("watching the map's tiles")?;
-    let mut changes = TileWatch::spawn(watch);
+    let changes = TileWatch::spawn(watch);
     let mut tiles = ServerTiles {
         runtime: &runtime,
         client: &client,
@@ -353,146 +344,41 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         tables = localizer.map().stats().tables_built,
         "range tables ready"
     );
-    let keep_up = !args.every_frame && args.from == 0 && args.to == 0;
-    let (mut processed, mut corrections, mut last_sequence) = (0u64, 0u64, 0u64);
-    // Frame time of the last estimate sent with particles.
-    let mut sampled_at: Option<f64> = None;
-    let mut first = Some(first);
-    let mut catch_up = CatchUp::new(args.max_skip_s);
-    let carrier = Carrier {
-        client: &client,
-        robot: &args.robot,
-        map: &args.map,
+    let settings = FollowSettings {
+        keep_up: !args.every_frame && args.from == 0 && args.to == 0,
+        to: args.to,
+        max_skip_s: args.max_skip_s,
+        particle_sample: args.particle_sample,
+        particle_sample_every_s: args.particle_sample_every_s,
     };
-    let sink = EstimateSink {
+    let ends = Ends {
         runtime: &runtime,
-        client: &client,
-        robot: &args.robot,
-        map: &args.map,
+        queue,
+        tiles,
+        changes,
+        sink: EstimateSink {
+            runtime: &runtime,
+            client: &client,
+            robot: &args.robot,
+            map: &args.map,
+        },
+        carrier: Carrier {
+            client: &client,
+            robot: &args.robot,
+            map: &args.map,
+        },
+        progress,
     };
-    // How long the last step took, and the most seconds of frames that
-    // came while one ran (how far the filter's evidence fell behind).
-    let mut last_took = Duration::ZERO;
-    let mut filter_lag_s: f64 = 0.0;
-    loop {
-        let next = match first.take().or_else(|| catch_up.next_waiting()) {
-            Some(frame) => Ok(Some(frame)),
-            None => runtime.block_on(async {
-                tokio::select! {
-                    () = &mut shutdown => Ok(None),
-                    frame = queue.next() => frame,
-                }
-            }),
-        };
-        let Some(mut frame) = next? else { break };
-        if keep_up {
-            let waiting = runtime.block_on(queue.ready());
-            let (newest, passed) = catch_up.newest_within_reach(frame, waiting, processed == 0);
-            frame = newest;
-            // While the correction with the newest frame runs, the newest
-            // frame passed over has the estimate of now: the last
-            // correction's, carried by that frame's odometry (as amcl's
-            // pose follows odometry between its filter updates).
-            if let Some(passed) = passed.filter(|p| processed > 0 && p.sequence > last_sequence) {
-                let estimate = passed
-                    .odometry
-                    .map(pose_from_wire)
-                    .and_then(|odometry| localizer.mcl().estimate(&odometry));
-                if let Some(estimate) = estimate {
-                    sink.publish(&passed, &estimate, &[])?;
-                }
-            }
-        }
-        if frame.rig != first_rig_field {
-            bail!(
-                "frame {} comes from rig {}, the robot's earlier frames from {rig_name}: restart the localizer for the new rig",
-                frame.sequence,
-                frame_rig_name(&frame.rig)
-            );
-        }
-        if frame.sequence <= last_sequence {
-            continue;
-        }
-        if args.to > 0 && frame.sequence > args.to {
-            break;
-        }
-        last_sequence = frame.sequence;
-        while let Some(change) = changes.try_next() {
-            match change {
-                TileChange::Tile(key) => localizer.tile_changed(key),
-                TileChange::All => localizer.all_changed(),
-            }
-        }
-        let odometry = frame
-            .odometry
-            .map(pose_from_wire)
-            .with_context(|| format!("frame {} has no odometry pose", frame.sequence))?;
-        localizer.note_frame(&odometry, frame.time_s);
-        let particles = localizer.mcl().particles().len();
-        let started = Instant::now();
-        let carried = localizer
-            .mcl()
-            .carried()
-            .filter(|_| keep_up && worth_carrying(particles, last_took));
-        let report = match carried {
-            Some(carried) => {
-                // The frames that come meanwhile get the estimate of now
-                // from a thread beside the step, then wait their turn.
-                let (report, arrived) =
-                    carrier.beside(&runtime, &mut queue, carried, frame.sequence, || {
-                        localizer.step(&odometry, &frame.ranges, started, &mut tiles)
-                    })?;
-                if let Some(newest) = arrived.last() {
-                    filter_lag_s = filter_lag_s.max(newest.time_s - frame.time_s);
-                }
-                catch_up.hold(arrived);
-                report
-            }
-            None => localizer.step(&odometry, &frame.ranges, started, &mut tiles),
-        }
-        .with_context(|| format!("frame {}", frame.sequence))?;
-        let took = started.elapsed();
-        last_took = took;
-        if let Some(correction) = &report.correction {
-            corrections += 1;
-            if took >= SLOW_STEP {
-                tracing::info!(
-                    frame = frame.sequence,
-                    ms = took.as_millis() as u64,
-                    particles,
-                    injected = correction.injected,
-                    tables_built = correction.tables_built,
-                    tiles_fetched = report.tiles_fetched,
-                    "slow sensor update"
-                );
-            }
-        }
-        processed += 1;
-        if let Some(estimate) = report.estimate {
-            let sample = if args.particle_sample > 0
-                && sampled_at.is_none_or(|at| frame.time_s - at >= args.particle_sample_every_s)
-            {
-                sampled_at = Some(frame.time_s);
-                localizer.mcl().sample(args.particle_sample, &odometry)
-            } else {
-                Vec::new()
-            };
-            sink.publish(&frame, &estimate, &sample)?;
-            log_estimate(&frame, &estimate, processed, localizer.map().bytes());
-        }
-        progress.reached(frame.sequence);
-        if args.to > 0 && frame.sequence >= args.to {
-            break;
-        }
-    }
-    drop(changes);
-    progress.finish();
+    let followed = follow(&mut localizer, first, ends, settings, &mut shutdown)?;
     let map = localizer.map();
     println!(
-        "{} on {}: {processed} frames, {corrections} sensor updates, {} frames skipped to keep up (the filter at most {filter_lag_s:.2} s of frames behind while carried), {} range tables built, cache {:.1} MiB",
+        "{} on {}: {} frames, {} sensor updates, {} frames skipped to keep up (the filter at most {:.2} s of frames behind while carried), {} range tables built, cache {:.1} MiB",
         args.robot,
         args.map,
-        catch_up.skipped(),
+        followed.processed,
+        followed.corrections,
+        followed.skipped,
+        followed.filter_lag_s,
         map.stats().tables_built,
         map.bytes() as f64 / f64::from(1 << 20)
     );
