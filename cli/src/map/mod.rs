@@ -5,18 +5,16 @@
 
 mod by_rig;
 mod estimates;
+mod follow;
 mod settings;
 
 use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
-use deog_grid::{FrameMotion, RayModelParams, Resolution, TileKey, TileSize};
-use deog_mapping::{
-    FrameInput, MapView, MapViewSettings, PoseChoice, SonarMethod, mapping_sonar_model,
-};
+use deog_grid::{FrameMotion, RayModelParams, Resolution, TileSize};
+use deog_mapping::{MapViewSettings, PoseChoice, SonarMethod, mapping_sonar_model};
 use deog_proto::v1 as pb;
-use deog_robot_client::convert::{pose_from_wire, pose_or_origin};
 use deog_robot_client::{MapClient, UpdateSenderConfig};
 
 use crate::connection::ConnectionArgs;
@@ -25,6 +23,7 @@ use crate::pose_args::MapPoseSource;
 use crate::rig_args::publish_rig;
 use by_rig::{CartographerByRig, ModelSettings};
 use estimates::EstimateFollower;
+use follow::Mapping;
 use settings::MapSettings;
 
 /// Options of `deog map`.
@@ -219,10 +218,6 @@ impl From<SonarMethodChoice> for SonarMethod {
     }
 }
 
-/// Tiles a batch may reach before it is sent at the next frame boundary:
-/// well inside the server's message limit even with dense tiles.
-const MAX_BATCH_TILES: usize = 256;
-
 /// Runs the cartographer.
 pub fn run(args: MapArgs) -> Result<()> {
     let MapSettings {
@@ -262,8 +257,8 @@ pub fn run(args: MapArgs) -> Result<()> {
             view,
             firing,
         };
-        let mut cartographers = CartographerByRig::new(client.clone(), settings, expected_rig);
-        let mut sender = client
+        let cartographers = CartographerByRig::new(client.clone(), settings, expected_rig);
+        let sender = client
             .updates(
                 &args.map,
                 &client_id,
@@ -279,7 +274,7 @@ pub fn run(args: MapArgs) -> Result<()> {
         if applied > 0 {
             tracing::info!(robot = %args.robot, map = %args.map, last_applied = applied, "resuming after the last frame the server applied");
         }
-        let mut ack_log = match &args.ack_log {
+        let ack_log = match &args.ack_log {
             Some(path) => Some(std::io::BufWriter::new(
                 std::fs::File::create(path)
                     .with_context(|| format!("creating {}", path.display()))?,
@@ -288,7 +283,7 @@ pub fn run(args: MapArgs) -> Result<()> {
         };
         let mut queue = FrameQueue::follow(&client, &args.robot, start, args.idle_exit).await?;
         let progress = queue.replay_progress("mapping frames", start, args.to, args.idle_exit);
-        let mut estimates = (args.pose == MapPoseSource::Estimate).then(|| {
+        let estimates = (args.pose == MapPoseSource::Estimate).then(|| {
             let map = args.estimate_map.as_deref().unwrap_or(&args.map);
             tracing::info!(robot = %args.robot, estimates_on = map, "mapping from the localizer's converged estimates");
             EstimateFollower::new(
@@ -301,16 +296,30 @@ pub fn run(args: MapArgs) -> Result<()> {
 
         let shutdown = deog_harness::shutdown_signal();
         tokio::pin!(shutdown);
+        let mut mapping = Mapping {
+            client: &client,
+            map: &args.map,
+            tile_size,
+            cartographers,
+            sender,
+            ack_log,
+            estimates,
+            start,
+            to: args.to,
+            view_refresh,
+            view_read: Instant::now(),
+            frame_motion: FrameMotion::default(),
+            deltas: Vec::new(),
+            integrated: 0,
+            cells: 0,
+            last: 0,
+        };
         // Timed from the first frame to the last acknowledgement: the
         // rate of the pipeline, not of waiting for frames.
         let mut began: Option<Instant> = None;
         let mut worked_until = Instant::now();
-        let (mut integrated, mut cells, mut last) = (0u64, 0u64, 0u64);
-        let mut deltas = Vec::new();
-        let mut frame_motion = FrameMotion::default();
         let mut batch = Vec::new();
-        let mut view_read = Instant::now();
-        'follow: loop {
+        loop {
             let first = tokio::select! {
                 () = &mut shutdown => break,
                 frame = queue.next() => match frame? {
@@ -322,7 +331,6 @@ pub fn run(args: MapArgs) -> Result<()> {
             // One batch: this frame and those already waiting, up to
             // --batch-frames, so a slow robot's frames reach the map at once
             // and a fast one's go in bulk.
-            batch.clear();
             batch.push(first);
             while batch.len() < args.batch_frames {
                 match queue.try_next() {
@@ -330,73 +338,19 @@ pub fn run(args: MapArgs) -> Result<()> {
                     None => break,
                 }
             }
-            let mut stop = false;
-            for frame in batch.drain(..) {
-                if frame.sequence < start || frame.sequence <= last {
-                    continue;
-                }
-                if args.to > 0 && frame.sequence > args.to {
-                    stop = true;
-                    break;
-                }
-                deltas.clear();
-                let estimate = match &mut estimates {
-                    Some(follower) => match follower.pose_for(frame.sequence).await? {
-                        Some(pose) => Some(pose),
-                        None => {
-                            last = frame.sequence;
-                            continue;
-                        }
-                    },
-                    None => None,
-                };
-                let pace = frame_motion.observe(&pose_or_origin(frame.odometry), frame.time_s);
-                let input = FrameInput {
-                    sequence: frame.sequence,
-                    pace,
-                    true_pose: frame.true_pose.map(pose_from_wire),
-                    odometry: pose_or_origin(frame.odometry),
-                    reference_pose: frame.reference_pose.map(pose_from_wire),
-                    estimate,
-                    ranges: &frame.ranges,
-                };
-                let cartographer = cartographers.for_frame(&frame.rig, frame.sequence).await?;
-                if let Some(view) = cartographer.view_mut() {
-                    if view_read.elapsed() >= view_refresh {
-                        // Read again what other writers changed.
-                        view.clear();
-                        view_read = Instant::now();
-                    }
-                }
-                let missing = cartographer.missing_tiles(&input)?;
-                if let (false, Some(view)) = (missing.is_empty(), cartographer.view_mut()) {
-                    fill_view(&client, &args.map, tile_size, view, &missing).await?;
-                }
-                cells += cartographer.integrate(&input, &mut deltas)? as u64;
-                for delta in deltas.drain(..) {
-                    sender.push(delta).await?;
-                }
-                last = frame.sequence;
-                integrated += 1;
-                if sender.pending_tiles() >= MAX_BATCH_TILES {
-                    send(&mut sender, last, &mut ack_log).await?;
-                }
-                if args.to > 0 && frame.sequence >= args.to {
-                    stop = true;
-                    break;
-                }
-            }
-            if last > 0 {
-                send(&mut sender, last, &mut ack_log).await?;
-                progress.reached(last);
+            let flow = mapping.batch(batch.drain(..)).await?;
+            if mapping.last > 0 {
+                progress.reached(mapping.last);
             }
             worked_until = Instant::now();
-            if stop {
-                break 'follow;
+            if flow.is_break() {
+                break;
             }
         }
         let closing = Instant::now();
-        let state = sender.close().await?;
+        let (integrated, cells) = (mapping.integrated, mapping.cells);
+        let estimates = mapping.estimates.take();
+        let state = mapping.close().await?;
         progress.finish();
         let seconds = began.map_or(0.0, |t| {
             (worked_until - t + closing.elapsed()).as_secs_f64()
@@ -418,57 +372,4 @@ pub fn run(args: MapArgs) -> Result<()> {
         );
         Ok(())
     })
-}
-
-/// Reads the tiles `keys` of `map` into `view`; those the server lacks
-/// are unknown everywhere.
-async fn fill_view(
-    client: &MapClient,
-    map: &str,
-    tile_size: TileSize,
-    view: &mut MapView,
-    keys: &[TileKey],
-) -> Result<()> {
-    let tiles = client
-        .tiles_by_key(map, tile_size, keys)
-        .await
-        .with_context(|| format!("reading {} tiles of map {map} around the robot", keys.len()))?;
-    let mut found = std::collections::HashSet::with_capacity(tiles.len());
-    for (key, _, tile) in tiles {
-        found.insert(key);
-        view.insert(key, tile)?;
-    }
-    for &key in keys.iter().filter(|key| !found.contains(key)) {
-        view.insert_unknown(key)?;
-    }
-    Ok(())
-}
-
-/// Sends the batch being filled under `sequence`; with an ack log, waits
-/// for its acknowledgement and writes it down.
-async fn send(
-    sender: &mut deog_robot_client::UpdateSender,
-    sequence: u64,
-    ack_log: &mut Option<std::io::BufWriter<std::fs::File>>,
-) -> Result<()> {
-    use std::io::Write as _;
-    if sender.pending_tiles() == 0 {
-        return Ok(());
-    }
-    // Read before sending: the acknowledgement may arrive at once.
-    let before = sender.acks();
-    sender.send_batch_as(sequence).await?;
-    if let Some(log) = ack_log {
-        let after = sender.flush().await?;
-        writeln!(
-            log,
-            "{} {} {}",
-            after.last_acked,
-            after.map_version,
-            after.applied > before.applied
-        )
-        .context("writing the ack log")?;
-        log.flush().context("writing the ack log")?;
-    }
-    Ok(())
 }
