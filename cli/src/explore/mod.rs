@@ -183,6 +183,7 @@ impl Explorer {
     }
 }
 
+/// What the run did, for its last line; and where the robot was last.
 #[derive(Debug, Default)]
 struct Summary {
     frames: u64,
@@ -193,6 +194,65 @@ struct Summary {
     distance_m: f64,
     sim_seconds: f64,
     finished: bool,
+    /// The simulation time of the first state seen and of the last.
+    start_time_s: Option<f64>,
+    last_time_s: f64,
+    last_pose: Option<Pose2>,
+    was_bumped: bool,
+}
+
+impl Summary {
+    /// Counts `state`, the robot's next: the distance it drove since the
+    /// last, a bump that began, the simulated time since the first.
+    fn observe(&mut self, state: &pb::RobotState) {
+        let truth = pose_or_origin(state.true_pose);
+        let start = *self.start_time_s.get_or_insert(state.time_s);
+        if let Some(previous) = self.last_pose {
+            self.distance_m += (truth.x - previous.x).hypot(truth.y - previous.y);
+        }
+        self.last_pose = Some(truth);
+        if state.bumper && !self.was_bumped {
+            self.bumps += 1;
+            tracing::warn!(
+                x = truth.x,
+                y = truth.y,
+                heading_deg = truth.theta.to_degrees(),
+                "bumped into something"
+            );
+        }
+        self.was_bumped = state.bumper;
+        self.frames += 1;
+        self.sim_seconds = state.time_s - start;
+        self.last_time_s = state.time_s;
+    }
+
+    /// Logs and counts what the steering decided.
+    fn note(&mut self, events: &[SteeringEvent]) {
+        for event in events {
+            match event {
+                SteeringEvent::NewGoal { goal, tight } => {
+                    self.goals += 1;
+                    tracing::info!(
+                        x = goal.x,
+                        y = goal.y,
+                        frontier_m = goal.frontier_m,
+                        travel_m = goal.travel_m,
+                        tight,
+                        approach = goal.approach,
+                        "new goal"
+                    );
+                }
+                SteeringEvent::Barred { x, y } => {
+                    self.barred += 1;
+                    tracing::info!(x, y, "goal not neared: barred for a while");
+                }
+                SteeringEvent::NoReachableFrontier {
+                    frontiers,
+                    empty_plans,
+                } => tracing::info!(frontiers, empty_plans, "no reachable frontier"),
+            }
+        }
+    }
 }
 
 /// Runs the explorer until no reachable frontier is left, its duration
@@ -305,35 +365,13 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
     tokio::pin!(shutdown);
     let mut summary = Summary::default();
     let mut backlog = Vec::new();
-    let mut start_time = None;
-    let mut last_pose: Option<Pose2> = None;
-    let mut last_time_s = 0.0;
-    let mut was_bumped = false;
     'run: loop {
         if !states.next_batch(shutdown.as_mut(), &mut backlog).await? {
             break;
         }
         let mut newest = None;
         for state in backlog.drain(..) {
-            let truth = pose_or_origin(state.true_pose);
-            let start = *start_time.get_or_insert(state.time_s);
-            if let Some(previous) = last_pose {
-                summary.distance_m += (truth.x - previous.x).hypot(truth.y - previous.y);
-            }
-            last_pose = Some(truth);
-            if state.bumper && !was_bumped {
-                summary.bumps += 1;
-                tracing::warn!(
-                    x = truth.x,
-                    y = truth.y,
-                    heading_deg = truth.theta.to_degrees(),
-                    "bumped into something"
-                );
-            }
-            was_bumped = state.bumper;
-            summary.frames += 1;
-            summary.sim_seconds = state.time_s - start;
-            last_time_s = state.time_s;
+            summary.observe(&state);
             if let Some((frames, _)) = &publisher
                 && frames
                     .send(frame_of(&args.robot, &state, &rig))
@@ -386,30 +424,7 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
             }
         };
         let decision = steering.step(now, pose, clearance, plan);
-        for event in &decision.events {
-            match event {
-                SteeringEvent::NewGoal { goal, tight } => {
-                    summary.goals += 1;
-                    tracing::info!(
-                        x = goal.x,
-                        y = goal.y,
-                        frontier_m = goal.frontier_m,
-                        travel_m = goal.travel_m,
-                        tight,
-                        approach = goal.approach,
-                        "new goal"
-                    );
-                }
-                SteeringEvent::Barred { x, y } => {
-                    summary.barred += 1;
-                    tracing::info!(x, y, "goal not neared: barred for a while");
-                }
-                SteeringEvent::NoReachableFrontier {
-                    frontiers,
-                    empty_plans,
-                } => tracing::info!(frontiers, empty_plans, "no reachable frontier"),
-            }
-        }
+        summary.note(&decision.events);
         if decision.finished {
             summary.finished = true;
             break 'run;
@@ -441,8 +456,9 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
         tracing::warn!(%error, "could not stop the robot");
     }
     // Give the goal up, so the others need not avoid it.
-    let at = last_pose.unwrap_or_default();
-    if let Err(error) = explorer.publish_goal(at.x, at.y, last_time_s, false).await {
+    let at = summary.last_pose.unwrap_or_default();
+    let time_s = summary.last_time_s;
+    if let Err(error) = explorer.publish_goal(at.x, at.y, time_s, false).await {
         tracing::warn!(%error, "could not give the goal up");
     }
     if let Some((frames, task)) = publisher {
