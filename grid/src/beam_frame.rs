@@ -210,7 +210,7 @@ impl BeamFrameIntegrator {
     }
 
     /// [`Self::integrate`] with each sonar cone guarded by the map it
-    /// writes to (see [`SonarModel::visit_cone_guarded`]); laser rays are
+    /// writes to (see `SonarModel::visit_cone_guarded`); laser rays are
     /// mapped as they are.
     pub fn integrate_guarded(
         &mut self,

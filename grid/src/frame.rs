@@ -80,7 +80,7 @@ impl FrameIntegrator {
     }
 
     /// [`Self::integrate`] with each cone guarded by the map it writes to
-    /// (see [`SonarModel::visit_cone_guarded`]): evidence stops at the
+    /// (see `SonarModel::visit_cone_guarded`): evidence stops at the
     /// cells `walls` holds occupied.
     pub fn integrate_guarded(
         &mut self,

@@ -33,7 +33,7 @@
 //! free ray would cut through them. Set it to 0 to ignore such readings.
 //!
 //! A cone can be guarded by the map it writes to
-//! ([`SonarModel::visit_cone_guarded`]): along each direction of the cone,
+//! (`SonarModel::visit_cone_guarded`): along each direction of the cone,
 //! evidence stops at the first cell the map already holds as a wall. The
 //! wall cell gets no empty evidence, and cells behind it get none at all.
 //! A sonar misses a wall it meets at a grazing angle and hears something

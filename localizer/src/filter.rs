@@ -31,7 +31,7 @@
 //! - for a few metres after a global start or the start of a search, the
 //!   filter keeps the frames it weighed, and its tight modes share their
 //!   weight by the likelihood of all of them, each mode's mean carried
-//!   back by the odometry ([`Mcl::weigh_by_history`]): a mode's weight
+//!   back by the odometry (`Mcl::weigh_by_history`): a mode's weight
 //!   when it forms is the luck of the first draws, which frame-by-frame
 //!   weighing can only multiply;
 //! - resampling happens only when the effective sample size, counted

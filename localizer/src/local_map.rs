@@ -20,7 +20,7 @@
 //! the one-cell ragged edges of its walls, none of which moves an expected
 //! range by more than a cell: the tables stay until a tile's occupied
 //! cells differ from those the tables were built with by more than that
-//! (see [`occupied_moved`]). Before tables are built, the least recently
+//! (see `occupied_moved`). Before tables are built, the least recently
 //! used ones make room; after a correction, [`LocalMap::evict_to_budget`]
 //! drops tables and tiles outside the working set. Both keep a quarter of
 //! the budget for the rest of the process (allocator overhead, buffers),

@@ -328,7 +328,7 @@ const STRIP_ROWS: i32 = 64;
 /// Writes [`build_table`]'s entries into `table` (one [`ConeGeometry::stride`]
 /// a cell of `tile`, row-major; entries past the tile's are left alone).
 ///
-/// Rays of one direction are cast along shared lines ([`LINE_SPACING`]
+/// Rays of one direction are cast along shared lines (`LINE_SPACING`
 /// apart) rather than one from each cell; [`fill_table_ray_by_ray`] casts
 /// each cell's own, and the two agree but for rays that graze a corner.
 pub fn fill_table(

@@ -7,7 +7,7 @@
 //! - [`pgm`]: PGM images, binary `P5` and plain `P2` in, `P5` out.
 //! - [`map_image`]: [`MapImage`], a map in memory: loading, map_server's
 //!   occupancy rules ([`Cell`]) and cell centres in world coordinates.
-//! - [`write`]: [`write_map`] (PGM + YAML), [`to_png`] (the pixels as
+//! - [`write`](mod@write): [`write_map`] (PGM + YAML), [`to_png`] (the pixels as
 //!   they are) and [`to_png_with_scale_bar`] (the picture people read).
 //! - [`canvas`]: [`Canvas`], what the picture helpers draw on (an RGB
 //!   plot, a grayscale map), and the quietest corner for a box.

@@ -10,7 +10,7 @@
 //! # Layout
 //! - [`rig`]: the types, [`Rig`], [`RangeSensor`], [`Beam`] and the checks of a frame
 //!   against its rig.
-//! - [`file`]: rig files (TOML; the format is in `rigs/README.md`).
+//! - [`file`](mod@file): rig files (TOML; the format is in `rigs/README.md`).
 //! - [`builtin`]: the built-in rigs (`scout`, `pioneer3dx`, `laser180`)
 //!   and [`load_rig_spec`], how a `--rig NAME|FILE` is resolved.
 //! - [`error`]: the one error type, [`RigError`].

@@ -1,7 +1,7 @@
 //! `deog bench fuzz`: every decoder of outside input fed mutated bytes for
 //! a fixed budget, on stable Rust without coverage feedback.
 //!
-//! Each target ([`targets`]) feeds bytes to the decoder a server or command
+//! Each target (`targets`) feeds bytes to the decoder a server or command
 //! uses on what it is sent or given: the packed tile cells, the wire
 //! requests the map server and the simulator accept (prost's decoding and
 //! then the servers' own checks), rig files, map_server YAML and PGM, the

@@ -112,8 +112,8 @@ impl VerdictImage {
 }
 
 /// Paints `input.map`'s verdicts over its world; the same errors as
-/// [`map_quality`]. Observed cells beyond the world's bounds (all wrong
-/// unless mapped occupied) are counted by [`map_quality`] but not drawn.
+/// [`map_quality`](super::map_quality). Observed cells beyond the world's bounds (all wrong
+/// unless mapped occupied) are counted by [`map_quality`](super::map_quality) but not drawn.
 pub fn verdict_image(input: &QualityInput<'_>) -> Result<VerdictImage, EvaluationError> {
     let (truth, grid, _) = judged_truth(input)?;
     let (width, height) = (grid.width, grid.height);

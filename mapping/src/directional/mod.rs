@@ -13,7 +13,7 @@
 //! most occupied observed bin if that bin decides it a wall: a cell is a
 //! wall if it faces some way as a wall. Otherwise a bin that decides it
 //! free wins over bins that only lean occupied; with no bin decided, the
-//! most occupied lean stands ([`combined`]). What goes to
+//! most occupied lean stands (`combined`). What goes to
 //! the map server is the change of that belief, so the server's map (and
 //! every reader of it) stays one belief per cell.
 //!
@@ -23,7 +23,7 @@
 //! number of tiles and forgets the least recently used; a forgotten tile
 //! starts again from nothing (the server keeps what it was sent).
 //!
-//! Space no robot could have seen ([`enclosure`]): every
+//! Space no robot could have seen (`enclosure`): every
 //! [`DirectionalSettings::enclosure_period`] frames the view floods from
 //! the cells the robots stood on through every cell it does not hold as
 //! occupied; a cell it holds free that the flood does not reach is
@@ -75,11 +75,11 @@ pub struct DirectionalSettings {
     /// that a direction can change its mind (a door opens).
     pub limits: ClampLimits,
     /// Frames between two judgements of the space no robot could have
-    /// seen ([`enclosure`]); 0: never judged.
+    /// seen (`enclosure`); 0: never judged.
     pub enclosure_period: u32,
     /// How far behind a wall, once heard, the free evidence that reached
     /// it through the wall is taken back, metres
-    /// ([`DirectionalView::shadow_behind`]); 0: never.
+    /// (`DirectionalView::shadow_behind`); 0: never.
     pub shadow_depth: f64,
 }
 
