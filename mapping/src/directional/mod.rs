@@ -1119,4 +1119,91 @@ mod tests {
         assert!(v.belief(CellIndex::new(0, 0)).is_some());
         assert!(v.belief(CellIndex::new(16, 0)).is_none());
     }
+
+    mod properties {
+        use super::*;
+        use deog_grid::TileMap;
+        use proptest::prelude::*;
+
+        /// x, y (metres) and heading (radians).
+        type RobotAt = (f64, f64, f64);
+        /// A cell (x, y) and a plain delta for it.
+        type CellEvidence = (i32, i32, i16);
+
+        /// One frame: where the robot stood and the plain evidence of its
+        /// cones, as (cell x, cell y, delta), all within 1.2 m of the
+        /// origin, so that cells are told again and again, become walls
+        /// and are taken back.
+        fn frame() -> impl Strategy<Value = (RobotAt, Vec<CellEvidence>)> {
+            (
+                (0.0..1.2f64, 0.0..1.2f64, -3.2..3.2f64),
+                prop::collection::vec(
+                    (
+                        0..24i32,
+                        0..24i32,
+                        (-1200..1200i16).prop_filter("nonzero", |d| *d != 0),
+                    ),
+                    1..60,
+                ),
+            )
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(64))]
+
+            /// What the view sends is the change of what it holds: the
+            /// deltas, added up by a map as the server adds them, give
+            /// every cell the view's belief, through taking back, the
+            /// judgement of enclosed space and clamping alike.
+            #[test]
+            fn the_deltas_sent_add_up_to_the_views_beliefs(
+                frames in prop::collection::vec(frame(), 1..30),
+                enclosure_period in 0..4u32,
+                shadow_depth in prop::sample::select(vec![0.0, 0.3, 1.0]),
+            ) {
+                let size = TileSize::new(16).expect("size");
+                let mut view = view_with(DirectionalSettings {
+                    enclosure_period,
+                    shadow_depth,
+                    ..DirectionalSettings::default()
+                });
+                let mut map = TileMap::new(Resolution::DEFAULT, size, ClampLimits::NONE);
+                let mut touched = std::collections::BTreeSet::new();
+                for ((x, y, theta), cells) in frames {
+                    let mut plain: Vec<TileDelta> = Vec::new();
+                    for (cx, cy, d) in cells {
+                        let cell = CellIndex::new(cx, cy);
+                        touched.insert((cx, cy));
+                        let (key, offset) = size.split(cell);
+                        let at = match plain.iter().position(|p| p.key == key) {
+                            Some(at) => at,
+                            None => {
+                                plain.push(TileDelta::zero(key, size));
+                                plain.len() - 1
+                            }
+                        };
+                        let raw = &mut plain[at].raw_mut()[offset.index(size)];
+                        *raw = raw.saturating_add(d);
+                    }
+                    let mut out = Vec::new();
+                    view.absorb(&Pose2::new(x, y, theta), &plain, &mut out)
+                        .expect("absorb");
+                    for delta in &out {
+                        map.apply(delta).expect("apply");
+                    }
+                }
+                for (x, y) in (-40..64).flat_map(|x| (-40..64).map(move |y| (x, y))) {
+                    let cell = CellIndex::new(x, y);
+                    let held = view.belief(cell).map(LogOdds::raw);
+                    let sent = map.get(cell).map(LogOdds::raw);
+                    // A cell the view never held a belief for was sent nothing.
+                    prop_assert_eq!(
+                        sent.filter(|&raw| raw != 0 || held.is_some()),
+                        held,
+                        "cell ({}, {}), touched: {}", x, y, touched.contains(&(x, y))
+                    );
+                }
+            }
+        }
+    }
 }
