@@ -165,4 +165,101 @@ mod tests {
         let costs = TravelCosts::from(&window, &costmap, start).unwrap();
         assert!(costs.reaches(window.index_of(CellIndex::new(9, 1)).unwrap()));
     }
+
+    mod properties {
+        use super::*;
+        use proptest::prelude::*;
+
+        /// A window of up to 12 × 12 cells, each free, occupied or unknown,
+        /// with a start on a free cell.
+        fn window_and_start() -> impl Strategy<Value = (Vec<String>, (usize, usize))> {
+            (2..12usize, 2..12usize).prop_flat_map(|(width, height)| {
+                let row = prop::collection::vec(
+                    prop::sample::select(vec!['.', '.', '.', '#', '?']),
+                    width,
+                )
+                .prop_map(|cells| cells.into_iter().collect::<String>());
+                (prop::collection::vec(row, height), (0..width, 0..height))
+            })
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(200))]
+
+            /// The costs are a shortest-path solution: no step into a
+            /// cell the costmap lets one enter would make it cheaper, the
+            /// cells reached are those a flood through enterable cells
+            /// reaches, and each path goes from the start by neighbours
+            /// through enterable cells at exactly the cost reported.
+            #[test]
+            fn costs_are_shortest_paths_and_paths_cost_what_they_say(
+                (mut rows, (sx, sy)) in window_and_start(),
+                proximity_weight in 0.0..4.0f64,
+            ) {
+                let height = rows.len();
+                // The start on a free cell (rows run from the top down).
+                let row = height - 1 - sy;
+                rows[row].replace_range(sx..sx + 1, ".");
+                let rows: Vec<&str> = rows.iter().map(String::as_str).collect();
+                let resolution = Resolution::new(0.1).unwrap();
+                let window = OccupancyWindow::from_rows(&rows, CellIndex::new(-3, 5), resolution);
+                let costmap = Costmap::inflate(&window, CostParams {
+                    proximity_weight,
+                    inflation_m: 0.25,
+                    ..no_inflation()
+                });
+                let start = CellIndex::new(-3 + sx as i32, 5 + sy as i32);
+                let costs = TravelCosts::from(&window, &costmap, start).unwrap();
+                let start_index = window.index_of(start).unwrap();
+                prop_assert_eq!(costs.cost_m(start_index), 0.0);
+
+                // Bellman: no cheaper way into any enterable neighbour.
+                for index in 0..window.len() {
+                    if !costs.reaches(index) {
+                        continue;
+                    }
+                    for (next, length) in window.neighbours(index) {
+                        if costmap.is_lethal(next) {
+                            continue;
+                        }
+                        let through = costs.cost_m(index) + length * costmap.step_factor(next) * 0.1;
+                        prop_assert!(costs.cost_m(next) <= through + 1e-9);
+                    }
+                }
+
+                // Reached: a flood from the start through enterable cells.
+                let mut flooded = vec![false; window.len()];
+                let mut stack = vec![start_index];
+                flooded[start_index] = true;
+                while let Some(index) = stack.pop() {
+                    for (next, _) in window.neighbours(index) {
+                        if !flooded[next] && !costmap.is_lethal(next) {
+                            flooded[next] = true;
+                            stack.push(next);
+                        }
+                    }
+                }
+                for (index, &flooded) in flooded.iter().enumerate() {
+                    prop_assert_eq!(costs.reaches(index), flooded);
+                }
+
+                // Each path: from the start, by neighbours, at its cost.
+                for goal in (0..window.len()).filter(|&i| costs.reaches(i)) {
+                    let path = costs.path_to(&window, goal).unwrap();
+                    prop_assert_eq!(path[0], start);
+                    prop_assert_eq!(*path.last().unwrap(), window.cell_at(goal));
+                    let mut cost = 0.0;
+                    for step in path.windows(2) {
+                        let (dx, dy) = (step[1].x - step[0].x, step[1].y - step[0].y);
+                        prop_assert!(dx.abs() <= 1 && dy.abs() <= 1 && (dx, dy) != (0, 0));
+                        let next = window.index_of(step[1]).unwrap();
+                        prop_assert!(!costmap.is_lethal(next));
+                        let length = if dx != 0 && dy != 0 { std::f64::consts::SQRT_2 } else { 1.0 };
+                        cost += length * costmap.step_factor(next) * 0.1;
+                    }
+                    prop_assert!((cost - costs.cost_m(goal)).abs() < 1e-9);
+                }
+            }
+        }
+    }
 }
