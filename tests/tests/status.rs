@@ -183,9 +183,12 @@ async fn status_shows_the_maps_robots_and_localizers_being_written() {
     assert_eq!(row["map"], MAP);
     assert_eq!(row["converged"], true);
     assert_eq!(row["lost_score"].as_f64(), Some(0.25));
-    // Two frames behind, three while a frame is in and its estimate not yet.
+    // Two frames behind; status reads the robots' frames and then the
+    // estimates, so a frame and an estimate landing between the two reads
+    // show one frame less (seen on a busy two-core machine), and a frame
+    // in with its estimate not yet one more.
     let lag = row["lag_frames"].as_u64().expect("lag");
-    assert!((2..=3).contains(&lag), "{json}");
+    assert!((1..=3).contains(&lag), "{json}");
     assert!(row["lag_s"].as_f64().expect("lag") > 0.0, "{json}");
     let error = row["error_m"].as_f64().expect("error");
     assert!((error - 5.0).abs() < 1e-6, "{json}");
