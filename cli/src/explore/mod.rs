@@ -14,14 +14,13 @@
 //! to decide; this loop drives, publishes and logs as it says.
 
 mod planner;
+mod summary;
 
 use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use deog_explore::{
-    Clearance, DeadReckoning, FollowParams, Steering, SteeringEvent, SteeringParams,
-};
+use deog_explore::{Clearance, DeadReckoning, FollowParams, Steering, SteeringParams};
 use deog_grid::Pose2;
 use deog_proto::names::check_robot_name;
 use deog_proto::v1 as pb;
@@ -32,6 +31,7 @@ use deog_simulator::deog_rig::{Reading, Rig};
 use crate::connection::{ConnectionArgs, SimConnectionArgs};
 use crate::wander::{sim_rig, spawn_publisher, spawn_state_reader};
 use planner::{Planner, spawn_planner};
+use summary::Summary;
 
 /// Options of `deog explore`.
 #[derive(Debug, Args)]
@@ -180,78 +180,6 @@ impl Explorer {
                 _ => None,
             });
         Clearance::of_echoes(echoes, self.rig.body_radius())
-    }
-}
-
-/// What the run did, for its last line; and where the robot was last.
-#[derive(Debug, Default)]
-struct Summary {
-    frames: u64,
-    published: u64,
-    goals: u64,
-    barred: u64,
-    bumps: u64,
-    distance_m: f64,
-    sim_seconds: f64,
-    finished: bool,
-    /// The simulation time of the first state seen and of the last.
-    start_time_s: Option<f64>,
-    last_time_s: f64,
-    last_pose: Option<Pose2>,
-    was_bumped: bool,
-}
-
-impl Summary {
-    /// Counts `state`, the robot's next: the distance it drove since the
-    /// last, a bump that began, the simulated time since the first.
-    fn observe(&mut self, state: &pb::RobotState) {
-        let truth = pose_or_origin(state.true_pose);
-        let start = *self.start_time_s.get_or_insert(state.time_s);
-        if let Some(previous) = self.last_pose {
-            self.distance_m += (truth.x - previous.x).hypot(truth.y - previous.y);
-        }
-        self.last_pose = Some(truth);
-        if state.bumper && !self.was_bumped {
-            self.bumps += 1;
-            tracing::warn!(
-                x = truth.x,
-                y = truth.y,
-                heading_deg = truth.theta.to_degrees(),
-                "bumped into something"
-            );
-        }
-        self.was_bumped = state.bumper;
-        self.frames += 1;
-        self.sim_seconds = state.time_s - start;
-        self.last_time_s = state.time_s;
-    }
-
-    /// Logs and counts what the steering decided.
-    fn note(&mut self, events: &[SteeringEvent]) {
-        for event in events {
-            match event {
-                SteeringEvent::NewGoal { goal, tight } => {
-                    self.goals += 1;
-                    tracing::info!(
-                        x = goal.x,
-                        y = goal.y,
-                        frontier_m = goal.frontier_m,
-                        travel_m = goal.travel_m,
-                        tight,
-                        approach = goal.approach,
-                        "new goal"
-                    );
-                }
-                SteeringEvent::Barred { x, y } => {
-                    self.barred += 1;
-                    tracing::info!(x, y, "goal not neared: barred for a while");
-                }
-                SteeringEvent::NoReachableFrontier {
-                    frontiers,
-                    empty_plans,
-                } => tracing::info!(frontiers, empty_plans, "no reachable frontier"),
-            }
-        }
     }
 }
 

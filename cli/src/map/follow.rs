@@ -23,8 +23,8 @@ use super::estimates::EstimateFollower;
 /// request limit.
 const MAX_BATCH_TILES: usize = 256;
 
-/// The frame loop's state: where its frames go and what it counted.
-pub(super) struct Mapping<'a> {
+/// Where the frame loop's frames go, and how it takes them.
+pub(super) struct MappingEnds<'a> {
     pub client: &'a MapClient,
     pub map: &'a str,
     pub tile_size: TileSize,
@@ -39,13 +39,38 @@ pub(super) struct Mapping<'a> {
     pub to: u64,
     /// How often the cartographer's view of the map is read anew.
     pub view_refresh: Duration,
-    pub view_read: Instant,
-    pub frame_motion: FrameMotion,
-    pub deltas: Vec<TileDelta>,
+}
+
+/// The frame loop's state: its ends and what it counted.
+pub(super) struct Mapping<'a> {
+    ends: MappingEnds<'a>,
+    view_read: Instant,
+    frame_motion: FrameMotion,
+    deltas: Vec<TileDelta>,
     /// Frames mapped, cell updates made and the last frame taken.
     pub integrated: u64,
     pub cells: u64,
     pub last: u64,
+}
+
+impl<'a> Mapping<'a> {
+    /// A loop that has mapped nothing yet.
+    pub(super) fn new(ends: MappingEnds<'a>) -> Self {
+        Self {
+            ends,
+            view_read: Instant::now(),
+            frame_motion: FrameMotion::default(),
+            deltas: Vec::new(),
+            integrated: 0,
+            cells: 0,
+            last: 0,
+        }
+    }
+
+    /// The estimates followed, with their counts, once the loop is over.
+    pub(super) fn take_estimates(&mut self) -> Option<EstimateFollower> {
+        self.ends.estimates.take()
+    }
 }
 
 impl Mapping<'_> {
@@ -71,14 +96,14 @@ impl Mapping<'_> {
 
     /// Maps one frame into the sender's pending batch.
     async fn frame(&mut self, frame: pb::SonarFrame) -> Result<ControlFlow<()>> {
-        if frame.sequence < self.start || frame.sequence <= self.last {
+        if frame.sequence < self.ends.start || frame.sequence <= self.last {
             return Ok(Continue(()));
         }
-        if self.to > 0 && frame.sequence > self.to {
+        if self.ends.to > 0 && frame.sequence > self.ends.to {
             return Ok(Break(()));
         }
         self.deltas.clear();
-        let estimate = match &mut self.estimates {
+        let estimate = match &mut self.ends.estimates {
             Some(follower) => match follower.pose_for(frame.sequence).await? {
                 Some(pose) => Some(pose),
                 None => {
@@ -101,11 +126,12 @@ impl Mapping<'_> {
             ranges: &frame.ranges,
         };
         let cartographer = self
+            .ends
             .cartographers
             .for_frame(&frame.rig, frame.sequence)
             .await?;
         if let Some(view) = cartographer.view_mut() {
-            if self.view_read.elapsed() >= self.view_refresh {
+            if self.view_read.elapsed() >= self.ends.view_refresh {
                 // Read again what other writers changed.
                 view.clear();
                 self.view_read = Instant::now();
@@ -113,18 +139,25 @@ impl Mapping<'_> {
         }
         let missing = cartographer.missing_tiles(&input)?;
         if let (false, Some(view)) = (missing.is_empty(), cartographer.view_mut()) {
-            fill_view(self.client, self.map, self.tile_size, view, &missing).await?;
+            fill_view(
+                self.ends.client,
+                self.ends.map,
+                self.ends.tile_size,
+                view,
+                &missing,
+            )
+            .await?;
         }
         self.cells += cartographer.integrate(&input, &mut self.deltas)? as u64;
         for delta in self.deltas.drain(..) {
-            self.sender.push(delta).await?;
+            self.ends.sender.push(delta).await?;
         }
         self.last = frame.sequence;
         self.integrated += 1;
-        if self.sender.pending_tiles() >= MAX_BATCH_TILES {
+        if self.ends.sender.pending_tiles() >= MAX_BATCH_TILES {
             self.send().await?;
         }
-        Ok(if self.to > 0 && frame.sequence >= self.to {
+        Ok(if self.ends.to > 0 && frame.sequence >= self.ends.to {
             Break(())
         } else {
             Continue(())
@@ -134,14 +167,14 @@ impl Mapping<'_> {
     /// Sends the pending deltas as one batch numbered by the last frame
     /// taken; with `--ack-log`, waits for its acknowledgement and logs it.
     async fn send(&mut self) -> Result<()> {
-        if self.sender.pending_tiles() == 0 {
+        if self.ends.sender.pending_tiles() == 0 {
             return Ok(());
         }
         // Read before sending: the acknowledgement may arrive at once.
-        let before = self.sender.acks();
-        self.sender.send_batch_as(self.last).await?;
-        if let Some(log) = &mut self.ack_log {
-            let after = self.sender.flush().await?;
+        let before = self.ends.sender.acks();
+        self.ends.sender.send_batch_as(self.last).await?;
+        if let Some(log) = &mut self.ends.ack_log {
+            let after = self.ends.sender.flush().await?;
             writeln!(
                 log,
                 "{} {} {}",
@@ -157,7 +190,7 @@ impl Mapping<'_> {
 
     /// Sends what is left and waits for every acknowledgement.
     pub(super) async fn close(self) -> Result<AckState> {
-        Ok(self.sender.close().await?)
+        Ok(self.ends.sender.close().await?)
     }
 }
 

@@ -12,7 +12,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
-use deog_grid::{FrameMotion, RayModelParams, Resolution, TileSize};
+use deog_grid::{RayModelParams, Resolution, TileSize};
 use deog_mapping::{MapViewSettings, PoseChoice, SonarMethod, mapping_sonar_model};
 use deog_proto::v1 as pb;
 use deog_robot_client::{MapClient, UpdateSenderConfig};
@@ -23,7 +23,7 @@ use crate::pose_args::MapPoseSource;
 use crate::rig_args::publish_rig;
 use by_rig::{CartographerByRig, ModelSettings};
 use estimates::EstimateFollower;
-use follow::Mapping;
+use follow::{Mapping, MappingEnds};
 use settings::MapSettings;
 
 /// Options of `deog map`.
@@ -296,7 +296,7 @@ pub fn run(args: MapArgs) -> Result<()> {
 
         let shutdown = deog_harness::shutdown_signal();
         tokio::pin!(shutdown);
-        let mut mapping = Mapping {
+        let mut mapping = Mapping::new(MappingEnds {
             client: &client,
             map: &args.map,
             tile_size,
@@ -307,13 +307,7 @@ pub fn run(args: MapArgs) -> Result<()> {
             start,
             to: args.to,
             view_refresh,
-            view_read: Instant::now(),
-            frame_motion: FrameMotion::default(),
-            deltas: Vec::new(),
-            integrated: 0,
-            cells: 0,
-            last: 0,
-        };
+        });
         // Timed from the first frame to the last acknowledgement: the
         // rate of the pipeline, not of waiting for frames.
         let mut began: Option<Instant> = None;
@@ -349,7 +343,7 @@ pub fn run(args: MapArgs) -> Result<()> {
         }
         let closing = Instant::now();
         let (integrated, cells) = (mapping.integrated, mapping.cells);
-        let estimates = mapping.estimates.take();
+        let estimates = mapping.take_estimates();
         let state = mapping.close().await?;
         progress.finish();
         let seconds = began.map_or(0.0, |t| {
