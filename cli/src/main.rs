@@ -15,6 +15,7 @@ mod localize;
 mod map;
 mod pose_args;
 mod record;
+mod refit;
 mod rig_args;
 mod server;
 mod sim;
@@ -90,6 +91,11 @@ enum Command {
     /// Exports a map, even one still being built, to map_server files
     /// (PGM + YAML) and a PNG.
     Export(export::ExportArgs),
+    /// Refits a map to every sonar frame that built it at once, through
+    /// the specular sonar's forward model, and writes the result as
+    /// map_server files (PGM + YAML) and a PNG; the map on the server
+    /// stays as it is.
+    Refit(refit::RefitArgs),
     /// Evaluation reports: `eval map` judges a map on the server against
     /// a world's ground truth.
     Eval(eval::EvalArgs),
@@ -147,6 +153,7 @@ fn run(command: Command) -> Result<()> {
         Command::Record(args) => record::run(args),
         Command::Copy(args) => copy::run(args),
         Command::Export(args) => export::run(args),
+        Command::Refit(args) => refit::run(args),
         Command::Map(args) => map::run(args),
         Command::Localize(args) => localize::run(args),
         Command::Teleport(args) => teleport::run(args),

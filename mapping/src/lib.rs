@@ -11,6 +11,8 @@
 //! - [`directional`]: [`DirectionalView`], sonar evidence kept per
 //!   direction of the surface normal, so that a wall swept at a grazing
 //!   angle keeps the echoes it returned ([`SonarMethod::Directional`]).
+//! - [`forward`]: [`fit_forward`], a sonar map fitted to all of a run's
+//!   readings at once through a forward model of the specular sonar.
 //! - [`estimates`]: [`EstimateBook`], which frames a localizer's converged
 //!   estimates place (mapping without ground truth).
 //! - [`sensors`]: the inverse sensor models behind
@@ -27,6 +29,7 @@ pub mod cartographer;
 pub mod directional;
 pub mod error;
 pub mod estimates;
+pub mod forward;
 pub mod map_export;
 pub mod map_import;
 pub mod map_view;
@@ -39,6 +42,7 @@ pub use cartographer::{
 pub use directional::{DEFAULT_ENCLOSURE_PERIOD, DirectionalSettings, DirectionalView};
 pub use error::MappingError;
 pub use estimates::{EstimateBook, EstimateLookup};
+pub use forward::{ForwardSettings, ForwardStats, SonarReading, fit_forward, ring_readings};
 pub use map_export::{ExportCounts, MapExport, export_map};
 pub use map_import::{ImportTarget, MapImport, image_origin_cell, import_map};
 pub use map_view::{MapView, MapViewSettings};

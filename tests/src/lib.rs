@@ -528,12 +528,26 @@ pub async fn health_status(
 /// in-process with the simulator's library, so tests need no simulator
 /// process to have frames.
 pub fn wander_frames(robot: &str, seed: u64, count: usize) -> Vec<deog_proto::v1::SonarFrame> {
+    wander_frames_with(robot, seed, count, deog_simulator::SonarParams::default())
+}
+
+/// [`wander_frames`] from a simulator whose sonars are `sonar`.
+pub fn wander_frames_with(
+    robot: &str,
+    seed: u64,
+    count: usize,
+    sonar: deog_simulator::SonarParams,
+) -> Vec<deog_proto::v1::SonarFrame> {
     use deog_proto::v1 as pb;
     use deog_simulator::simulation::{SimConfig, Simulation};
     use deog_simulator::{WanderParams, Wanderer};
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/map2.toml");
     let world = deog_world::load_world(&path).expect("map2 loads");
-    let mut sim = Simulation::new(world, SimConfig::default(), seed).expect("simulation");
+    let config = SimConfig {
+        sonar,
+        ..SimConfig::default()
+    };
+    let mut sim = Simulation::new(world, config, seed).expect("simulation");
     let mut state = sim.spawn(robot, None).expect("spawn");
     let mut wanderer = Wanderer::new(
         WanderParams::default(),

@@ -21,19 +21,40 @@ pub(crate) fn sim_config(rig: &Rig, preset: SonarPreset) -> SimConfig {
     }
 }
 
+/// How long a robot wanders to build a map, and whether the map is then
+/// refitted to its frames.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct MapPlan {
+    /// Simulated minutes of wandering.
+    pub minutes: f64,
+    /// Refit the map to every frame through the sonar's forward model.
+    pub forward_fit: bool,
+}
+
 /// The map a wandering robot's frames give, as the cartographer builds it
-/// from the rig and sonar of `config`, with range tables (for `sensor`'s
-/// cone) for the sonar of `localize_config`.
+/// from the rig and sonar of `config` (and, with `forward_fit`, refits it
+/// to all those frames through the sonar's forward model), with range
+/// tables (for `sensor`'s cone) for the sonar of `localize_config`.
 pub(crate) fn build_map(
     world: deog_world::World,
     config: &SimConfig,
     localize_config: &SimConfig,
     sensor: SensorChoice,
-    minutes: f64,
+    plan: MapPlan,
     surface_depth: f64,
     thresholds: OccupancyThresholds,
 ) -> Result<(TileMap, LocalMap)> {
+    let MapPlan {
+        minutes,
+        forward_fit,
+    } = plan;
     const NAME: &str = "cartographer";
+    if forward_fit && config.rig != deog_rig::scout() {
+        anyhow::bail!("--forward-fit fits a Scout's sonar ring; the rig is another");
+    }
+    let ring = deog_grid::SensorRing::scout();
+    let mut readings = Vec::new();
+    let mut pace = deog_grid::FrameMotion::default();
     let mut sim = Simulation::new(world, config.clone(), 1000)?;
     let mut state = sim.spawn(NAME, None)?;
     let mut wanderer = Wanderer::for_rig(WanderParams::default(), &config.rig, 1000)?;
@@ -51,8 +72,23 @@ pub(crate) fn build_map(
         state = fired.pop().context("a firing")?;
         changed.clear();
         growing.integrate(&state, &mut changed)?;
+        if forward_fit {
+            deog_mapping::ring_readings(
+                &ring,
+                config.ring_firing(),
+                &state.true_pose,
+                pace.observe(&state.odometry, state.time_s).as_ref(),
+                &state.ranges,
+                config.sonar.max_range,
+                &mut readings,
+            );
+        }
     }
-    let tiles = growing.tiles;
+    let mut tiles = growing.tiles;
+    if forward_fit {
+        let settings = crate::sonar_mapping::forward_settings(&config.sonar);
+        tiles = deog_mapping::fit_forward(&tiles, &readings, &settings, ClampLimits::default())?.0;
+    }
     let mut map = empty_local_map(localize_config, sensor, surface_depth, thresholds)?;
     for (key, tile) in tiles.tiles() {
         map.insert_tile(*key, 1, Some(tile))?;

@@ -117,6 +117,12 @@ pub struct LocalizeOptions {
     /// readings leave in it.
     #[arg(long)]
     pub clean_map: bool,
+    /// Refit the map, once built, to every frame that built it through the
+    /// sonar's forward model (`deog_mapping::fit_forward`, as the sonar
+    /// mapping bench's `forward` method), as `deog refit` would; the Scout
+    /// only, not with `--growing-map`.
+    #[arg(long)]
+    pub forward_fit: bool,
     /// Also write the figures as JSON to this file: per world its runs,
     /// how many converged and recovered and the mean errors, and every
     /// run's figures.
@@ -241,6 +247,14 @@ impl LocalizeOptions {
             || {
                 "--map-minutes must be positive with --growing-map: the filter starts on the map the first minutes built"
                     .into()
+            },
+        )?;
+        require(
+            !(self.growing_map && self.forward_fit),
+            "--forward-fit",
+            || {
+                "--forward-fit refits a map built before the runs; a --growing-map changes during them"
+                .into()
             },
         )?;
         require(!(self.growing_map && self.clean_map), "--clean-map", || {
@@ -464,6 +478,7 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
         sensor: setup.sensor.name().to_string(),
         sonar: preset.name().to_string(),
         clean_map: options.clean_map,
+        forward_fit: options.forward_fit,
         map_minutes: options.map_minutes,
         growing_map: options.growing_map.then_some(report::GrowingMapFigures {
             mappers: options.mappers,
@@ -514,7 +529,10 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
                 &map_config,
                 &config,
                 setup.sensor,
-                options.map_minutes,
+                map_build::MapPlan {
+                    minutes: options.map_minutes,
+                    forward_fit: options.forward_fit,
+                },
                 options.surface_depth(),
                 options.thresholds()?,
             )?;
@@ -834,7 +852,10 @@ mod tests {
             &config,
             &config,
             setup.sensor,
-            0.2,
+            map_build::MapPlan {
+                minutes: 0.2,
+                forward_fit: false,
+            },
             options.surface_depth(),
             options.thresholds().expect("the default"),
         )

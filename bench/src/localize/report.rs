@@ -16,6 +16,9 @@ pub(super) struct LocalizeReport {
     pub sonar: String,
     /// Whether the map came from the default sonar whatever the runs'.
     pub clean_map: bool,
+    /// Whether the map was refitted to its frames through the forward
+    /// model (`--forward-fit`).
+    pub forward_fit: bool,
     /// Simulated minutes of mapping before the filter starts.
     pub map_minutes: f64,
     /// With `--growing-map`: the robots that built the map during each
@@ -158,6 +161,7 @@ mod tests {
             sensor: "beam".into(),
             sonar: "realistic".into(),
             clean_map: false,
+            forward_fit: false,
             map_minutes: 1.0,
             growing_map: Some(GrowingMapFigures {
                 mappers: 3,

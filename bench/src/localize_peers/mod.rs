@@ -269,7 +269,10 @@ pub fn run(options: LocalizePeersOptions) -> Result<()> {
             &config,
             &config,
             SensorChoice::Beam,
-            options.map_minutes,
+            map_build::MapPlan {
+                minutes: options.map_minutes,
+                forward_fit: false,
+            },
             ConeGeometry::default().surface_depth,
             deog_grid::OccupancyThresholds::default(),
         )?;
