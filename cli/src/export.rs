@@ -69,18 +69,28 @@ pub fn run(args: ExportArgs) -> Result<()> {
     Ok(())
 }
 
-/// Every tile of the map, as a [`TileMap`] with the map's settings.
-async fn fetch(args: &ExportArgs) -> Result<TileMap> {
-    let client = MapClient::connect(args.timeout.apply(args.connection.client_config()?)?).await?;
-    if let Err(ClientError::Status(status)) = client.map_info(&args.map).await
+/// A client of the map server `connection` names, once it is known to
+/// hold map `map`.
+pub(crate) async fn open_map(
+    connection: &ConnectionArgs,
+    timeout: &ConnectTimeoutArgs,
+    map: &str,
+) -> Result<MapClient> {
+    let client = MapClient::connect(timeout.apply(connection.client_config()?)?).await?;
+    if let Err(ClientError::Status(status)) = client.map_info(map).await
         && status.code() == tonic::Code::NotFound
     {
         bail!(
-            "no map named {:?} on the map server at {}",
-            args.map,
-            args.connection.server
+            "no map named {map:?} on the map server at {}",
+            connection.server
         )
     }
+    Ok(client)
+}
+
+/// Every tile of the map, as a [`TileMap`] with the map's settings.
+async fn fetch(args: &ExportArgs) -> Result<TileMap> {
+    let client = open_map(&args.connection, &args.timeout, &args.map).await?;
     let progress = Progress::new("exporting tiles", "tiles", 0);
     let (_, map) = client
         .download_with_progress(&args.map, &mut |read, total| {

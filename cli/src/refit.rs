@@ -21,7 +21,6 @@ use deog_mapping::{ForwardSettings, ForwardStats, SonarReading, export_map, fit_
 use deog_proto::v1 as pb;
 use deog_rig::{Reading, Rig, SensorKind};
 use deog_robot_client::convert::pose_from_wire;
-use deog_robot_client::{ClientError, MapClient};
 
 use crate::connection::{ConnectTimeoutArgs, ConnectionArgs};
 
@@ -121,16 +120,7 @@ pub fn run(args: RefitArgs) -> Result<()> {
 
 /// The map's tiles, every frame of the robots, and their rig.
 async fn fetch(args: &RefitArgs) -> Result<(TileMap, Vec<pb::SonarFrame>, Rig)> {
-    let client = MapClient::connect(args.timeout.apply(args.connection.client_config()?)?).await?;
-    if let Err(ClientError::Status(status)) = client.map_info(&args.map).await
-        && status.code() == tonic::Code::NotFound
-    {
-        bail!(
-            "no map named {:?} on the map server at {}",
-            args.map,
-            args.connection.server
-        )
-    }
+    let client = crate::export::open_map(&args.connection, &args.timeout, &args.map).await?;
     let (_, map) = client
         .download(&args.map)
         .await
