@@ -92,6 +92,12 @@ pub fn run(args: RefitArgs) -> Result<()> {
             args.critical_incidence_deg
         );
     }
+    if !(1..=50).contains(&args.iterations) {
+        bail!("--iterations takes 1 to 50 rounds, got {}", args.iterations);
+    }
+    if !(args.reach > 0.0 && args.reach <= 20.0) {
+        bail!("--reach takes (0, 20] metres, got {}", args.reach);
+    }
     let stem = args
         .name
         .clone()
@@ -108,7 +114,7 @@ pub fn run(args: RefitArgs) -> Result<()> {
     let settings = ForwardSettings {
         iterations: args.iterations,
         reach: args.reach,
-        keep_unjudged: args.keep_unreached,
+        keep_unreached: args.keep_unreached,
         ..sonar_model(&rig, args.critical_incidence_deg.to_radians())?
     };
     let started = std::time::Instant::now();
@@ -287,7 +293,7 @@ fn write(
         "map {} refitted to {} readings in {seconds:.1} s ({} cells reached): {} cells occupied, {} free, {} unknown; wrote {} with its .pgm and .png",
         args.map,
         stats.readings,
-        stats.cells_judged,
+        stats.cells_reached,
         counts.occupied,
         counts.free,
         counts.unknown(),

@@ -36,7 +36,8 @@
 //!
 //! Cells the readings judged too little, and cells no ray reached (behind
 //! walls, inside obstacles), come out unknown, unless
-//! [`ForwardSettings::keep_unjudged`] keeps the first guess there.
+//! [`ForwardSettings::keep_unreached`] keeps the first guess where no ray
+//! reached.
 //!
 //! Batch, pure and synchronous: readings and a first guess in, a map out.
 //! Its cost is a few walks of every reading's fan, one per round.
@@ -58,8 +59,9 @@ pub const MAX_RAYS: usize = 32;
 /// expectation) comes out unknown.
 const MIN_RAYS: f32 = 1.0;
 
-/// The most cells a fit may span (a 20 km² window at 5 cm).
-pub const MAX_CELLS: usize = 80_000_000;
+/// The most cells a fit may span: 5 hectares at 5 cm (a building 220 m
+/// square), about 2.2 GB at the fit's 110 bytes a cell.
+pub const MAX_CELLS: usize = 20_000_000;
 
 /// One sonar reading where it was taken.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -113,7 +115,7 @@ pub struct ForwardSettings {
     pub belief_nats: f64,
     /// Cells no reading reached keep the first guess's belief, rather than
     /// coming out unknown.
-    pub keep_unjudged: bool,
+    pub keep_unreached: bool,
 }
 
 impl Default for ForwardSettings {
@@ -135,7 +137,7 @@ impl Default for ForwardSettings {
             iterations: 3,
             decide_nats: 1.5,
             belief_nats: 4.0,
-            keep_unjudged: false,
+            keep_unreached: false,
         }
     }
 }
@@ -263,7 +265,7 @@ pub struct ForwardStats {
     /// Readings fitted.
     pub readings: usize,
     /// Cells some ray reached.
-    pub cells_judged: usize,
+    pub cells_reached: usize,
     /// Cells that crossed p = 0.5 in the last round.
     pub last_changes: usize,
     /// The readings' log-likelihood in the last round, nats.
@@ -297,7 +299,7 @@ pub fn fit_forward(
         stats.log_likelihood = total;
         stats.last_changes = fit.maximize();
     }
-    stats.cells_judged = fit.reached.iter().filter(|&&r| r).count();
+    stats.cells_reached = fit.reached.iter().filter(|&&r| r).count();
     Ok((fit.into_map(initial, limits)?, stats))
 }
 
@@ -790,7 +792,7 @@ impl Fit {
                     continue;
                 }
                 logit.clamp(-self.settings.belief_nats, self.settings.belief_nats)
-            } else if self.settings.keep_unjudged && !self.reached[index] {
+            } else if self.settings.keep_unreached && !self.reached[index] {
                 match initial.get(cell) {
                     Some(b) if b.raw() != 0 => b.nats(),
                     _ => continue,
@@ -901,7 +903,7 @@ mod tests {
         let free = (-100..100).flat_map(|x| (15..40).map(move |y| (x, y, -2.0)));
         let (map, stats) = fit(&map_with(wall.chain(free)), &readings);
         assert_eq!(stats.readings, readings.len());
-        assert!(stats.cells_judged > 1000, "{stats:?}");
+        assert!(stats.cells_reached > 1000, "{stats:?}");
         let walls = (-60..60)
             .filter(|&x| class(&map, x, 40) == Some(true))
             .count();
@@ -952,7 +954,7 @@ mod tests {
         let wall = (-100..100).map(|x| (x, 40, 2.0));
         let inside = (-100..100).map(|x| (x, 45, 3.0));
         let settings = ForwardSettings {
-            keep_unjudged: true,
+            keep_unreached: true,
             ..ForwardSettings::default()
         };
         let (map, _) = fit_forward(

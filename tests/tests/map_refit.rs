@@ -163,4 +163,19 @@ async fn a_specular_sonars_map_refitted_to_its_frames_judges_better() {
         ],
     ));
     assert!(line.contains("--critical-incidence-deg"), "{line}");
+    let line = refused(&deog(
+        &server,
+        &[
+            "refit",
+            "--map",
+            "m",
+            "--robots",
+            "r",
+            "--iterations",
+            "0",
+            "--out",
+            files_arg,
+        ],
+    ));
+    assert!(line.contains("--iterations takes 1 to 50"), "{line}");
 }

@@ -694,7 +694,7 @@ fn build_forward(
     deog_harness::eprintln_above_bars!(
         "forward: {} readings, {} cells reached, {} crossed p = 0.5 in the last round, log-likelihood {:.0}, {:.1} s",
         stats.readings,
-        stats.cells_judged,
+        stats.cells_reached,
         stats.last_changes,
         stats.log_likelihood,
         began.elapsed().as_secs_f64()
