@@ -17,6 +17,10 @@ use deog_simulator::simulation::SimConfig;
 
 /// The name of the shared map on the server.
 pub(crate) const MAP: &str = "demo";
+/// The map refitted to every frame once the robots stop, on the server.
+pub(crate) const REFIT_MAP: &str = "demo-refit";
+/// The refitted map's file stem in the output folder.
+pub(crate) const REFIT_STEM: &str = "map-refit";
 /// A cartographer or localizer ends once no frame came for this long,
 /// seconds.
 const IDLE_EXIT_S: &str = "3";
@@ -287,6 +291,37 @@ pub(crate) fn localize(
     .collect()
 }
 
+/// The shared map refitted to every robot's frames through the specular
+/// sonar's forward model, written to `out` as map_server files.
+pub(crate) fn refit(plan: &DemoPlan, addresses: &Addresses, out: &Path) -> Vec<OsString> {
+    let robots = plan.robot_names().collect::<Vec<_>>().join(",");
+    // A sonar whose every wall echoes has no specular angle: 90° says so.
+    let critical = plan.sonar.specular_angle_deg().unwrap_or(90.0);
+    let mut args = os(&[
+        "refit",
+        "--map",
+        MAP,
+        "--robots",
+        &robots,
+        "--critical-incidence-deg",
+        &critical.to_string(),
+    ]);
+    args.extend(firing_period(plan.sonar));
+    args.extend(os(&["--name", REFIT_STEM, "--out"]));
+    args.push(out.as_os_str().to_owned());
+    args.extend(os(&["--server", &addresses.server_url()]));
+    args
+}
+
+/// The refitted map's files, written by [`refit`] to `out`, loaded on the
+/// server as map [`REFIT_MAP`].
+pub(crate) fn import_refit(addresses: &Addresses, out: &Path) -> Vec<OsString> {
+    let mut args = os(&["import", "--map", REFIT_MAP]);
+    args.push(out.join(format!("{REFIT_STEM}.yaml")).into_os_string());
+    args.extend(os(&["--server", &addresses.server_url()]));
+    args
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -451,5 +486,35 @@ mod tests {
              --server http://127.0.0.1:5001 --specular-angle 30 --firing-period 0.1 \
              --refresh-s 1.25"
         );
+    }
+
+    #[test]
+    fn a_specular_sonar_map_is_refitted_and_loaded_as_a_map_of_its_own() {
+        let addresses = Addresses {
+            servers: vec!["127.0.0.1:5001".parse().expect("address")],
+            sim: "127.0.0.1:5002".parse().expect("address"),
+        };
+        let realistic = plan(&["--sonar", "realistic", "--robots", "2"]).expect("valid");
+        assert!(realistic.refit);
+        let out = Path::new("demo-out");
+        assert_eq!(
+            line(&refit(&realistic, &addresses, out)),
+            "refit --map demo --robots scout-1,scout-2 --critical-incidence-deg 30 \
+             --firing-period 0.1 --name map-refit --out demo-out --server http://127.0.0.1:5001"
+        );
+        assert_eq!(
+            line(&import_refit(&addresses, out)),
+            "import --map demo-refit demo-out/map-refit.yaml --server http://127.0.0.1:5001"
+        );
+        let together = plan(&["--sonar", "specular60"]).expect("valid");
+        assert_eq!(
+            line(&refit(&together, &addresses, out)),
+            "refit --map demo --robots scout-1,scout-2,scout-3 --critical-incidence-deg 60 \
+             --name map-refit --out demo-out --server http://127.0.0.1:5001"
+        );
+        // Every wall echoes: the cartographers' map is the one to keep.
+        assert!(!plan(&[]).expect("valid").refit);
+        let skipped = plan(&["--sonar", "realistic", "--no-refit"]).expect("valid");
+        assert!(!skipped.refit);
     }
 }

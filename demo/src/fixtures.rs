@@ -83,6 +83,7 @@ pub(crate) fn judgement() -> Judgement {
         },
         map_png: "map.png".to_string(),
         map_yaml: "map.yaml".to_string(),
+        refit: None,
     }
 }
 

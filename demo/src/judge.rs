@@ -17,12 +17,15 @@ use deog_harness::run_reads::{read_map, read_robot, robot_starts};
 use deog_mapfile::{to_png_with_scale_bar, write_map};
 use deog_mapping::export_map;
 use deog_robot_client::MapClient;
+use deog_world::Point2;
 
-use crate::commands::MAP;
+use crate::commands::{MAP, REFIT_MAP, REFIT_STEM};
 use crate::plan::DemoPlan;
 
 /// Where the map is right and wrong, drawn over the world.
 pub(crate) const VERDICT_PNG: &str = "map-verdict.png";
+/// The same for the refitted map.
+pub(crate) const REFIT_VERDICT_PNG: &str = "map-refit-verdict.png";
 
 /// One robot's figures and its plot's file name.
 #[derive(Debug, Clone)]
@@ -44,6 +47,19 @@ pub(crate) struct Judgement {
     pub map_png: String,
     /// The map's map_server YAML file, in the output folder.
     pub map_yaml: String,
+    /// The map refitted to every frame, when the plan refits.
+    pub refit: Option<RefitJudgement>,
+}
+
+/// The refitted map (`deog refit`, loaded as [`REFIT_MAP`]) judged.
+#[derive(Debug, Clone)]
+pub(crate) struct RefitJudgement {
+    /// The refitted map against the world.
+    pub quality: MapQuality,
+    /// Its picture, in the output folder.
+    pub map_png: String,
+    /// Its map_server YAML file, in the output folder.
+    pub map_yaml: String,
 }
 
 /// Judges the map against the world and each localizer against its
@@ -51,18 +67,18 @@ pub(crate) struct Judgement {
 pub(crate) async fn judge(client: &MapClient, plan: &DemoPlan, out: &Path) -> Result<Judgement> {
     let map = read_map(client, MAP).await?;
     let seeds = robot_starts(client).await?;
-    let input = QualityInput {
-        map: &map,
-        world: &plan.world,
-        seeds: &seeds,
-        // The Scout's figure for the Scout, so its figures stay; a larger
-        // robot reaches less.
-        robot_radius_m: DEFAULT_ROBOT_RADIUS_M.max(plan.rig.body_radius()),
-    };
-    let quality = map_quality(&input).context("judging the map against the world")?;
+    let quality = judge_map(&map, plan, &seeds, out, VERDICT_PNG)?;
     let (map_yaml, map_png) = write_map_files(&map, out)?;
-    let png = verdict_png(&input).context("drawing where the map is right and wrong")?;
-    write(out, VERDICT_PNG, &png)?;
+    let refit = if plan.refit {
+        let refitted = read_map(client, REFIT_MAP).await?;
+        Some(RefitJudgement {
+            quality: judge_map(&refitted, plan, &seeds, out, REFIT_VERDICT_PNG)?,
+            map_png: format!("{REFIT_STEM}.png"),
+            map_yaml: format!("{REFIT_STEM}.yaml"),
+        })
+    } else {
+        None
+    };
     let mut robots = Vec::with_capacity(plan.robots.len());
     if plan.localize {
         for name in plan.robot_names() {
@@ -74,7 +90,31 @@ pub(crate) async fn judge(client: &MapClient, plan: &DemoPlan, out: &Path) -> Re
         quality,
         map_png,
         map_yaml,
+        refit,
     })
+}
+
+/// `map` against the world's ground truth, its verdict drawn to file
+/// `verdict` in `out`.
+fn judge_map(
+    map: &TileMap,
+    plan: &DemoPlan,
+    seeds: &[Point2],
+    out: &Path,
+    verdict: &str,
+) -> Result<MapQuality> {
+    let input = QualityInput {
+        map,
+        world: &plan.world,
+        seeds,
+        // The Scout's figure for the Scout, so its figures stay; a larger
+        // robot reaches less.
+        robot_radius_m: DEFAULT_ROBOT_RADIUS_M.max(plan.rig.body_radius()),
+    };
+    let quality = map_quality(&input).context("judging the map against the world")?;
+    let png = verdict_png(&input).context("drawing where the map is right and wrong")?;
+    write(out, verdict, &png)?;
+    Ok(quality)
 }
 
 /// Judges robot `name`'s localizer and draws its paths over `map`.

@@ -6,7 +6,10 @@ use std::fmt::Write as _;
 
 use deog_evaluation::localization::LocalizationReport;
 
-use crate::judge::VERDICT_PNG;
+use deog_evaluation::map_quality::MapQuality;
+
+use crate::commands::REFIT_MAP;
+use crate::judge::{REFIT_VERDICT_PNG, VERDICT_PNG};
 use crate::report::DemoOutcome;
 
 // Writing to a String cannot fail: the `let _ =` on every `writeln!` below
@@ -15,25 +18,24 @@ use crate::report::DemoOutcome;
 /// The short table printed at the end.
 pub(crate) fn summary(outcome: &DemoOutcome<'_>) -> String {
     let mut out = String::new();
-    let q = &outcome.judgement.quality;
-    let _ = writeln!(
-        out,
-        "\nmap: {} cells observed, {:.1}% classified right, occupied precision {}, recall {}",
-        q.cells_observed(),
-        100.0 * q.fraction_correct(),
-        percent(q.occupied_precision()),
-        percent(q.occupied_recall()),
-    );
+    let _ = writeln!(out, "\n{}", map_line("map", &outcome.judgement.quality));
+    if let Some(refit) = &outcome.judgement.refit {
+        let label = format!("refitted map ({REFIT_MAP})");
+        let _ = writeln!(out, "{}", map_line(&label, &refit.quality));
+    }
     for robot in &outcome.judgement.robots {
         let lag = outcome.max_lag_s(&robot.report.robot);
         let _ = writeln!(out, "{}", robot_line(&robot.report, lag));
     }
+    let maps = match &outcome.judgement.refit {
+        Some(refit) => format!("{}, {}", outcome.judgement.map_yaml, refit.map_yaml),
+        None => outcome.judgement.map_yaml.clone(),
+    };
     let _ = writeln!(
         out,
-        "{:.0} s in all; wrote {} (report.md, report.json, {}, the plots, logs/)",
+        "{:.0} s in all; wrote {} (report.md, report.json, {maps}, the plots, logs/)",
         outcome.wall_s,
         outcome.plan.out.display(),
-        outcome.judgement.map_yaml
     );
     out
 }
@@ -142,6 +144,24 @@ pub(crate) fn report(outcome: &DemoOutcome<'_>) -> String {
          but uncertain; light grey never observed, dark grey the world's walls):\n\n\
          ![where the map is right]({VERDICT_PNG})\n"
     );
+    if let Some(refit) = &judgement.refit {
+        let _ = writeln!(md, "## The map refitted to every frame\n");
+        let _ = writeln!(
+            md,
+            "Once the robots stopped, `deog refit` fitted the map to every frame at once, \
+             through the specular sonar's forward model, and `deog import` loaded it as map \
+             `{REFIT_MAP}` (the live map above is unchanged).\n\n![refitted map]({})\n\n\
+             As ROS map_server files: `{}` with its `.pgm`. Judged against the world's \
+             ground truth:\n",
+            refit.map_png, refit.map_yaml
+        );
+        let _ = writeln!(md, "{}", refit.quality.table());
+        let _ = writeln!(
+            md,
+            "Where it is right and wrong, coloured as above:\n\n\
+             ![where the refitted map is right]({REFIT_VERDICT_PNG})\n"
+        );
+    }
     let _ = writeln!(md, "## The processes\n");
     let _ = writeln!(
         md,
@@ -154,6 +174,19 @@ pub(crate) fn report(outcome: &DemoOutcome<'_>) -> String {
     }
     let _ = writeln!(md, "```");
     md
+}
+
+/// A map's figures on one line, after `label`.
+fn map_line(label: &str, q: &MapQuality) -> String {
+    format!(
+        "{label}: {} cells observed, {:.1}% classified right, occupied precision {}, recall {} \
+         ({} of the walls it observed)",
+        q.cells_observed(),
+        100.0 * q.fraction_correct(),
+        percent(q.occupied_precision()),
+        percent(q.occupied_recall()),
+        percent(q.observed_occupied_recall()),
+    )
 }
 
 /// One robot's figures on one line.
@@ -280,7 +313,8 @@ mod tests {
         assert_eq!(lines.len(), 5, "{summary}");
         assert_eq!(
             lines[1],
-            "map: 90 cells observed, 98.9% classified right, occupied precision 90.0%, recall 75.0%"
+            "map: 90 cells observed, 98.9% classified right, occupied precision 90.0%, \
+             recall 75.0% (83.3% of the walls it observed)"
         );
         assert_eq!(
             lines[2],

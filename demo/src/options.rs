@@ -61,6 +61,12 @@ pub struct DemoOptions {
     /// are printed).
     #[arg(long)]
     pub keep: bool,
+    /// With a specular sonar (`--sonar realistic` or `specular60`) the demo
+    /// refits the map to every frame once the robots stop (`deog refit`),
+    /// loads the result as map `demo-refit` and judges it beside the live
+    /// map; this skips that.
+    #[arg(long)]
+    pub no_refit: bool,
     /// Where the live view (`deog view`) serves its page; when that port is
     /// taken, a free one (the address is printed).
     #[arg(long, value_name = "ADDR", default_value = "127.0.0.1:8080")]

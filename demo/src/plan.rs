@@ -62,6 +62,9 @@ pub(crate) struct DemoPlan {
     pub store: Option<String>,
     /// How many map servers run.
     pub servers: usize,
+    /// Whether the map is refitted to every frame once the robots stop:
+    /// with a specular sonar, unless `--no-refit`.
+    pub refit: bool,
 }
 
 impl DemoPlan {
@@ -115,6 +118,7 @@ impl DemoPlan {
             localize: !options.no_localize,
             store: options.store.clone(),
             servers: options.servers.max(1) as usize,
+            refit: options.sonar.specular_angle_deg().is_some() && !options.no_refit,
         })
     }
 

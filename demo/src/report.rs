@@ -67,6 +67,11 @@ pub struct DemoReport {
     pub robots: Vec<DemoRobotRecord>,
     /// The map against the world's ground truth.
     pub map: MapQualityRecord,
+    /// The map refitted to every frame once the robots stopped (`deog
+    /// refit`, loaded as map `demo-refit`), against the same truth; `null`
+    /// when the demo did not refit (a sonar whose every wall echoes, or
+    /// `--no-refit`).
+    pub refit_map: Option<MapQualityRecord>,
     /// Wall-clock seconds the demo took, up to the end of the judging.
     pub duration_s: f64,
     /// Simulated seconds the robots drove (`--duration`).
@@ -149,6 +154,7 @@ impl DemoReport {
                 })
                 .collect(),
             map: outcome.judgement.quality.record(),
+            refit_map: outcome.judgement.refit.as_ref().map(|r| r.quality.record()),
             duration_s: outcome.wall_s,
             simulated_s: plan.schedule.duration_s,
             speed: plan.schedule.speed,
@@ -240,6 +246,7 @@ mod tests {
             BTreeSet::from([
                 "robots",
                 "map",
+                "refit_map",
                 "duration_s",
                 "simulated_s",
                 "speed",
@@ -304,6 +311,45 @@ mod tests {
         assert_eq!(robots[1]["recovered"], Value::Null);
         let map: Value = serde_json::from_str(&judgement.quality.to_json()).expect("JSON");
         assert_eq!(json["map"], map);
+        assert_eq!(json["refit_map"], Value::Null);
+    }
+
+    #[test]
+    fn a_refitted_map_is_judged_beside_the_live_one() {
+        let plan = two_robots();
+        let mut judgement = judgement();
+        let mut refitted = judgement.quality.clone();
+        refitted.confusion.free_as_uncertain = 0;
+        refitted.confusion.free_as_free = 81;
+        judgement.refit = Some(crate::judge::RefitJudgement {
+            quality: refitted.clone(),
+            map_png: "map-refit.png".to_string(),
+            map_yaml: "map-refit.yaml".to_string(),
+        });
+        let outcome = DemoOutcome {
+            plan: &plan,
+            judgement: &judgement,
+            kidnap: None,
+            wall_s: 1.0,
+            max_lags_s: Vec::new(),
+            coverage: Vec::new(),
+            commands: Vec::new(),
+            driven: Driven::default(),
+        };
+        let json: Value = serde_json::from_str(&DemoReport::new(&outcome).to_json().expect("JSON"))
+            .expect("JSON");
+        let alone: Value = serde_json::from_str(&refitted.to_json()).expect("JSON");
+        assert_eq!(json["refit_map"], alone);
+        assert_ne!(json["refit_map"], json["map"]);
+        let md = markdown::report(&outcome);
+        assert!(md.contains("![refitted map](map-refit.png)"), "{md}");
+        assert!(md.contains("(map-refit-verdict.png)"), "{md}");
+        let summary = markdown::summary(&outcome);
+        assert!(
+            summary
+                .contains("refitted map (demo-refit): 90 cells observed, 100.0% classified right"),
+            "{summary}"
+        );
     }
 
     #[test]

@@ -4,6 +4,7 @@
 //! judging and the reports. Any failure, or ctrl-c, returns an error, and
 //! dropping the supervisor stops every process.
 
+use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -53,6 +54,10 @@ async fn demo(plan: &DemoPlan) -> Result<()> {
     let mut demo = Demo::start(plan).await?;
     let (kidnap, max_lags_s, coverage, driven) = demo.drive().await?;
     demo.drain().await?;
+    if plan.refit {
+        demo.refit().await?;
+    }
+    demo.status.finish();
 
     let out = &plan.out;
     let judgement = judge(&demo.map_client, plan, out).await?;
@@ -333,6 +338,9 @@ impl Demo<'_> {
             self.children.check()?;
             let mut waiting = self.children.running("map-");
             waiting.extend(self.children.running("localize-"));
+            if waiting.is_empty() {
+                continue;
+            }
             if finishing.elapsed() > FINISH_TIMEOUT {
                 bail!(
                     "{} still had frames to work through {} s after the robots stopped",
@@ -345,7 +353,30 @@ impl Demo<'_> {
                 waiting.join(", ")
             ));
         }
-        self.status.finish();
+        self.children.check()
+    }
+
+    /// The map refitted to every robot's frames (`deog refit`) once the
+    /// cartographers have ended, and loaded on the server as a map of its
+    /// own (`deog import`), the live map left as it is.
+    async fn refit(&mut self) -> Result<()> {
+        let out = &self.plan.out;
+        let refit = commands::refit(self.plan, &self.addresses, out);
+        self.run_to_end("refit", &refit, "refitting the map to every frame")
+            .await?;
+        let import = commands::import_refit(&self.addresses, out);
+        self.run_to_end("import-refit", &import, "loading the refitted map")
+            .await
+    }
+
+    /// Runs task `name` to its end, `doing` on the status line.
+    async fn run_to_end(&mut self, name: &str, command: &[OsString], doing: &str) -> Result<()> {
+        self.children.start(name, Role::Task, command)?;
+        while !self.children.all_done(name) {
+            self.pacer.next(&mut self.status).await?;
+            self.children.check()?;
+            self.status.show(doing);
+        }
         self.children.check()
     }
 }

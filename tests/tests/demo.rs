@@ -139,6 +139,9 @@ fn a_short_demo_localizes_every_robot_and_maps_the_room() {
         map["occupied_recall"].as_f64().expect("recall") > 0.5,
         "{context}"
     );
+    // Every wall echoes: the cartographers' map is the one kept.
+    assert_eq!(report["refit_map"], Value::Null, "{context}");
+    assert!(!run.out.path().join("map-refit.yaml").exists());
     let duration = report["duration_s"].as_f64().expect("duration_s");
     assert!(
         duration > 0.0 && duration <= elapsed,
@@ -206,6 +209,32 @@ fn a_demo_on_the_realistic_sonar_maps_by_direction_and_localizes() {
         map["fraction_correct"].as_f64().expect("fraction") > 0.85,
         "{context}"
     );
+    // Once the robots stopped, the map was refitted to every frame and
+    // loaded as a map of its own: righter than the live one, its observed
+    // walls kept (on this seed 99.4 % right against 92.5 %, 87.7 % of
+    // the observed walls against 82.0 %).
+    let refit = &report["refit_map"];
+    let refit_correct = refit["fraction_correct"].as_f64().expect("fraction");
+    let live_correct = map["fraction_correct"].as_f64().expect("fraction");
+    assert!(
+        refit_correct > live_correct && refit_correct > 0.95,
+        "refitted {refit_correct}, live {live_correct}\n{context}"
+    );
+    assert!(
+        refit["observed_occupied_recall"].as_f64().expect("recall") > 0.8,
+        "{context}"
+    );
+    for file in [
+        "map-refit.pgm",
+        "map-refit.yaml",
+        "map-refit.png",
+        "map-refit-verdict.png",
+    ] {
+        let len = std::fs::metadata(run.out.path().join(file)).map_or(0, |m| m.len());
+        assert!(len > 100, "{file}: {len} bytes");
+    }
+    let import = run.log("import-refit");
+    assert!(import.contains("written to map demo-refit"), "{import}");
     let cartographer = run.log("map-scout-1");
     let localizer = run.log("localize-scout-1");
     // The localizers expect specular walls and leave the inferred ones out.
