@@ -244,8 +244,12 @@ pub struct CorrectionReport {
 }
 
 /// The most particles a set may hold for [`Mcl::move_uphill`] to move
-/// its modes: a tracking filter's few modes, not a global search.
-const UPHILL_MOST: usize = 5_000;
+/// its modes: a filter's few modes, not a global search. A set of 9,000
+/// that has just settled on two modes is still above 5,000, and there a
+/// mode of a hundred particles copied off its peak lost to its image in
+/// two seconds; with 20,000, `map1` on the world's own map converged in
+/// 74 of 80 seeds against 70 (BENCHMARKS.md).
+const UPHILL_MOST: usize = 20_000;
 
 /// The widest a cluster may spread, metres (the root of its position
 /// variances' sum) and radians, and still be a pose the filter tracks:

@@ -29,6 +29,8 @@ pub(crate) struct MapPlan {
     pub minutes: f64,
     /// Refit the map to every frame through the sonar's forward model.
     pub forward_fit: bool,
+    /// Draw the map from the world instead ([`true_map`]).
+    pub true_map: bool,
 }
 
 /// The map a wandering robot's frames give, as the cartographer builds it
@@ -47,7 +49,16 @@ pub(crate) fn build_map(
     let MapPlan {
         minutes,
         forward_fit,
+        true_map: drawn,
     } = plan;
+    if drawn {
+        let tiles = true_map(&world)?;
+        let mut map = empty_local_map(localize_config, sensor, surface_depth, thresholds)?;
+        for (key, tile) in tiles.tiles() {
+            map.insert_tile(*key, 1, Some(tile))?;
+        }
+        return Ok((tiles, map));
+    }
     const NAME: &str = "cartographer";
     if forward_fit && config.rig != deog_rig::scout() {
         anyhow::bail!("--forward-fit fits a Scout's sonar ring; the rig is another");
@@ -94,6 +105,39 @@ pub(crate) fn build_map(
         map.insert_tile(*key, 1, Some(tile))?;
     }
     Ok((tiles, map))
+}
+
+/// `world` drawn as a map: a cell occupied (at 0.95) where its centre is
+/// not free space, free (at 0.05, clamped to the map's floor) where it is,
+/// one cell beyond the world's bounds.
+pub(crate) fn true_map(world: &deog_world::World) -> Result<TileMap> {
+    let res = Resolution::DEFAULT;
+    let size = TileSize::new(64)?;
+    let (min, max) = world.bounds();
+    let margin = res.metres();
+    let first = res.cell_of(min.x - margin, min.y - margin)?;
+    let last = res.cell_of(max.x + margin, max.y + margin)?;
+    let occupied = (0.95f64 / 0.05).ln() * deog_grid::LOG_ODDS_SCALE;
+    let mut deltas: std::collections::HashMap<deog_grid::TileKey, deog_grid::TileDelta> =
+        std::collections::HashMap::new();
+    for y in first.y..=last.y {
+        for x in first.x..=last.x {
+            let cell = deog_grid::CellIndex::new(x, y);
+            let (cx, cy) = res.cell_center(cell);
+            let free = world.is_free(deog_world::Point2::new(cx, cy));
+            let raw = if free { -occupied } else { occupied }.round() as i16;
+            let (key, offset) = size.split(cell);
+            deltas
+                .entry(key)
+                .or_insert_with(|| deog_grid::TileDelta::zero(key, size))
+                .raw_mut()[offset.index(size)] = raw;
+        }
+    }
+    let mut map = TileMap::new(res, size, ClampLimits::default());
+    for delta in deltas.values() {
+        map.apply(delta)?;
+    }
+    Ok(map)
 }
 
 /// The cartographer `deog map` runs for a robot of `config`: the thesis's
@@ -229,5 +273,31 @@ impl GrowingMap {
             changed.push(d.key);
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use deog_grid::CellIndex;
+
+    use super::*;
+
+    #[test]
+    fn the_true_map_holds_the_world_cell_by_cell() {
+        let world = deog_world::load_world_spec("map1").expect("built in");
+        let map = true_map(&world).expect("drawn");
+        let res = Resolution::DEFAULT;
+        let at = |x: f64, y: f64| {
+            let cell: CellIndex = res.cell_of(x, y).expect("cell");
+            map.get(cell).expect("drawn").probability()
+        };
+        // The room's middle is free, the moved box and the space beyond
+        // the boundary are not.
+        assert!(at(5.0, 4.0) < 0.2);
+        assert!(at(8.1, 5.8) > 0.9);
+        assert!(at(7.05, 5.8) < 0.2, "left of the moved box");
+        assert!(at(-0.02, 4.0) > 0.9);
+        // Both sides of a face on a cell border land in the right cell.
+        assert!(at(2.01, 2.0) > 0.9 && at(1.99, 2.0) < 0.2);
     }
 }

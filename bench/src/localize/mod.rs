@@ -117,6 +117,11 @@ pub struct LocalizeOptions {
     /// readings leave in it.
     #[arg(long)]
     pub clean_map: bool,
+    /// Draw the map from the world itself rather than build it from
+    /// readings: a cell is occupied where its centre is not free space,
+    /// free where it is. What the filter does on a perfect map.
+    #[arg(long, conflicts_with_all = ["clean_map", "forward_fit", "growing_map"])]
+    pub true_map: bool,
     /// Refit the map, once built, to every frame that built it through the
     /// sonar's forward model (`deog_mapping::fit_forward`, as the sonar
     /// mapping bench's `forward` method), as `deog refit` would; the Scout
@@ -343,7 +348,7 @@ impl LocalizeOptions {
     /// The specular angle of the sonar the map is built from, radians (a
     /// `--clean-map` is the default sonar's).
     fn map_sonar_angle(&self) -> Option<f64> {
-        if self.clean_map {
+        if self.clean_map || self.true_map {
             None
         } else {
             self.sonar_preset().specular_angle_deg()
@@ -479,6 +484,7 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
         sonar: preset.name().to_string(),
         clean_map: options.clean_map,
         forward_fit: options.forward_fit,
+        true_map: options.true_map,
         map_minutes: options.map_minutes,
         growing_map: options.growing_map.then_some(report::GrowingMapFigures {
             mappers: options.mappers,
@@ -532,6 +538,7 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
                 map_build::MapPlan {
                     minutes: options.map_minutes,
                     forward_fit: options.forward_fit,
+                    true_map: options.true_map,
                 },
                 options.surface_depth(),
                 options.thresholds()?,
@@ -855,6 +862,7 @@ mod tests {
             map_build::MapPlan {
                 minutes: 0.2,
                 forward_fit: false,
+                true_map: false,
             },
             options.surface_depth(),
             options.thresholds().expect("the default"),

@@ -19,6 +19,8 @@ pub(super) struct LocalizeReport {
     /// Whether the map was refitted to its frames through the forward
     /// model (`--forward-fit`).
     pub forward_fit: bool,
+    /// Whether the map was drawn from the world itself (`--true-map`).
+    pub true_map: bool,
     /// Simulated minutes of mapping before the filter starts.
     pub map_minutes: f64,
     /// With `--growing-map`: the robots that built the map during each
@@ -162,6 +164,7 @@ mod tests {
             sonar: "realistic".into(),
             clean_map: false,
             forward_fit: false,
+            true_map: false,
             map_minutes: 1.0,
             growing_map: Some(GrowingMapFigures {
                 mappers: 3,

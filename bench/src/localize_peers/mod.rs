@@ -272,6 +272,7 @@ pub fn run(options: LocalizePeersOptions) -> Result<()> {
             map_build::MapPlan {
                 minutes: options.map_minutes,
                 forward_fit: false,
+                true_map: false,
             },
             ConeGeometry::default().surface_depth,
             deog_grid::OccupancyThresholds::default(),
