@@ -10,6 +10,7 @@ use crate::judge::{Judgement, RobotJudgement};
 use crate::kidnap::KidnapDone;
 use crate::options::DemoOptions;
 use crate::plan::DemoPlan;
+use crate::report::{DemoOutcome, Driven};
 
 /// `deog demo` alone, to parse its flags as the binary does.
 #[derive(Debug, Parser)]
@@ -94,5 +95,20 @@ pub(crate) fn kidnap() -> KidnapDone {
         time_s: 50.25,
         from: Pose2::new(1.0, 2.0, 0.5),
         to: Pose2::new(4.0, 3.0, -1.0),
+    }
+}
+
+/// A run of `plan` judged as `judgement` in a second of wall-clock time,
+/// with no kidnap, no lag, no coverage and no command lines.
+pub(crate) fn quiet_outcome<'a>(plan: &'a DemoPlan, judgement: &'a Judgement) -> DemoOutcome<'a> {
+    DemoOutcome {
+        plan,
+        judgement,
+        kidnap: None,
+        wall_s: 1.0,
+        max_lags_s: Vec::new(),
+        coverage: Vec::new(),
+        commands: Vec::new(),
+        driven: Driven::default(),
     }
 }

@@ -247,7 +247,7 @@ fn percent(v: Option<f64>) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fixtures::{judgement, kidnap, two_robots};
+    use crate::fixtures::{judgement, kidnap, quiet_outcome, two_robots};
 
     #[test]
     fn report_md_has_the_tables_the_kidnap_and_the_commands() {
@@ -282,16 +282,7 @@ mod tests {
     #[test]
     fn no_kidnap_is_said() {
         let (plan, judgement) = (two_robots(), judgement());
-        let outcome = DemoOutcome {
-            plan: &plan,
-            judgement: &judgement,
-            kidnap: None,
-            wall_s: 1.0,
-            max_lags_s: Vec::new(),
-            coverage: Vec::new(),
-            commands: Vec::new(),
-            driven: Default::default(),
-        };
+        let outcome = quiet_outcome(&plan, &judgement);
         assert!(report(&outcome).contains("No robot was kidnapped."));
     }
 

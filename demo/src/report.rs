@@ -202,7 +202,7 @@ mod tests {
     use serde_json::Value;
 
     use super::*;
-    use crate::fixtures::{judgement, kidnap, two_robots};
+    use crate::fixtures::{judgement, kidnap, quiet_outcome, two_robots};
 
     fn keys(value: &Value) -> BTreeSet<&str> {
         value
@@ -326,16 +326,7 @@ mod tests {
             map_png: "map-refit.png".to_string(),
             map_yaml: "map-refit.yaml".to_string(),
         });
-        let outcome = DemoOutcome {
-            plan: &plan,
-            judgement: &judgement,
-            kidnap: None,
-            wall_s: 1.0,
-            max_lags_s: Vec::new(),
-            coverage: Vec::new(),
-            commands: Vec::new(),
-            driven: Driven::default(),
-        };
+        let outcome = quiet_outcome(&plan, &judgement);
         let json: Value = serde_json::from_str(&DemoReport::new(&outcome).to_json().expect("JSON"))
             .expect("JSON");
         let alone: Value = serde_json::from_str(&refitted.to_json()).expect("JSON");
@@ -350,21 +341,16 @@ mod tests {
                 .contains("refitted map (demo-refit): 90 cells observed, 100.0% classified right"),
             "{summary}"
         );
+        assert!(
+            summary.contains("wrote demo-out (report.md, report.json, map.yaml, map-refit.yaml,"),
+            "{summary}"
+        );
     }
 
     #[test]
     fn no_kidnap_is_null() {
         let (plan, judgement) = (two_robots(), judgement());
-        let outcome = DemoOutcome {
-            plan: &plan,
-            judgement: &judgement,
-            kidnap: None,
-            wall_s: 1.0,
-            max_lags_s: Vec::new(),
-            coverage: Vec::new(),
-            commands: Vec::new(),
-            driven: Driven::default(),
-        };
+        let outcome = quiet_outcome(&plan, &judgement);
         let json: Value = serde_json::from_str(&DemoReport::new(&outcome).to_json().expect("JSON"))
             .expect("JSON");
         assert_eq!(json["kidnap"], Value::Null);
