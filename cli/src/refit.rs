@@ -17,7 +17,9 @@ use clap::{Args, ValueEnum};
 use deog_grid::{ClampLimits, FrameMotion, Pose2, RingFiring, TileMap};
 use deog_harness::Progress;
 use deog_mapfile::{to_png_with_scale_bar, write_map};
-use deog_mapping::{ForwardSettings, ForwardStats, SonarReading, export_map, fit_forward};
+use deog_mapping::{
+    ForwardSettings, ForwardStats, SonarReading, export_map, fit_forward, ring_readings,
+};
 use deog_proto::v1 as pb;
 use deog_rig::{Reading, Rig, SensorKind};
 use deog_robot_client::convert::pose_from_wire;
@@ -207,25 +209,21 @@ fn readings_of(
                 rig.readings()
             );
         }
-        let fired = firing
-            .robot_at_readings(ring.len(), pace.as_ref())
-            .map_or_else(|| ring.clone(), |at| ring.as_fired(&at));
-        for ((sensor, &range), beam) in fired
-            .sensor_poses(&placed)
-            .zip(&frame.ranges)
+        let ranges = frame
+            .ranges
+            .iter()
             .zip(rig.beams())
-        {
-            let range = match beam.classify(range) {
-                Some(Reading::Echo(r)) => Some(r),
-                Some(Reading::NoEcho) => None,
-                None => bail!(
+            .map(|(&range, beam)| match beam.classify(range) {
+                Some(Reading::Echo(r)) => Ok(Some(r)),
+                Some(Reading::NoEcho) => Ok(None),
+                None => Err(anyhow::anyhow!(
                     "frame {} of robot {:?} has a reading that is not a range: {range}",
                     frame.sequence,
                     frame.robot
-                ),
-            };
-            readings.push(SonarReading { sensor, range });
-        }
+                )),
+            })
+            .collect::<Result<Vec<_>>>()?;
+        ring_readings(&ring, firing, &placed, pace.as_ref(), ranges, &mut readings);
     }
     Ok(readings)
 }

@@ -235,14 +235,15 @@ impl ForwardSettings {
 /// A ring's frame as readings where each was taken: the robot at `pose`
 /// moving at `pace` (its pose a second earlier, seen from now, as
 /// [`deog_grid::FrameMotion`] gives it), its sensors fired as `firing`
-/// says; a range of `max_range` or more is no echo. Appended to `out`.
+/// says; `ranges` in ring order, `None` for no echo (how a sensor says
+/// so is its rig's business: [`echo_below`] for a plain maximum range).
+/// Appended to `out`.
 pub fn ring_readings(
     ring: &deog_grid::SensorRing,
     firing: deog_grid::RingFiring,
     pose: &Pose2,
     pace: Option<&Pose2>,
-    ranges: &[f64],
-    max_range: f64,
+    ranges: impl IntoIterator<Item = Option<f64>>,
     out: &mut Vec<SonarReading>,
 ) {
     let fired = firing
@@ -252,11 +253,13 @@ pub fn ring_readings(
         fired
             .sensor_poses(pose)
             .zip(ranges)
-            .map(|(sensor, &range)| SonarReading {
-                sensor,
-                range: (range < max_range).then_some(range),
-            }),
+            .map(|(sensor, range)| SonarReading { sensor, range }),
     );
+}
+
+/// `ranges` with each at `max_range` or more (or NaN) taken for no echo.
+pub fn echo_below(ranges: &[f64], max_range: f64) -> impl Iterator<Item = Option<f64>> + '_ {
+    ranges.iter().map(move |&r| (r < max_range).then_some(r))
 }
 
 /// What the fit found, beside the map.
@@ -1017,8 +1020,7 @@ mod tests {
             deog_grid::RingFiring::Together,
             &pose,
             None,
-            &ranges,
-            10.668,
+            echo_below(&ranges, 10.668),
             &mut out,
         );
         assert_eq!(out.len(), 16);
@@ -1034,8 +1036,7 @@ mod tests {
             deog_grid::RingFiring::Sequential { period_s: 0.1 },
             &pose,
             Some(&Pose2::new(0.0, 0.0, -1.0)),
-            &ranges,
-            10.668,
+            echo_below(&ranges, 10.668),
             &mut turned,
         );
         assert!((turned[0].sensor.theta - out[0].sensor.theta).abs() > 0.05);

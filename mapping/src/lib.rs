@@ -42,7 +42,9 @@ pub use cartographer::{
 pub use directional::{DEFAULT_ENCLOSURE_PERIOD, DirectionalSettings, DirectionalView};
 pub use error::MappingError;
 pub use estimates::{EstimateBook, EstimateLookup};
-pub use forward::{ForwardSettings, ForwardStats, SonarReading, fit_forward, ring_readings};
+pub use forward::{
+    ForwardSettings, ForwardStats, SonarReading, echo_below, fit_forward, ring_readings,
+};
 pub use map_export::{ExportCounts, MapExport, export_map};
 pub use map_import::{ImportTarget, MapImport, image_origin_cell, import_map};
 pub use map_view::{MapView, MapViewSettings};

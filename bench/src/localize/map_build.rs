@@ -89,8 +89,7 @@ pub(crate) fn build_map(
                 config.ring_firing(),
                 &state.true_pose,
                 pace.observe(&state.odometry, state.time_s).as_ref(),
-                &state.ranges,
-                config.sonar.max_range,
+                deog_mapping::echo_below(&state.ranges, config.sonar.max_range),
                 &mut readings,
             );
         }

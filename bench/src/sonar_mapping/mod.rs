@@ -92,8 +92,8 @@ use deog_grid::{ClampLimits, Pose2, Resolution, TileMap, TileSize};
 use deog_harness::Progress;
 use deog_mapping::{
     Cartographer, ForwardSettings, FrameInput, MapViewSettings, PoseChoice,
-    SPECULAR_OCCUPIED_AXIS_FACTOR, SonarMethod, fit_forward, mapping_sonar_model, ring_readings,
-    specular_sonar_mapping,
+    SPECULAR_OCCUPIED_AXIS_FACTOR, SonarMethod, echo_below, fit_forward, mapping_sonar_model,
+    ring_readings, specular_sonar_mapping,
 };
 use deog_simulator::simulation::{SimConfig, Simulation};
 use deog_simulator::{SonarPreset, WanderParams, Wanderer};
@@ -680,8 +680,7 @@ fn build_forward(
             firing,
             &frame.true_pose,
             frame.pace.as_ref(),
-            &frame.ranges,
-            params.max_range,
+            echo_below(&frame.ranges, params.max_range),
             &mut readings,
         );
     }
