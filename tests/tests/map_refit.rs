@@ -134,48 +134,36 @@ async fn a_specular_sonars_map_refitted_to_its_frames_judges_better() {
     assert_eq!(again, mapped_right);
 
     // What cannot be refitted says why.
-    let line = refused(&deog(
-        &server,
-        &[
-            "refit", "--map", "nosuch", "--robots", "r", "--out", files_arg,
-        ],
-    ));
-    assert!(line.contains("no map named \"nosuch\""), "{line}");
-    let line = refused(&deog(
-        &server,
-        &[
-            "refit", "--map", "m", "--robots", "ghost", "--out", files_arg,
-        ],
-    ));
-    assert!(line.contains("no frame of robot \"ghost\""), "{line}");
-    let line = refused(&deog(
-        &server,
-        &[
-            "refit",
-            "--map",
-            "m",
-            "--robots",
-            "r",
+    let refusals: [(&[&str], &str); 4] = [
+        (
+            &["--map", "nosuch", "--robots", "r"],
+            "no map named \"nosuch\"",
+        ),
+        (
+            &["--map", "m", "--robots", "ghost"],
+            "no frame of robot \"ghost\"",
+        ),
+        (
+            &[
+                "--map",
+                "m",
+                "--robots",
+                "r",
+                "--critical-incidence-deg",
+                "120",
+            ],
             "--critical-incidence-deg",
-            "120",
-            "--out",
-            files_arg,
-        ],
-    ));
-    assert!(line.contains("--critical-incidence-deg"), "{line}");
-    let line = refused(&deog(
-        &server,
-        &[
-            "refit",
-            "--map",
-            "m",
-            "--robots",
-            "r",
-            "--iterations",
-            "0",
-            "--out",
-            files_arg,
-        ],
-    ));
-    assert!(line.contains("--iterations takes 1 to 50"), "{line}");
+        ),
+        (
+            &["--map", "m", "--robots", "r", "--iterations", "0"],
+            "--iterations takes 1 to 50",
+        ),
+    ];
+    for (args, says) in refusals {
+        let mut command = vec!["refit"];
+        command.extend_from_slice(args);
+        command.extend_from_slice(&["--out", files_arg]);
+        let line = refused(&deog(&server, &command));
+        assert!(line.contains(says), "{args:?}: {line}");
+    }
 }
