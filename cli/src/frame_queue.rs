@@ -13,6 +13,14 @@ use deog_robot_client::MapClient;
 /// Frames read ahead at most.
 const QUEUE_CAPACITY: usize = 1024;
 
+/// Times in a row a broken frame stream is opened again before the
+/// follower gives up.
+const REOPEN_TRIES: u32 = 10;
+
+/// The pause before opening a broken stream again, times the failures in
+/// a row.
+const REOPEN_PAUSE: Duration = Duration::from_millis(500);
+
 /// Frames read ahead from a `SubscribeFrames` stream.
 pub(crate) struct FrameQueue {
     /// What the server held of the robot's frames when following began.
@@ -59,7 +67,7 @@ impl FrameQueue {
             .subscribe_frames(robot, from)
             .await
             .with_context(|| format!("following the frames of robot {robot}"))?;
-        let mut queue = Self::spawn(stream, robot.to_string(), idle_exit_s);
+        let mut queue = Self::spawn(client.clone(), stream, robot.to_string(), idle_exit_s);
         queue.held = held;
         Ok(queue)
     }
@@ -97,28 +105,73 @@ impl FrameQueue {
         }
     }
 
-    /// Starts reading `stream` of `robot`'s frames.
+    /// Starts reading `stream` of `robot`'s frames. A stream that breaks
+    /// (the connection dropped, the server restarted) is opened again from
+    /// the frame after the last one read, with a log line, up to
+    /// [`REOPEN_TRIES`] times in a row: a follower is not lost because its
+    /// connection was.
     fn spawn(
+        client: MapClient,
         mut stream: tonic::Streaming<pb::SonarFrame>,
         robot: String,
         idle_exit_s: f64,
     ) -> Self {
         let (tx, frames) = tokio::sync::mpsc::channel(QUEUE_CAPACITY);
         let reader = tokio::spawn(async move {
-            let mut first = true;
-            while let Some(frame) = stream.message().await.context("the frame stream failed")? {
-                if first {
-                    tracing::info!(
-                        "first frame of robot {robot} arrived: sequence {}",
-                        frame.sequence
-                    );
-                    first = false;
-                }
-                if tx.send(frame).await.is_err() {
-                    break;
+            let mut last: Option<u64> = None;
+            let mut failures = 0u32;
+            loop {
+                match stream.message().await {
+                    Ok(Some(frame)) => {
+                        if last.is_none() {
+                            tracing::info!(
+                                "first frame of robot {robot} arrived: sequence {}",
+                                frame.sequence
+                            );
+                        }
+                        failures = 0;
+                        // A reopened stream may repeat what was read.
+                        if last.is_some_and(|l| frame.sequence <= l) {
+                            continue;
+                        }
+                        last = Some(frame.sequence);
+                        if tx.send(frame).await.is_err() {
+                            return Ok(());
+                        }
+                    }
+                    Ok(None) => return Ok(()),
+                    Err(status) => {
+                        let from = last.map_or(0, |l| l + 1);
+                        tracing::warn!(
+                            robot = %robot,
+                            from,
+                            error = %status,
+                            "the frame stream broke; opening it again"
+                        );
+                        loop {
+                            failures += 1;
+                            if failures > REOPEN_TRIES {
+                                return Err(anyhow::Error::new(status).context(format!(
+                                    "the frame stream of robot {robot} broke and could not be opened again in {REOPEN_TRIES} tries"
+                                )));
+                            }
+                            tokio::time::sleep(REOPEN_PAUSE * failures).await;
+                            match client.subscribe_frames(&robot, from).await {
+                                Ok(reopened) => {
+                                    tracing::info!(robot = %robot, from, "the frame stream is open again");
+                                    stream = reopened;
+                                    break;
+                                }
+                                Err(e) => tracing::warn!(
+                                    robot = %robot,
+                                    error = %e,
+                                    "the frame stream could not be opened again yet"
+                                ),
+                            }
+                        }
+                    }
                 }
             }
-            Ok(())
         });
         Self {
             held: None,

@@ -20,6 +20,8 @@ pub struct RunFigures {
     pub mean_heading_deg: Option<f64>,
     /// Estimates used for the mean errors.
     pub samples: u64,
+    /// Estimates flagged converged while more than 0.5 m or 0.25 rad off.
+    pub false_converged: u64,
 }
 
 impl From<&LocalizationReport> for RunFigures {
@@ -31,6 +33,7 @@ impl From<&LocalizationReport> for RunFigures {
             mean_position_m: stats.map(|s| s.mean_position_m),
             mean_heading_deg: stats.map(|s| s.theta_rad.mean_abs.to_degrees()),
             samples: stats.map_or(0, |s| s.count),
+            false_converged: r.false_converged,
         }
     }
 }
@@ -50,6 +53,11 @@ pub struct RunsSummary {
     pub mean_position_m: Option<f64>,
     /// The same for the heading, degrees.
     pub mean_heading_deg: Option<f64>,
+    /// Estimates flagged converged while more than 0.5 m or 0.25 rad off,
+    /// over every run.
+    pub false_converged: u64,
+    /// Runs with at least one such estimate.
+    pub runs_false_converged: usize,
 }
 
 impl RunsSummary {
@@ -87,6 +95,8 @@ pub fn summarize(runs: &[RunFigures], limit_s: f64) -> RunsSummary {
         recovered: runs.iter().filter(|f| within(f.recover_s)).count(),
         mean_position_m: mean(|f| f.mean_position_m),
         mean_heading_deg: mean(|f| f.mean_heading_deg),
+        false_converged: runs.iter().map(|f| f.false_converged).sum(),
+        runs_false_converged: runs.iter().filter(|f| f.false_converged > 0).count(),
     }
 }
 
@@ -103,6 +113,7 @@ mod tests {
                 mean_position_m: Some(0.02),
                 mean_heading_deg: Some(0.5),
                 samples: 100,
+                false_converged: 0,
             },
             RunFigures {
                 converge_s: Some(60.0),
@@ -110,6 +121,7 @@ mod tests {
                 mean_position_m: Some(0.04),
                 mean_heading_deg: Some(1.5),
                 samples: 50,
+                false_converged: 4,
             },
             RunFigures::default(),
         ];
@@ -118,6 +130,7 @@ mod tests {
         assert!((s.mean_position_m.unwrap() - 0.03).abs() < 1e-12);
         assert!((s.mean_heading_deg.unwrap() - 1.0).abs() < 1e-12);
         assert!((s.converged_percent() - 200.0 / 3.0).abs() < 1e-9);
+        assert_eq!((s.false_converged, s.runs_false_converged), (4, 1));
         assert_eq!(summarize(&[], 60.0).mean_position_m, None);
     }
 }

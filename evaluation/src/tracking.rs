@@ -6,7 +6,9 @@
 use deog_grid::normalize_angle;
 use serde::Serialize;
 
-use crate::localization::{EstimateSample, EvalParams, TruthSample};
+use crate::localization::{
+    EstimateSample, EvalParams, FALSE_CONVERGED_M, FALSE_CONVERGED_RAD, TruthSample,
+};
 
 /// How the estimates followed the true poses, estimate by estimate.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
@@ -32,6 +34,10 @@ pub struct Tracking {
     pub longest_lost: Option<LostStretch>,
     /// Whether the last estimate was within the bounds.
     pub last_within: bool,
+    /// Estimates the filter flagged converged while more than
+    /// [`FALSE_CONVERGED_M`] or [`FALSE_CONVERGED_RAD`] off: wrong and
+    /// sure of it.
+    pub false_converged: u64,
 }
 
 /// A run of consecutive estimates outside the bounds.
@@ -73,6 +79,11 @@ pub fn track(truth: &[TruthSample], estimates: &[EstimateSample], params: &EvalP
         let heading = normalize_angle(pose.theta - truth.pose.theta).abs();
         let within = position <= params.converge_m && heading <= params.converge_rad;
         t.paired += 1;
+        if estimate.filter_converged
+            && (position > FALSE_CONVERGED_M || heading > FALSE_CONVERGED_RAD)
+        {
+            t.false_converged += 1;
+        }
         sum += position;
         square_sum += position * position;
         heading_sum += heading;
@@ -119,10 +130,14 @@ mod tests {
                 } else {
                     0.0
                 };
-                EstimateSample::new(t.sequence, Pose2::new(t.pose.x, off, 0.0))
+                let mut e = EstimateSample::new(t.sequence, Pose2::new(t.pose.x, off, 0.0));
+                // Sure of itself throughout: the lapse is false convergence.
+                e.filter_converged = true;
+                e
             })
             .collect();
         let t = track(&truth, &estimates, &EvalParams::default());
+        assert_eq!(t.false_converged, 3);
         assert_eq!((t.paired, t.within), (9, 6));
         assert_eq!(t.lost_stretches, 1);
         let lost = t.longest_lost.expect("a lapse");

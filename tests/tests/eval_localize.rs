@@ -186,6 +186,8 @@ async fn eval_localize_reports_the_known_errors_and_plots_the_paths() {
     // 31..=37 (7) were wrong.
     assert_eq!(r.get("filter_converged").number(), 54.0);
     assert_eq!(r.get("filter_converged_within_bounds").number(), 47.0);
+    // Those 7 were metres off: false convergence.
+    assert_eq!(r.get("false_converged").number(), 7.0);
 
     // The plot over the map: the longer side is 1000 px, and the map's
     // walls, both paths and the kidnap marks are all there.

@@ -587,12 +587,13 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
             progress.inc(1);
             if options.verbose {
                 deog_harness::println_above_bars!(
-                    "  seed {seed}: converge {} s, recover {} s, mean error {:.3} m {:.2}°, {} samples, {:.1} s",
+                    "  seed {seed}: converge {} s, recover {} s, mean error {:.3} m {:.2}°, {} samples, {} falsely converged, {:.1} s",
                     fmt_opt(figures.converge_s),
                     fmt_opt(figures.recover_s),
                     figures.mean_position_m.unwrap_or(0.0),
                     figures.mean_heading_deg.unwrap_or(0.0),
                     figures.samples,
+                    figures.false_converged,
                     t0.elapsed().as_secs_f64()
                 );
             }
@@ -601,7 +602,7 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
         }
         let summary = summarize(&all, CONVERGE_LIMIT_S);
         deog_harness::println_above_bars!(
-            "{world_name}: converged within 60 s {}/{} ({:.0} %), recovered within 60 s {}/{} ({:.0} %), mean error after convergence {:.3} m, {:.2}°; {:.1} s",
+            "{world_name}: converged within 60 s {}/{} ({:.0} %), recovered within 60 s {}/{} ({:.0} %), mean error after convergence {:.3} m, {:.2}°; false convergence {} estimates in {} runs; {:.1} s",
             summary.converged,
             summary.runs,
             summary.converged_percent(),
@@ -610,6 +611,8 @@ pub fn run(options: LocalizeOptions) -> Result<()> {
             summary.recovered_percent(),
             summary.mean_position_m.unwrap_or(0.0),
             summary.mean_heading_deg.unwrap_or(0.0),
+            summary.false_converged,
+            summary.runs_false_converged,
             started.elapsed().as_secs_f64()
         );
         let settled_15 = all

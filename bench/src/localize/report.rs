@@ -71,6 +71,11 @@ pub(super) struct WorldFigures {
     pub mean_abs_error_m: Option<f64>,
     /// Mean heading error after convergence, degrees.
     pub mean_abs_error_deg: Option<f64>,
+    /// Estimates flagged converged while more than 0.5 m or 0.25 rad off,
+    /// over every run: a filter wrong and sure of it.
+    pub false_converged: u64,
+    /// Runs with at least one such estimate.
+    pub runs_false_converged: usize,
     /// Every run, by seed.
     pub per_run: Vec<RunRow>,
 }
@@ -85,6 +90,8 @@ pub(super) struct RunRow {
     pub recover_s: Option<f64>,
     pub mean_abs_error_m: Option<f64>,
     pub mean_abs_error_deg: Option<f64>,
+    /// Estimates flagged converged while more than 0.5 m or 0.25 rad off.
+    pub false_converged: u64,
     /// Frames judged after convergence.
     pub samples: u64,
     /// The most particles the filter held from 10 s after it settled to
@@ -109,6 +116,8 @@ impl WorldFigures {
             recovered: summary.recovered,
             mean_abs_error_m: summary.mean_position_m,
             mean_abs_error_deg: summary.mean_heading_deg,
+            false_converged: summary.false_converged,
+            runs_false_converged: summary.runs_false_converged,
             per_run: runs
                 .iter()
                 .zip(first_seed..)
@@ -119,6 +128,7 @@ impl WorldFigures {
                     recover_s: run.recover_s,
                     mean_abs_error_m: run.mean_position_m,
                     mean_abs_error_deg: run.mean_heading_deg,
+                    false_converged: run.false_converged,
                     samples: run.samples,
                     most_particles_settled,
                 })
@@ -148,6 +158,7 @@ mod tests {
                 mean_position_m: Some(0.2),
                 mean_heading_deg: Some(3.0),
                 samples: 40,
+                false_converged: 3,
             },
             RunFigures {
                 converge_s: None,
@@ -155,6 +166,7 @@ mod tests {
                 mean_position_m: None,
                 mean_heading_deg: None,
                 samples: 0,
+                false_converged: 0,
             },
         ];
         let summary = summarize(&runs, 60.0);
@@ -193,6 +205,9 @@ mod tests {
         assert_eq!(world["runs"], 2);
         assert_eq!(world["converged"], 1);
         assert_eq!(world["recovered"], 0);
+        assert_eq!(world["false_converged"], 3);
+        assert_eq!(world["runs_false_converged"], 1);
+        assert_eq!(world["per_run"][0]["false_converged"], 3);
         assert!(world["mean_abs_error_m"].is_number());
         assert!(world["mean_abs_error_deg"].is_number());
         assert_eq!(world["per_run"][1]["seed"], 8);

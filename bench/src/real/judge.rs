@@ -58,6 +58,8 @@ pub(super) struct WindowVerdict {
     pub final_position_error_m: Option<f64>,
     /// |heading error| of the last estimate, radians.
     pub final_abs_error_rad: Option<f64>,
+    /// Estimates flagged converged while more than 0.5 m or 0.25 rad off.
+    pub false_converged: u64,
 }
 
 impl WindowVerdict {
@@ -93,6 +95,7 @@ pub(super) fn window(
         settled_after_scans: None,
         final_position_error_m: None,
         final_abs_error_rad: None,
+        false_converged: track(&truth, &estimates, &params()).false_converged,
     };
     let Some(last) = estimates.last() else {
         return Ok(verdict);

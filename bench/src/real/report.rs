@@ -245,6 +245,11 @@ impl RealFigures {
         );
         let _ = writeln!(
             out,
+            "| tracking: false convergence (flagged converged, over 0.5 m or 0.25 rad off) | {} | 0 |",
+            t.false_converged
+        );
+        let _ = writeln!(
+            out,
             "| tracking: localizer time | {:.1} s, {:.3} s a frame | |",
             self.tracking.seconds,
             self.tracking.seconds_per_frame()
@@ -267,6 +272,14 @@ impl RealFigures {
                     "| global: median scans to converge | {} | |",
                     self.median_scans_to_converge()
                         .map_or("-".to_owned(), |m| format!("{m}"))
+                );
+                let _ = writeln!(
+                    out,
+                    "| global: false convergence | {} | 0 |",
+                    self.starts
+                        .iter()
+                        .map(|s| s.verdict.false_converged)
+                        .sum::<u64>()
                 );
                 let _ = writeln!(
                     out,
@@ -351,6 +364,7 @@ impl RealFigures {
                 within_bounds_fraction: self.tracking.within_fraction(),
                 stretches_outside_bounds: t.lost_stretches,
                 last_estimate_within_bounds: t.last_within,
+                false_converged: t.false_converged,
                 seconds: self.tracking.seconds,
                 seconds_per_frame: self.tracking.seconds_per_frame(),
             },
@@ -368,12 +382,14 @@ impl RealFigures {
                         settled_after_scans: s.verdict.settled_after_scans,
                         final_position_error_m: s.verdict.final_position_error_m,
                         final_abs_error_deg: s.verdict.final_abs_error_rad.map(f64::to_degrees),
+                        false_converged: s.verdict.false_converged,
                         seconds: s.seconds,
                     })
                     .collect(),
                 converged: self.converged(),
                 converged_fraction: self.converged_fraction(),
                 median_scans_to_converge: self.median_scans_to_converge(),
+                false_converged: self.starts.iter().map(|s| s.verdict.false_converged).sum(),
                 seconds_per_frame: self.global_seconds_per_frame(),
             },
             targets: self.targets(),
@@ -452,6 +468,7 @@ struct TrackingRecord {
     within_bounds_fraction: Option<f64>,
     stretches_outside_bounds: u64,
     last_estimate_within_bounds: bool,
+    false_converged: u64,
     seconds: f64,
     seconds_per_frame: f64,
 }
@@ -467,6 +484,7 @@ struct StartRecord {
     settled_after_scans: Option<u64>,
     final_position_error_m: Option<f64>,
     final_abs_error_deg: Option<f64>,
+    false_converged: u64,
     seconds: f64,
 }
 
@@ -476,6 +494,7 @@ struct GlobalRecord {
     converged: usize,
     converged_fraction: Option<f64>,
     median_scans_to_converge: Option<f64>,
+    false_converged: u64,
     seconds_per_frame: Option<f64>,
 }
 
@@ -513,6 +532,7 @@ mod tests {
             settled_after_scans: after,
             final_position_error_m: Some(0.04),
             final_abs_error_rad: Some(0.01),
+            false_converged: u64::from(!converged),
         }
     }
 
@@ -544,6 +564,7 @@ mod tests {
                     max_m: 0.4,
                     mean_abs_heading_rad: 0.01,
                     max_abs_heading_rad: 0.1,
+                    false_converged: 2,
                     ..Tracking::default()
                 },
                 seconds: 44.0,
@@ -587,6 +608,7 @@ mod tests {
         assert_eq!(t["rms_position_m"], 0.06);
         assert_eq!(t["max_position_error_m"], 0.4);
         assert_eq!(t["seconds_per_frame"], 0.1);
+        assert_eq!(t["false_converged"], 2);
         approx::assert_relative_eq!(
             t["mean_abs_error_deg"].as_f64().unwrap(),
             0.01f64.to_degrees()
@@ -599,6 +621,8 @@ mod tests {
         assert_eq!(g["starts"][1]["scans_to_converge"], 5);
         assert_eq!(g["starts"][2]["scans_to_converge"], serde_json::Value::Null);
         assert_eq!(g["starts"][2]["settled_after_scans"], 33);
+        assert_eq!(g["starts"][2]["false_converged"], 1);
+        assert_eq!(g["false_converged"], 2);
         approx::assert_relative_eq!(g["seconds_per_frame"].as_f64().unwrap(), 0.1);
         assert_eq!(json["targets"]["met"]["rms_position_m"], false);
         assert_eq!(json["targets"]["met"]["mean_abs_error_deg"], true);

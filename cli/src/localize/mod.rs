@@ -239,13 +239,15 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         thresholds,
         expected_rig,
     } = args.settings()?;
-    // One thread: the filter is sequential, and its allocations then come
-    // from one arena of the allocator, not one per worker thread each
-    // holding memory the others freed. The loop is synchronous and waits
-    // on the runtime only for I/O; the frame and watch streams wait while
-    // the filter works (the server keeps their backlog: frames are re-read
-    // from storage, a watcher that falls behind gets a resync).
-    let runtime = tokio::runtime::Builder::new_current_thread()
+    // The filter runs on this thread, synchronously; one worker thread
+    // drives the connection meanwhile, so the streams keep reading and
+    // the server's keepalive pings are answered however long a table
+    // build or an update takes (a current-thread runtime would stall the
+    // connection until the next wait on I/O, and the server drops a peer
+    // silent for 50 s). The filter's allocations stay on this one thread.
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .thread_name("deog-localize-io")
         .enable_all()
         .build()
         .context("starting the async runtime")?;

@@ -126,6 +126,9 @@ pub struct LocalizationReport {
     pub filter_converged: u64,
     /// Of those, the ones within the bounds.
     pub filter_converged_within_bounds: u64,
+    /// Of the flagged ones, those more than [`super::FALSE_CONVERGED_M`]
+    /// or [`super::FALSE_CONVERGED_RAD`] off: false convergence.
+    pub false_converged: u64,
     /// Time of the first truth sample, seconds.
     pub start_time_s: f64,
     /// Time of the last truth sample judged, seconds.
@@ -210,6 +213,12 @@ struct Paired {
 impl Paired {
     fn position(&self) -> f64 {
         self.x.hypot(self.y)
+    }
+
+    fn falsely_converged(&self) -> bool {
+        self.filter_converged
+            && (self.position() > super::FALSE_CONVERGED_M
+                || self.theta.abs() > super::FALSE_CONVERGED_RAD)
     }
 
     fn within(&self, params: &EvalParams) -> bool {
@@ -357,6 +366,7 @@ pub fn evaluate(input: &EvalInput<'_>) -> Result<LocalizationReport, EvaluationE
         estimates_within_bounds: within as u64,
         filter_converged: claimed.clone().count() as u64,
         filter_converged_within_bounds: claimed.filter(|p| p.within(&params)).count() as u64,
+        false_converged: paired.iter().filter(|p| p.falsely_converged()).count() as u64,
         start_time_s: truth[0].time_s,
         end_time_s: truth[truth.len() - 1].time_s,
         convergence,

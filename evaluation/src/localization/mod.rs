@@ -84,7 +84,11 @@
 //!   or when one was not recovered from).
 //! - **Filter claims**: of the paired estimates, those the filter flagged
 //!   as converged, and how many of them were within the bounds: whether
-//!   its own confidence can be trusted.
+//!   its own confidence can be trusted; and **false convergence**: the
+//!   flagged estimates more than [`FALSE_CONVERGED_M`] (0.5 m) or
+//!   [`FALSE_CONVERGED_RAD`] (0.25 rad) from the truth, a filter wrong and
+//!   sure of it. A filter may take long to converge; it may never claim a
+//!   pose it is not at.
 //!
 //! Figures that do not exist are `None`, `null` in JSON, never NaN.
 //!
@@ -138,6 +142,12 @@ pub const METRES_PER_INCH: f64 = 0.0254;
 pub const DEFAULT_CONVERGE_M: f64 = 0.25;
 /// Default largest heading error of a settled estimate, radians.
 pub const DEFAULT_CONVERGE_RAD: f64 = 0.25;
+/// Position error past which an estimate flagged converged is a false
+/// convergence, metres.
+pub const FALSE_CONVERGED_M: f64 = 0.5;
+/// Heading error past which an estimate flagged converged is a false
+/// convergence, radians.
+pub const FALSE_CONVERGED_RAD: f64 = 0.25;
 /// Default jump between consecutive frames, beyond what driving explains,
 /// that counts as a kidnap, metres.
 pub const DEFAULT_KIDNAP_JUMP_M: f64 = 0.5;

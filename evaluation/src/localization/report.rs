@@ -147,6 +147,7 @@ pub struct LocalizationRecord {
     pub estimates_within_bounds: u64,
     pub filter_converged: u64,
     pub filter_converged_within_bounds: u64,
+    pub false_converged: u64,
     pub start_time_s: f64,
     pub end_time_s: f64,
     pub bounds: BoundsRecord,
@@ -206,6 +207,7 @@ impl LocalizationReport {
             estimates_within_bounds: self.estimates_within_bounds,
             filter_converged: self.filter_converged,
             filter_converged_within_bounds: self.filter_converged_within_bounds,
+            false_converged: self.false_converged,
             start_time_s: self.start_time_s,
             end_time_s: self.end_time_s,
             bounds: BoundsRecord {
@@ -273,8 +275,12 @@ impl LocalizationReport {
         };
         let _ = writeln!(
             out,
-            "the filter said converged for {} estimates, {} of them within the bounds",
-            self.filter_converged, self.filter_converged_within_bounds
+            "the filter said converged for {} estimates, {} of them within the bounds, {} of them falsely (over {} m or {} rad off)",
+            self.filter_converged,
+            self.filter_converged_within_bounds,
+            self.false_converged,
+            super::FALSE_CONVERGED_M,
+            super::FALSE_CONVERGED_RAD
         );
         match &self.stats {
             Some(s) => {

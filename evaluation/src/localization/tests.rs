@@ -374,6 +374,30 @@ fn unpaired_estimates_and_frames_after_the_last_estimate_are_left_out() {
 }
 
 #[test]
+fn false_convergence_counts_flagged_estimates_past_half_a_metre_or_a_quarter_radian() {
+    let truth = straight(6);
+    // Errors: within the bounds; outside them but not false; 0.6 m off;
+    // 0.3 rad off; 2 m off but not flagged; 0.42 m and 0.2 rad off.
+    let errors = [
+        (0.1, 0.0, 0.0),
+        (0.3, 0.2, 0.0),
+        (0.0, 0.6, 0.0),
+        (0.05, 0.0, 0.3),
+        (2.0, 0.0, 0.0),
+        (0.3, 0.3, 0.2),
+    ];
+    let mut estimates = offset(&truth, |s| errors[s as usize - 1]);
+    for (i, e) in estimates.iter_mut().enumerate() {
+        e.filter_converged = i != 4;
+    }
+    let r = run(&truth, &estimates);
+    assert_eq!(r.filter_converged, 5);
+    assert_eq!(r.filter_converged_within_bounds, 1);
+    assert_eq!(r.false_converged, 2);
+    assert_eq!(r.record().false_converged, 2);
+}
+
+#[test]
 fn empty_input_is_a_clear_error() {
     let truth = straight(3);
     let estimates = offset(&truth, |_| (0.0, 0.0, 0.0));
