@@ -28,6 +28,9 @@
 //!   against the distance field (Gauss–Newton), for the likelihood field.
 //! - [`beam_model`]: the likelihood of a measured range given the
 //!   expected one.
+//! - [`search`]: the global search, branch and bound over a whole map's
+//!   poses for those that explain the recent echoes: where a global start
+//!   and a lost filter put their particles.
 //! - [`sampling`], [`cluster`], [`gaussian`]: resampling and the KLD
 //!   bound, particle clusters and the estimate, normal draws;
 //!   [`numeric`]: small helpers for the hot loops.
@@ -47,5 +50,6 @@ pub mod preset;
 pub mod range_table;
 pub mod refine;
 pub mod sampling;
+pub mod search;
 pub mod sensors;
 pub mod step;

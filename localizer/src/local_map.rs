@@ -39,6 +39,7 @@ use crate::distance_field::{DistanceField, FieldSpec, FieldWindow};
 use crate::error::LocalizerError;
 use crate::numeric::{cell_i32, round_i32};
 use crate::range_table::{ConeGeometry, NO_ECHO, OccupancyRaster, RangeTable, fill_table};
+use crate::search::SearchCell;
 
 const UNKNOWN: u8 = 0;
 const FREE: u8 = 1;
@@ -1051,6 +1052,85 @@ impl LocalMap {
         self.clock += 1;
         self.clock
     }
+}
+
+impl LocalMap {
+    /// The held tiles as the global search reads them
+    /// ([`crate::search::SearchGrid`]): cells of `factor` × `factor` map
+    /// cells, occupied where any of theirs is, else free where any is;
+    /// `None` when no tile is held. Origin (metres) of the first cell's
+    /// lower-left corner, cells along x and y, and the cells row-major.
+    pub fn search_cells(&self, factor: u32) -> Result<Option<SearchCells>, LocalizerError> {
+        let factor = i64::from(factor.max(1));
+        let Some(first) = self.tiles.keys().next() else {
+            return Ok(None);
+        };
+        let (mut lo, mut hi) = (*first, *first);
+        for key in self.tiles.keys() {
+            lo = TileKey::new(lo.x.min(key.x), lo.y.min(key.y));
+            hi = TileKey::new(hi.x.max(key.x), hi.y.max(key.y));
+        }
+        let size = self.settings.tile_size;
+        let side = i64::from(size.cells());
+        let min = size.origin(lo)?;
+        let (min_x, min_y) = (i64::from(min.x), i64::from(min.y));
+        let cells_x = (i64::from(hi.x) - i64::from(lo.x) + 1) * side;
+        let cells_y = (i64::from(hi.y) - i64::from(lo.y) + 1) * side;
+        let width = (cells_x + factor - 1) / factor;
+        let height = (cells_y + factor - 1) / factor;
+        let count = width.saturating_mul(height);
+        if count > crate::search::MAX_SEARCH_CELLS as i64 {
+            return Err(LocalizerError::Invalid(format!(
+                "the map's {width} x {height} search cells are more than {}",
+                crate::search::MAX_SEARCH_CELLS
+            )));
+        }
+        let (width, height) = (width as usize, height as usize);
+        let mut cells = vec![SearchCell::Unknown; width * height];
+        for (key, tile) in &self.tiles {
+            let Some(states) = tile.cells.as_deref() else {
+                continue;
+            };
+            let origin = size.origin(*key)?;
+            let (ox, oy) = (i64::from(origin.x) - min_x, i64::from(origin.y) - min_y);
+            for (i, &state) in states.iter().enumerate() {
+                if state == UNKNOWN {
+                    continue;
+                }
+                let x = (ox + (i as i64 % side)) / factor;
+                let y = (oy + (i as i64 / side)) / factor;
+                let cell = &mut cells[y as usize * width + x as usize];
+                match state {
+                    OCCUPIED => *cell = SearchCell::Occupied,
+                    _ if *cell == SearchCell::Unknown => *cell = SearchCell::Free,
+                    _ => {}
+                }
+            }
+        }
+        let res = self.settings.resolution.metres();
+        Ok(Some(SearchCells {
+            origin: [min_x as f64 * res, min_y as f64 * res],
+            cell_m: res * factor as f64,
+            width,
+            height,
+            cells,
+        }))
+    }
+}
+
+/// The held map in the global search's cells ([`LocalMap::search_cells`]).
+#[derive(Debug, Clone)]
+pub struct SearchCells {
+    /// World position of the first cell's lower-left corner, metres.
+    pub origin: [f64; 2],
+    /// Side of a cell, metres.
+    pub cell_m: f64,
+    /// Cells along x.
+    pub width: usize,
+    /// Cells along y.
+    pub height: usize,
+    /// The cells, row-major from the lower-left.
+    pub cells: Vec<SearchCell>,
 }
 
 impl OccupancyView for LocalMap {
