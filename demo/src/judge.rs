@@ -81,8 +81,10 @@ pub(crate) async fn judge(client: &MapClient, plan: &DemoPlan, out: &Path) -> Re
     };
     let mut robots = Vec::with_capacity(plan.robots.len());
     if plan.localize {
-        for name in plan.robot_names() {
-            robots.push(judge_robot(client, &map, name, out).await?);
+        let names: Vec<_> = plan.robot_names().collect();
+        for (index, name) in names.iter().enumerate() {
+            let started_s = plan.schedule.localizer_start_s(index, names.len());
+            robots.push(judge_robot(client, &map, name, started_s, out).await?);
         }
     }
     Ok(Judgement {
@@ -117,15 +119,19 @@ fn judge_map(
     Ok(quality)
 }
 
-/// Judges robot `name`'s localizer and draws its paths over `map`.
+/// Judges robot `name`'s localizer, started at simulated second
+/// `started_s`, and draws its paths over `map`.
 async fn judge_robot(
     client: &MapClient,
     map: &TileMap,
     name: &str,
+    started_s: f64,
     out: &Path,
 ) -> Result<RobotJudgement> {
-    // Judge from the first frame the localizer saw, not from the mapping
-    // head start before it ran.
+    // Judge from the localizer's start, not from the mapping head start
+    // before it ran: a localizer that searches publishes its first
+    // estimate only once the robot's frames outline where it is, and that
+    // wait counts towards its time to converge.
     let first = client
         .read_poses(name, 0, 0)
         .await
@@ -135,7 +141,15 @@ async fn judge_robot(
         .map(|p| p.frame_sequence)
         .min()
         .with_context(|| format!("the localizer of {name} published no estimate"))?;
-    let samples = read_robot(client, name, Some(MAP), first, 0).await?;
+    let mut samples = read_robot(client, name, Some(MAP), 0, 0).await?;
+    let first_time = samples
+        .truth
+        .iter()
+        .find(|t| t.sequence == first)
+        .map_or(started_s, |t| t.time_s);
+    samples
+        .truth
+        .retain(|t| t.time_s >= started_s.min(first_time));
     let report = evaluate(&EvalInput {
         robot: name,
         map: Some(MAP),

@@ -216,6 +216,18 @@ pub struct CarriedEstimate {
 }
 
 impl CarriedEstimate {
+    /// The same estimate, not called converged: the filter's pose awaits
+    /// a check ([`crate::searcher`]).
+    pub fn unconfirmed(self) -> Self {
+        Self {
+            estimate: Estimate {
+                converged: false,
+                ..self.estimate
+            },
+            ..self
+        }
+    }
+
     /// The estimate for a frame with odometry pose `odometry`: the pose
     /// moved by the odometry since the correction.
     pub fn at(&self, odometry: &Pose2) -> Estimate {
@@ -242,6 +254,13 @@ pub struct CorrectionReport {
     /// Range tables built for this correction.
     pub tables_built: usize,
 }
+
+/// A settled filter whose newest frame fits less than this share as well
+/// as its frames have lately is not called converged: a robot carried off
+/// keeps its filter's tight cluster for the few frames the averages take
+/// to fall, and those estimates are wrong. One frame's fit varies far less
+/// than this while tracking.
+const CONVERGED_FRAME_FIT: f64 = 0.3;
 
 /// The most particles a set may hold for [`Mcl::move_uphill`] to move
 /// its modes: a filter's few modes, not a global search. A set of 9,000
@@ -295,6 +314,9 @@ pub struct Mcl {
     odometry: Option<Pose2>,
     w_slow: f64,
     w_fast: f64,
+    /// The last frame's fit over the slow average's before it: how the
+    /// newest frame alone fits, beside how frames have fitted lately.
+    frame_fit: f64,
     cluster: Option<ClusterEstimate>,
     /// The tracked cluster's mean ([`Mcl::tracked_pose`]), moved by the
     /// odometry since it was found: the pose the sensor model judges a
@@ -320,6 +342,18 @@ pub struct Mcl {
     /// Where the robot stood at each reading of the frame noted last, in
     /// its pose's frame; `None` when they were all taken with the frame.
     reading_poses: Option<Vec<Pose2>>,
+    /// Where injected particles are drawn around instead of over every
+    /// free cell: the global search's hypotheses
+    /// ([`Mcl::set_injection_poses`]).
+    injection_poses: Option<InjectionPoses>,
+}
+
+/// Poses injected particles are drawn around, and how widely.
+#[derive(Debug, Clone)]
+struct InjectionPoses {
+    poses: Vec<Pose2>,
+    std_xy: f64,
+    std_theta: f64,
 }
 
 impl Mcl {
@@ -348,6 +382,7 @@ impl Mcl {
             odometry: None,
             w_slow: 0.0,
             w_fast: 0.0,
+            frame_fit: 1.0,
             cluster: None,
             reference: None,
             scratch_log: Vec::new(),
@@ -358,6 +393,7 @@ impl Mcl {
             firing: RingFiring::Together,
             frame_motion: FrameMotion::default(),
             reading_poses: None,
+            injection_poses: None,
         })
     }
 
@@ -406,6 +442,109 @@ impl Mcl {
         self.reset_weights();
         self.history = Some(Vec::new());
         Ok(())
+    }
+
+    /// Global localization from a search's hypotheses: `per_pose`
+    /// particles around each of `poses` (within the settings' fewest and
+    /// most), with standard deviations `std_xy` (metres) and `std_theta`
+    /// (radians). The modes are then weighed by every frame from here on,
+    /// as after a uniform start: the search ranks them by one cloud of
+    /// echoes, the filter by the whole way the robot drives.
+    pub fn start_hypotheses(
+        &mut self,
+        poses: &[Pose2],
+        per_pose: usize,
+        std_xy: f64,
+        std_theta: f64,
+    ) -> Result<(), LocalizerError> {
+        if poses.is_empty() {
+            return Err(LocalizerError::Invalid(
+                "a start from hypotheses needs at least one".into(),
+            ));
+        }
+        within("hypothesis std_xy", std_xy, 0.0, 1000.0)?;
+        within("hypothesis std_theta", std_theta, 0.0, 10.0)?;
+        let kld = self.settings.kld;
+        let n = poses
+            .len()
+            .saturating_mul(per_pose.max(1))
+            .clamp(kld.min_particles, kld.max_particles);
+        self.particles.clear();
+        self.weights.clear();
+        for i in 0..n {
+            let pose = poses[i % poses.len()].validate("hypothesis")?;
+            let p = self.around(&pose, std_xy, std_theta);
+            self.particles.push(p);
+        }
+        self.sort_particles(deog_grid::Resolution::DEFAULT);
+        self.reset_weights();
+        self.history = Some(Vec::new());
+        Ok(())
+    }
+
+    /// Adds `per_pose` particles around each of `poses`, each mode with
+    /// the weight of the heaviest cluster: a rival the search found for
+    /// the filter's pose is weighed against it from here on, frame by
+    /// frame and over the frames to come, rather than left out.
+    pub fn add_rivals(
+        &mut self,
+        poses: &[Pose2],
+        per_pose: usize,
+        std_xy: f64,
+        std_theta: f64,
+    ) -> Result<(), LocalizerError> {
+        if poses.is_empty() || self.particles.is_empty() {
+            return Ok(());
+        }
+        let room = self
+            .settings
+            .kld
+            .max_particles
+            .saturating_sub(self.particles.len());
+        let per_pose = per_pose.min(room / poses.len());
+        if per_pose == 0 {
+            return Ok(());
+        }
+        let mode_weight = self.cluster.map_or(0.5, |c| c.weight.max(0.05));
+        let total_before: f64 = self.weights.iter().sum();
+        for pose in poses {
+            let pose = pose.validate("rival")?;
+            for _ in 0..per_pose {
+                let p = self.around(&pose, std_xy, std_theta);
+                self.particles.push(p);
+                self.weights
+                    .push(total_before * mode_weight / per_pose as f64);
+            }
+        }
+        let total: f64 = self.weights.iter().sum();
+        for w in &mut self.weights {
+            *w /= total;
+        }
+        self.sort_particles(deog_grid::Resolution::DEFAULT);
+        self.cluster = heaviest_cluster(&self.particles, &self.weights, self.settings.bins);
+        self.reference = self.tracked_pose();
+        self.history = Some(Vec::new());
+        Ok(())
+    }
+
+    /// Draws injected particles around `poses` (with these spreads) from
+    /// now on, instead of over every free cell; `None` goes back to free
+    /// space.
+    pub fn set_injection_poses(&mut self, poses: Option<Vec<Pose2>>, std_xy: f64, std_theta: f64) {
+        self.injection_poses = poses.filter(|p| !p.is_empty()).map(|poses| InjectionPoses {
+            poses,
+            std_xy,
+            std_theta,
+        });
+    }
+
+    /// A pose drawn around `pose`.
+    fn around(&mut self, pose: &Pose2, std_xy: f64, std_theta: f64) -> Pose2 {
+        Pose2::new(
+            pose.x + crate::gaussian::normal(&mut self.rng, std_xy),
+            pose.y + crate::gaussian::normal(&mut self.rng, std_xy),
+            normalize_angle(pose.theta + crate::gaussian::normal(&mut self.rng, std_theta)),
+        )
     }
 
     /// Tracking: the most particles the settings allow, drawn around `pose`
@@ -478,6 +617,7 @@ impl Mcl {
         self.odometry = None;
         self.w_slow = 0.0;
         self.w_fast = 0.0;
+        self.frame_fit = 1.0;
         self.cluster = heaviest_cluster(&self.particles, &self.weights, self.settings.bins);
         self.reference = self.tracked_pose();
     }
@@ -648,6 +788,11 @@ impl Mcl {
         // per observation (the tempering undone, then the geometric mean
         // over readings) so that its scale does not depend on the sensor.
         let average = ((best + total.ln()) / self.sensor.observations()).exp();
+        self.frame_fit = if self.w_slow > 0.0 {
+            average / self.w_slow
+        } else {
+            1.0
+        };
         if self.w_slow == 0.0 {
             self.w_slow = average;
             self.w_fast = average;
@@ -703,6 +848,41 @@ impl Mcl {
     ) -> Result<f64, LocalizerError> {
         self.sensor.set_reading_poses(self.reading_poses.as_deref());
         self.sensor.score_pose(map, pose, ranges)
+    }
+
+    /// The tempered log-likelihood of a stretch of `frames` (each its
+    /// odometry pose and readings) for a robot now at `pose`, with
+    /// odometry `now`: each frame scored where the odometry carries `pose`
+    /// back to, as [`Self::score_pose`] scores one (all readings taken
+    /// with their frame). How well a pose explains the way the robot came,
+    /// to weigh it against another.
+    pub fn path_score<'a>(
+        &mut self,
+        map: &mut LocalMap,
+        now: &Pose2,
+        pose: &Pose2,
+        frames: impl IntoIterator<Item = (&'a Pose2, &'a [f64])>,
+    ) -> Result<f64, LocalizerError> {
+        self.sensor.set_reading_poses(None);
+        self.sensor.set_reference(None);
+        let mut total = 0.0;
+        let mut failed = None;
+        for (odometry, readings) in frames {
+            let at = OdometryMove::between(now, odometry).apply(pose);
+            match self.sensor.score_pose(map, &at, readings) {
+                Ok(score) => total += score,
+                Err(e) => {
+                    failed = Some(e);
+                    break;
+                }
+            }
+        }
+        self.sensor.set_reference(self.reference);
+        self.sensor.set_reading_poses(self.reading_poses.as_deref());
+        match failed {
+            Some(e) => Err(e),
+            None => Ok(total),
+        }
     }
 
     /// The tiles a frame of `readings` needs scored at `pose` alone: what
@@ -789,7 +969,8 @@ impl Mcl {
             &mut self.scratch_indices,
         )?;
         let res = map.settings().resolution;
-        let free = if inject > 0.0 {
+        let around_hypotheses = self.injection_poses.clone().filter(|_| inject > 0.0);
+        let free = if inject > 0.0 && around_hypotheses.is_none() {
             // Recovery searches as far as the cache can hold range tables
             // for, half of it (the particles' sonars reach into the tiles
             // around): on a map larger than that, the tiles nearest the
@@ -841,11 +1022,20 @@ impl Mcl {
             }
         };
         while counted(&next, injected) < bound && next.len() < most && taken < pool {
-            let pose = if !free.is_empty() && self.rng.random_bool(inject) {
+            let can_inject = !free.is_empty() || around_hypotheses.is_some();
+            let pose = if can_inject && self.rng.random_bool(inject) {
                 injected += 1;
                 source.push(INJECTED);
-                let cell = free[self.rng.random_range(0..free.len())];
-                let pose = random_pose_in(cell, res, &mut self.rng);
+                let pose = match &around_hypotheses {
+                    Some(h) => {
+                        let centre = h.poses[self.rng.random_range(0..h.poses.len())];
+                        self.around(&centre, h.std_xy, h.std_theta)
+                    }
+                    None => {
+                        let cell = free[self.rng.random_range(0..free.len())];
+                        random_pose_in(cell, res, &mut self.rng)
+                    }
+                };
                 if !search {
                     next.push(pose);
                     continue;
@@ -1184,7 +1374,7 @@ impl Mcl {
                 covariance: cluster.covariance,
                 particle_count: self.particles.len(),
                 cluster_weight: cluster.weight,
-                converged: self.settled(),
+                converged: self.settled() && self.frame_fit >= CONVERGED_FRAME_FIT,
                 lost_score: self.injection_share(),
             },
             odometry: self.odometry,

@@ -31,6 +31,10 @@
 //! - [`search`]: the global search, branch and bound over a whole map's
 //!   poses for those that explain the recent echoes: where a global start
 //!   and a lost filter put their particles.
+//! - [`searcher`]: [`searcher::Searcher`], the search beside the filter:
+//!   a global start from its hypotheses, a lost filter's injections
+//!   around them, and convergence believed only once a search finds no
+//!   rival.
 //! - [`sampling`], [`cluster`], [`gaussian`]: resampling and the KLD
 //!   bound, particle clusters and the estimate, normal draws;
 //!   [`numeric`]: small helpers for the hot loops.
@@ -51,5 +55,6 @@ pub mod range_table;
 pub mod refine;
 pub mod sampling;
 pub mod search;
+pub mod searcher;
 pub mod sensors;
 pub mod step;

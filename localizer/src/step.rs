@@ -15,8 +15,9 @@ use std::time::{Duration, Instant};
 use deog_grid::{Pose2, Tile, TileKey, TileMap};
 
 use crate::error::LocalizerError;
-use crate::filter::{CorrectionReport, Estimate, Mcl};
+use crate::filter::{CarriedEstimate, CorrectionReport, Estimate, Mcl};
 use crate::local_map::LocalMap;
+use crate::searcher::Searcher;
 
 /// A tile as the map server holds it.
 #[derive(Debug, Clone)]
@@ -86,6 +87,8 @@ pub struct Localizer {
     last_rebuild: Duration,
     /// Whether slow rebuilds stretch the refresh period.
     stretch_refresh: bool,
+    /// The global search beside the filter, when it has one.
+    searcher: Option<Searcher>,
 }
 
 impl Localizer {
@@ -102,7 +105,48 @@ impl Localizer {
             last_refresh: now,
             last_rebuild: Duration::ZERO,
             stretch_refresh: true,
+            searcher: None,
         }
+    }
+
+    /// Gives the filter a global search ([`crate::searcher`]): a global
+    /// start then starts from its hypotheses, a lost filter searches, and
+    /// a settled one is believed only once a search confirms it. A filter
+    /// already started at a pose is checked from its first frame.
+    pub fn with_searcher(mut self, mut searcher: Searcher) -> Self {
+        if !self.mcl.particles().is_empty() {
+            searcher.start_tracking();
+        }
+        self.searcher = Some(searcher);
+        self
+    }
+
+    /// The global search, when the filter has one.
+    pub fn searcher(&self) -> Option<&Searcher> {
+        self.searcher.as_ref()
+    }
+
+    /// The estimate for a frame at `odometry`, converged only where the
+    /// search confirmed it ([`Mcl::estimate`] otherwise).
+    pub fn estimate(&self, odometry: &Pose2) -> Option<Estimate> {
+        let mut estimate = self.mcl.estimate(odometry)?;
+        estimate.converged &= self.confirmed();
+        Some(estimate)
+    }
+
+    /// What [`Self::estimate`] needs apart from the localizer, to carry
+    /// it to frames that come while a step runs.
+    pub fn carried(&self) -> Option<CarriedEstimate> {
+        let carried = self.mcl.carried()?;
+        Some(if self.confirmed() {
+            carried
+        } else {
+            carried.unconfirmed()
+        })
+    }
+
+    fn confirmed(&self) -> bool {
+        self.searcher.as_ref().is_none_or(Searcher::confirmed)
     }
 
     /// Refreshes at exactly the period, however long table rebuilds take:
@@ -153,7 +197,13 @@ impl Localizer {
         for t in tiles {
             self.map.insert_tile(t.key, t.version, Some(&t.tile))?;
         }
-        self.mcl.start_global(&self.map)
+        match &mut self.searcher {
+            Some(searcher) => {
+                searcher.start_global();
+                Ok(())
+            }
+            None => self.mcl.start_global(&self.map),
+        }
     }
 
     /// Fetches the tiles and builds the tables (or fields) a frame like
@@ -167,6 +217,10 @@ impl Localizer {
         readings: &[f64],
         tiles: &mut impl TileSource,
     ) -> Result<usize, LocalizerError> {
+        if self.searcher.as_ref().is_some_and(Searcher::waiting) {
+            // No particle yet: the search places them.
+            return Ok(0);
+        }
         let needed = self.mcl.tiles_for_frame(&self.map, readings);
         let missing = self.mcl.missing_tiles(&self.map, &needed);
         let fetched = fetch_into(tiles, &missing, &mut self.map)?;
@@ -224,6 +278,15 @@ impl Localizer {
             // did not change keeps its range tables.
             let refetch = self.map.stale_tiles();
             report.tiles_fetched += fetch_into(tiles, &refetch, &mut self.map)?;
+            if let Some(searcher) = &mut self.searcher {
+                searcher.map_changed();
+            }
+        }
+        if let Some(searcher) = &mut self.searcher {
+            searcher.note_frame(odometry, readings);
+            if !searcher.before_step(&mut self.mcl, &self.map, odometry)? {
+                return Ok(report);
+            }
         }
         if self.mcl.predict(odometry)? {
             let needed = self.mcl.tiles_for_frame(&self.map, readings);
@@ -249,6 +312,10 @@ impl Localizer {
             }
             other => other,
         };
+        if let (Some(searcher), Some(estimate)) = (&mut self.searcher, &mut report.estimate) {
+            estimate.converged =
+                searcher.verify(&mut self.mcl, &mut self.map, estimate, odometry)?;
+        }
         Ok(report)
     }
 }

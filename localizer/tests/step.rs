@@ -12,6 +12,7 @@ use deog_grid::{ClampLimits, Pose2, Resolution, TileKey, TileMap, TileSize};
 use deog_localizer::error::LocalizerError;
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::LocalMap;
+use deog_localizer::searcher::{Searcher, SearcherSettings};
 use deog_localizer::sensors::SensorModel;
 use deog_localizer::step::{FetchedTile, Localizer, TileSource};
 
@@ -309,4 +310,48 @@ fn slow_rebuilds_stretch_the_refresh_period_unless_it_is_kept_steady() {
             "steady {steady}"
         );
     }
+}
+
+#[test]
+fn a_searching_global_start_finds_the_robot_and_claims_only_what_is_right() {
+    let reference = room();
+    let steps = path(300);
+    let mut tiles = room_tiles();
+    let beams = deog_rig::builtin::scout().beams().to_vec();
+    let searcher = Searcher::new(beams.clone(), SearcherSettings::for_beams(&beams)).unwrap();
+    let map = LocalMap::new(settings(1 << 30)).unwrap();
+    let now = Instant::now();
+    let mut localizer =
+        Localizer::new(filter(100_000, 3), map, Duration::MAX, now).with_searcher(searcher);
+    let keys: Vec<TileKey> = tiles.tiles().map(|(k, _)| *k).collect();
+    localizer.start_global(tiles.fetch(&keys).unwrap()).unwrap();
+    let (mut waited, mut most, mut claimed, mut last) = (0, 0, 0, None);
+    for (truth, odometry) in &steps {
+        let ranges = frame(&reference, truth);
+        let report = localizer.step(odometry, &ranges, now, &mut tiles).unwrap();
+        let Some(estimate) = report.estimate else {
+            assert!(localizer.searcher().unwrap().waiting());
+            waited += 1;
+            continue;
+        };
+        most = most.max(estimate.particle_count);
+        let (metres, radians) = error(&estimate.pose, truth);
+        if estimate.converged {
+            claimed += 1;
+            assert!(
+                metres <= 0.5 && radians <= 0.25,
+                "converged {metres} m, {radians} rad off"
+            );
+        }
+        last = Some((estimate.converged, metres, radians));
+    }
+    // It waited for the frames to outline the room, then started from a
+    // few hypotheses: never the most particles allowed.
+    assert!(waited > 5, "waited {waited} frames");
+    assert!(most < 30_000, "{most} particles");
+    let (converged, metres, radians) = last.expect("estimates");
+    assert!(converged && claimed > 50, "claimed {claimed}");
+    assert!(metres < 0.15 && radians < 0.1, "{metres} m, {radians} rad");
+    let stats = localizer.searcher().unwrap().stats();
+    assert!(stats.searches >= 1 && stats.confirmations >= 2, "{stats:?}");
 }

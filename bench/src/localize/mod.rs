@@ -49,6 +49,15 @@ use deog_world::load_world_spec;
 
 use crate::option_error::{OptionError, require, require_folder_of};
 
+/// `deog bench localize --start`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum StartChoice {
+    /// From the global search's hypotheses.
+    Search,
+    /// Uniform over every free cell.
+    Uniform,
+}
+
 /// Options of `deog bench localize`.
 #[derive(Debug, Clone, Args)]
 pub struct LocalizeOptions {
@@ -89,6 +98,12 @@ pub struct LocalizeOptions {
     /// count from the filter's start.
     #[arg(long)]
     pub growing_map: bool,
+    /// How a global start places its particles: `search` (the global
+    /// search's hypotheses, a lost filter searching again, convergence
+    /// confirmed by a search; deog_localizer::searcher) or `uniform`
+    /// (the most particles allowed over every free cell).
+    #[arg(long, value_enum, default_value_t = StartChoice::Search)]
+    pub start: StartChoice,
     /// Robots that build a growing map, the one localized among them.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=8))]
     pub mappers: u64,
@@ -900,6 +915,9 @@ mod tests {
             "1",
             "--max-particles",
             "5000",
+            // The filter runs 4 s: too few for a search to see the room.
+            "--start",
+            "uniform",
         ]);
         assert_eq!(options.validate(), Ok(()));
         let setup = options.rig_setup().expect("the scout");

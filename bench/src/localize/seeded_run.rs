@@ -9,6 +9,7 @@ use deog_evaluation::runs::RunFigures;
 use deog_grid::TileMap;
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::LocalMap;
+use deog_localizer::searcher::{Searcher, SearcherSettings};
 use deog_localizer::sensors::{LikelihoodFieldParams, SensorChoice};
 use deog_localizer::step::{Localizer, TileSource};
 use deog_simulator::simulation::{SimConfig, Simulation};
@@ -116,6 +117,11 @@ pub(super) fn run_once(
         Duration::MAX
     };
     let mut localizer = Localizer::new(mcl, map, refresh, at(start_s)).with_steady_refresh();
+    if options.start == super::StartChoice::Search {
+        let beams = rig.beams().to_vec();
+        let settings = SearcherSettings::for_beams(&beams);
+        localizer = localizer.with_searcher(Searcher::new(beams, settings)?);
+    }
     let mut started = false;
     let mut changed = Vec::new();
     let mut kidnap_rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6b69_646e_6170);
@@ -269,6 +275,31 @@ pub(super) fn run_once(
                     e.converged,
                     e.lost_score
                 );
+                if let Some(searcher) = localizer.searcher() {
+                    let probe = searcher.probe(&t, &state.odometry);
+                    let stats = searcher.stats();
+                    deog_harness::println_above_bars!(
+                        "      search: {} searches ({} cut short), {} vetoes, {} confirmations; {}",
+                        stats.searches,
+                        stats.incomplete,
+                        stats.vetoes,
+                        stats.confirmations,
+                        match probe {
+                            Some(p) => format!(
+                                "truth scores {:.3} (latest frame {:.3}), best of {} ({:.2}, {:.2}, {:.1}°) {:.3}, {} points",
+                                p.score,
+                                p.latest_score,
+                                p.hypotheses,
+                                p.best.map_or(0.0, |b| b.pose.x),
+                                p.best.map_or(0.0, |b| b.pose.y),
+                                p.best.map_or(0.0, |b| b.pose.theta.to_degrees()),
+                                p.best.map_or(0.0, |b| b.score),
+                                p.points
+                            ),
+                            None => "no grid yet".to_owned(),
+                        }
+                    );
+                }
                 injected_since_trace = 0;
             }
             counts.push((state.time_s, e.particle_count));
@@ -283,6 +314,13 @@ pub(super) fn run_once(
             state.time_s,
             state.true_pose,
         ));
+    }
+    if estimates.is_empty() {
+        // A search that never found where the robot is: nothing converged.
+        let extras = RunExtras {
+            most_particles_settled: None,
+        };
+        return Ok((RunFigures::default(), extras, localizer.into_map()));
     }
     let known: Vec<u64> = kidnap_frame.into_iter().collect();
     let report = evaluate(&EvalInput {

@@ -136,6 +136,10 @@ pub struct Recipe {
     /// Tracking's --initial-std-theta, radians.
     #[arg(long, default_value_t = 0.05)]
     pub initial_std_theta: f64,
+    /// The localizer's --start: `search` (global starts from the global
+    /// search's hypotheses, convergence confirmed by it) or `uniform`.
+    #[arg(long, default_value = "search")]
+    pub start: String,
 }
 
 impl Recipe {
@@ -152,6 +156,7 @@ impl Recipe {
             ("--motion-noise-scale", self.motion_noise_scale.to_string()),
             ("--min-particles", self.min_particles.to_string()),
             ("--max-particles", self.max_particles.to_string()),
+            ("--start", self.start.clone()),
         ]
         .into_iter()
         .flat_map(|(flag, value)| [flag.to_owned(), value])
@@ -162,6 +167,11 @@ impl Recipe {
     /// Checks the flags' ranges that the bench can tell before the
     /// localizer starts (the localizer checks them all again).
     fn validate(&self) -> Result<(), OptionError> {
+        require(
+            matches!(self.start.as_str(), "search" | "uniform"),
+            "--start",
+            || format!("--start takes search or uniform, not {:?}", self.start),
+        )?;
         require(
             self.field_tempering.is_finite() && self.field_tempering > 0.0,
             "--field-tempering",
@@ -380,6 +390,8 @@ mod tests {
                 "2000",
                 "--max-particles",
                 "100000",
+                "--start",
+                "search",
             ]
         );
         assert_eq!(
@@ -412,7 +424,7 @@ mod tests {
         options.validate().expect("valid");
         assert_eq!(
             options.recipe.localize_args().join(" "),
-            "--field-tempering 0.3 --field-search-tempering 0.2 --field-beams 60 --motion-noise-scale 1.5 --min-particles 500 --max-particles 5000 --no-refine"
+            "--field-tempering 0.3 --field-search-tempering 0.2 --field-beams 60 --motion-noise-scale 1.5 --min-particles 500 --max-particles 5000 --start search --no-refine"
         );
     }
 

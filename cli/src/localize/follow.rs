@@ -199,7 +199,7 @@ impl Following<'_> {
             let estimate = passed
                 .odometry
                 .map(pose_from_wire)
-                .and_then(|odometry| localizer.mcl().estimate(&odometry));
+                .and_then(|odometry| localizer.estimate(&odometry));
             if let Some(estimate) = estimate {
                 self.ends.sink.publish(&passed, &estimate, &[])?;
             }
@@ -215,9 +215,9 @@ impl Following<'_> {
             .with_context(|| format!("frame {} has no odometry pose", frame.sequence))?;
         localizer.note_frame(&odometry, frame.time_s);
         let particles = localizer.mcl().particles().len();
+        let searched_before = localizer.searcher().map(|s| s.stats());
         let started = Instant::now();
         let carried = localizer
-            .mcl()
             .carried()
             .filter(|_| self.settings.keep_up && worth_carrying(particles, self.last_took));
         let ends = &mut self.ends;
@@ -243,6 +243,21 @@ impl Following<'_> {
         .with_context(|| format!("frame {}", frame.sequence))?;
         let took = started.elapsed();
         self.last_took = took;
+        if let Some(searcher) = localizer.searcher()
+            && Some(searcher.stats()) != searched_before
+        {
+            let stats = searcher.stats();
+            tracing::info!(
+                frame = frame.sequence,
+                ms = took.as_millis() as u64,
+                searches = stats.searches,
+                cut_short = stats.incomplete,
+                confirmations = stats.confirmations,
+                vetoes = stats.vetoes,
+                particles = localizer.mcl().particles().len(),
+                "global search"
+            );
+        }
         if let Some(correction) = &report.correction {
             self.corrections += 1;
             if took >= SLOW_STEP {

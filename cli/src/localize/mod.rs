@@ -21,6 +21,7 @@ use deog_grid::{CellBox, CellIndex, Pose2, Resolution, TileSize};
 use deog_localizer::filter::{FilterSettings, Mcl};
 use deog_localizer::local_map::{LocalMap, MapSettings};
 use deog_localizer::preset::Preset;
+use deog_localizer::searcher::{Searcher, SearcherSettings};
 use deog_localizer::step::{FetchedTile, Localizer};
 use deog_robot_client::convert::{cell_box_from_wire, pose_from_wire};
 use deog_robot_client::{MapClient, TileWatch};
@@ -173,6 +174,17 @@ pub struct LocalizeArgs {
     /// doubled, 2000 particles at least). A flag given beside it wins.
     #[arg(long, value_enum, default_value_t = PresetChoice::Sim)]
     pub preset: PresetChoice,
+    /// How a global start places its particles, and whether convergence
+    /// is checked: `search` (the default) waits until the robot's recent
+    /// echoes outline where it is, searches the whole map for the poses
+    /// that explain them (branch and bound, coarse to fine), and starts
+    /// the filter around those few; a lost filter searches again; and the
+    /// filter says converged only once a search finds no other pose that
+    /// explains its recent frames nearly as well. `uniform` spreads
+    /// --max-particles over every free cell and believes the filter's
+    /// own spread and weight.
+    #[arg(long, value_enum, default_value_t = StartChoice::Search)]
+    pub start: StartChoice,
     /// Seed of the filter's random draws.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -209,6 +221,15 @@ pub struct LocalizeArgs {
     pub particle_sample_every_s: f64,
     #[command(flatten)]
     pub connection: ConnectionArgs,
+}
+
+/// `deog localize --start`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum StartChoice {
+    /// From the global search's hypotheses; convergence confirmed by it.
+    Search,
+    /// Uniform over every free cell.
+    Uniform,
 }
 
 /// `deog localize --preset`.
@@ -334,7 +355,15 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         std_theta: args.initial_std_theta,
     });
     let refresh = Duration::from_secs_f64(args.refresh_s);
-    let mut localizer = start(mcl, map, around, refresh, &info, &tiles)?;
+    let searcher = match args.start {
+        StartChoice::Search => {
+            let beams = rig.beams().to_vec();
+            let settings = SearcherSettings::for_beams(&beams);
+            Some(Searcher::new(beams, settings).context("the global search's settings")?)
+        }
+        StartChoice::Uniform => None,
+    };
+    let mut localizer = start(mcl, map, around, searcher, refresh, &info, &tiles)?;
     // The tables the first correction needs are built before it takes its
     // frame: with a global start that is the whole map's.
     let started = Instant::now();
@@ -430,6 +459,7 @@ fn start(
     mut mcl: Mcl,
     map: LocalMap,
     around: Option<AroundPose>,
+    searcher: Option<Searcher>,
     refresh: Duration,
     info: &pb::MapInfo,
     tiles: &ServerTiles<'_>,
@@ -448,7 +478,11 @@ fn start(
             theta = pose.theta,
             "tracking from the given pose"
         );
-        return Ok(Localizer::new(mcl, map, refresh, Instant::now()));
+        let localizer = Localizer::new(mcl, map, refresh, Instant::now());
+        return Ok(match searcher {
+            Some(searcher) => localizer.with_searcher(searcher),
+            None => localizer,
+        });
     }
     let Some(region) = info.bounds_cells else {
         bail!(
@@ -468,14 +502,26 @@ fn start(
         .into_iter()
         .map(|(key, version, tile)| FetchedTile { key, version, tile });
     let mut localizer = Localizer::new(mcl, map, refresh, Instant::now());
+    let searching = searcher.is_some();
+    if let Some(searcher) = searcher {
+        localizer = localizer.with_searcher(searcher);
+    }
     localizer
         .start_global(whole)
         .context("spreading particles over the map")?;
-    tracing::info!(
-        tiles = localizer.map().tile_count(),
-        free_cells = localizer.map().free_cell_count(),
-        particles = localizer.mcl().particles().len(),
-        "global localization: particles spread over every known-free cell"
-    );
+    if searching {
+        tracing::info!(
+            tiles = localizer.map().tile_count(),
+            free_cells = localizer.map().free_cell_count(),
+            "global localization: searching the map once the robot's recent echoes outline where it is"
+        );
+    } else {
+        tracing::info!(
+            tiles = localizer.map().tile_count(),
+            free_cells = localizer.map().free_cell_count(),
+            particles = localizer.mcl().particles().len(),
+            "global localization: particles spread over every known-free cell"
+        );
+    }
     Ok(localizer)
 }

@@ -36,10 +36,10 @@ pub struct SearchSettings {
     /// Largest heading step, radians; smaller when the scan reaches far
     /// (a step that moves the farthest point by at most a cell).
     pub max_angle_step: f64,
-    /// Most candidate scorings (blocks and poses alike) one search may
-    /// make past the coarsest level, which is scored whole (a few
-    /// thousand blocks for a building): its cost is bounded whatever the
-    /// map.
+    /// Most point lookups (a candidate scored costs one per point of the
+    /// cloud) one search may make past the coarsest level, which is
+    /// scored whole (a few thousand blocks for a building): its cost is
+    /// bounded whatever the map, about a second per 10⁹ on one core.
     pub budget: u64,
 }
 
@@ -52,7 +52,7 @@ impl Default for SearchSettings {
             separation_rad: 0.5,
             max_hypotheses: 16,
             max_angle_step: 2f64.to_radians(),
-            budget: 3_000_000,
+            budget: 300_000_000,
         }
     }
 }
@@ -108,6 +108,8 @@ pub struct SearchOutcome {
     pub hypotheses: Vec<Hypothesis>,
     /// Candidate scorings made.
     pub evaluations: u64,
+    /// Point lookups made.
+    pub lookups: u64,
     /// Whether the search ran to its end; false when its budget ran out
     /// first (what it found so far is still returned).
     pub complete: bool,
@@ -152,6 +154,7 @@ pub fn search(
     let mut outcome = SearchOutcome {
         hypotheses: Vec::new(),
         evaluations: 0,
+        lookups: 0,
         complete: true,
     };
     if cloud.groups() == 0 {
@@ -199,21 +202,18 @@ pub fn search(
         .iter()
         .map(|&theta| {
             let (s, c) = theta.sin_cos();
+            let turn = |p: &[f64; 2]| {
+                let x = c * p[0] - s * p[1];
+                let y = s * p[0] + c * p[1];
+                // The robot stands at its cell's centre.
+                (
+                    (x / cell + 0.5).floor() as i64,
+                    (y / cell + 0.5).floor() as i64,
+                )
+            };
             Turned {
                 theta,
-                cells: cloud
-                    .points()
-                    .iter()
-                    .map(|p| {
-                        let x = c * p[0] - s * p[1];
-                        let y = s * p[0] + c * p[1];
-                        // The robot stands at its cell's centre.
-                        (
-                            (x / cell + 0.5).floor() as i64,
-                            (y / cell + 0.5).floor() as i64,
-                        )
-                    })
-                    .collect(),
+                cells: cloud.points().iter().map(turn).collect(),
             }
         })
         .collect();
@@ -246,9 +246,12 @@ pub fn search(
         x_max: x_range.1,
         y_max: y_range.1,
         evaluations: 0,
+        lookups: 0,
+        budget: u64::MAX,
         out_of_budget: false,
     };
     state.bound_all(&mut candidates, top);
+    state.budget = state.lookups.saturating_add(settings.budget);
     for candidate in candidates {
         let threshold = settings.min_score.max(best * settings.keep_ratio);
         if candidate.bound < threshold {
@@ -261,6 +264,7 @@ pub fn search(
         }
     }
     outcome.evaluations = state.evaluations;
+    outcome.lookups = state.lookups;
     outcome.complete = !state.out_of_budget;
     let threshold = settings.min_score.max(best * settings.keep_ratio);
     found.retain(|h| h.score >= threshold);
@@ -288,15 +292,21 @@ pub fn score_pose(grid: &SearchGrid, cloud: &ScanCloud, pose: &Pose2) -> f64 {
         return 0.0;
     }
     let (s, c) = pose.theta.sin_cos();
+    let cell_of = |p: &[f64; 2]| {
+        let x = pose.x + c * p[0] - s * p[1];
+        let y = pose.y + s * p[0] + c * p[1];
+        grid.cell_at(x, y)
+    };
     let mut total = 0u64;
     for group in cloud.group_ranges() {
-        let mut best = 0u8;
-        for p in &cloud.points()[group] {
-            let x = pose.x + c * p[0] - s * p[1];
-            let y = pose.y + s * p[0] + c * p[1];
-            let (cx, cy) = grid.cell_at(x, y);
-            best = best.max(grid.score(0, cx, cy));
-        }
+        let best = cloud.points()[group]
+            .iter()
+            .map(|p| {
+                let (x, y) = cell_of(p);
+                grid.score(0, x, y)
+            })
+            .max()
+            .unwrap_or(0);
         total += u64::from(best);
     }
     total as f64 / (255.0 * cloud.groups() as f64)
@@ -310,6 +320,9 @@ struct Walk<'a> {
     x_max: i64,
     y_max: i64,
     evaluations: u64,
+    lookups: u64,
+    /// Lookups at which the search stops splitting blocks.
+    budget: u64,
     out_of_budget: bool,
 }
 
@@ -318,7 +331,8 @@ impl Walk<'_> {
     /// reading's best block maximum; 0 for a block with no free cell.
     fn bound(&mut self, c: &Candidate, level: usize) -> f64 {
         self.evaluations += 1;
-        if self.evaluations > self.settings.budget {
+        self.lookups += self.cloud.points().len() as u64;
+        if self.lookups > self.budget {
             self.out_of_budget = true;
         }
         if !self.grid.any_free(level, c.x, c.y) {

@@ -14,7 +14,7 @@ use crate::motion::OdometryMove;
 
 /// Within a sonar's cone, the offsets from its axis of the points a
 /// reading stands for, as shares of the half-angle.
-const CONE_SPREAD: [f64; 3] = [0.0, -0.6, 0.6];
+const CONE_SPREAD: [f64; 5] = [0.0, -0.5, 0.5, -0.95, 0.95];
 
 /// Echoes, in the robot's frame, grouped by reading.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -140,6 +140,13 @@ impl RecentFrames {
         }
     }
 
+    /// The frames held, oldest first: odometry pose and readings.
+    pub fn frames(&self) -> impl Iterator<Item = (&Pose2, &[f64])> {
+        self.frames
+            .iter()
+            .map(|(pose, ranges)| (pose, ranges.as_slice()))
+    }
+
     /// Frames held.
     pub fn len(&self) -> usize {
         self.frames.len()
@@ -201,8 +208,8 @@ mod tests {
         ranges[1] = 9.0;
         let mut cloud = ScanCloud::new();
         cloud.add_frame(scout.beams(), &ranges, &Pose2::new(0.0, 0.0, 0.0), 5.0);
-        // The far echo is left out, the near one is three points.
-        assert_eq!((cloud.groups(), cloud.points().len()), (1, 3));
+        // The far echo is left out, the near one is five points.
+        assert_eq!((cloud.groups(), cloud.points().len()), (1, 5));
         assert!(cloud.reach() > 3.0 && cloud.reach() < 3.5);
     }
 

@@ -198,7 +198,7 @@ fn the_budget_bounds_the_work() {
     let grid = grid_of(w, h, &cells);
     let cloud = scan(w, h, &cells, &Pose2::new(3.0, 2.5, 0.4));
     let settings = SearchSettings {
-        budget: 500,
+        budget: 50_000,
         ..SearchSettings::default()
     };
     let out = search(&grid, &cloud, SearchWindow::Global, &settings).expect("searches");
