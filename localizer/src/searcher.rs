@@ -20,6 +20,9 @@
 //!   ambiguity, not convergence: the rivals found go into the filter as
 //!   modes of their own, to be weighed against its pose frame by frame.
 //!   The check is made again every [`SearcherSettings::verify_every_m`].
+//!   A filter started at a given pose is checked too, more leniently:
+//!   one check confirms it, a rival must explain the frames better, and
+//!   rivals are not added to it.
 
 use deog_grid::{Pose2, normalize_angle};
 use deog_rig::rig::{Beam, BeamShape};
@@ -232,6 +235,8 @@ pub struct Searcher {
     verified: bool,
     /// Checks in a row that found no rival.
     streak: u32,
+    /// Started at a given pose ([`Self::start_tracking`]).
+    tracking: bool,
     found: Option<Found>,
     stats: SearcherStats,
 }
@@ -253,6 +258,7 @@ impl Searcher {
             verified_at_m: None,
             verified: false,
             streak: 0,
+            tracking: false,
             found: None,
             stats: SearcherStats::default(),
         })
@@ -271,14 +277,18 @@ impl Searcher {
     /// A global start: the filter waits for the first search.
     pub fn start_global(&mut self) {
         self.phase = Phase::Starting;
+        self.tracking = false;
         self.verified = false;
         self.streak = 0;
         self.found = None;
     }
 
-    /// The filter was started at a given pose: it is checked as any.
+    /// The filter was started at a given pose: its flag is checked as
+    /// any, but the rivals a check finds are not added to it (a pose
+    /// given is a prior the search does not overrule).
     pub fn start_tracking(&mut self) {
         self.phase = Phase::Running;
+        self.tracking = true;
         self.verified = false;
         self.streak = 0;
     }
@@ -455,9 +465,12 @@ impl Searcher {
                         });
                     }
                 }
-                // Injections, whenever the filter makes them, go around the
-                // last hypotheses carried to now by the odometry.
-                let carried = self.found.as_ref().map(|f| {
+                // A lost filter's injections go around the last hypotheses
+                // carried to now by the odometry; a filter that is not lost
+                // trickles over free space as it always has (drawn around
+                // poses a check found, the trickle would pull a tracking
+                // filter towards them).
+                let carried = self.found.as_ref().filter(|_| lost).map(|f| {
                     let step = OdometryMove::between(&f.odometry, odometry);
                     f.hypotheses
                         .iter()
@@ -531,6 +544,17 @@ impl Searcher {
         // The search ranks by one blurred cloud; the filter's own model
         // over the frames kept is what weighs a rival against the pose.
         let own = mcl.path_score(map, odometry, &pose, self.recent.frames())?;
+        // A pose given at the start is a prior the search does not
+        // overrule: there a rival must explain the frames better, and one
+        // check confirms.
+        let (margin, needed) = if self.tracking {
+            (0.0, 1)
+        } else {
+            (
+                self.settings.rival_margin,
+                self.settings.confirmations.max(1),
+            )
+        };
         let mut rivals = Vec::new();
         for h in &hypotheses {
             let at = forward.apply(&h.pose);
@@ -538,18 +562,20 @@ impl Searcher {
                 continue;
             }
             let score = mcl.path_score(map, odometry, &at, self.recent.frames())?;
-            if score >= own - self.settings.rival_margin {
+            if score >= own - margin {
                 rivals.push(at);
             }
         }
         let fits = own_cloud >= self.settings.search.min_score;
         let passed = fits && rivals.is_empty();
         self.streak = if passed { self.streak + 1 } else { 0 };
-        self.verified = self.streak >= self.settings.confirmations.max(1);
+        self.verified = self.streak >= needed;
         if passed {
             self.stats.confirmations += 1;
         } else {
             self.stats.vetoes += 1;
+        }
+        if !passed && !self.tracking {
             mcl.add_rivals(
                 &rivals,
                 self.settings.particles_per_hypothesis,
