@@ -885,6 +885,25 @@ impl Mcl {
         }
     }
 
+    /// Whether a frame of `readings` the filter does not correct with (the
+    /// robot has not moved enough since the last) still fits at `pose` at
+    /// least [`CONVERGED_FRAME_FIT`] as well as frames have lately: a
+    /// robot carried off moves no odometry, and its filter would stay sure
+    /// of the old pose until the robot drove on.
+    pub fn still_fits(
+        &mut self,
+        map: &mut LocalMap,
+        pose: &Pose2,
+        readings: &[f64],
+    ) -> Result<bool, LocalizerError> {
+        if self.w_slow <= 0.0 {
+            return Ok(true);
+        }
+        let score = self.score_pose(map, pose, readings)?;
+        let fit = (score / self.sensor.observations()).exp() / self.w_slow;
+        Ok(fit >= CONVERGED_FRAME_FIT)
+    }
+
     /// The tiles a frame of `readings` needs scored at `pose` alone: what
     /// [`Self::refine`] reads.
     pub fn tiles_for_pose(&self, map: &LocalMap, pose: &Pose2, readings: &[f64]) -> Vec<TileKey> {

@@ -312,6 +312,15 @@ impl Localizer {
             }
             other => other,
         };
+        if report.correction.is_none()
+            && let Some(estimate) = &mut report.estimate
+            && estimate.converged
+            && !self
+                .mcl
+                .still_fits(&mut self.map, &estimate.pose, readings)?
+        {
+            estimate.converged = false;
+        }
         if let (Some(searcher), Some(estimate)) = (&mut self.searcher, &mut report.estimate) {
             estimate.converged =
                 searcher.verify(&mut self.mcl, &mut self.map, estimate, odometry)?;
