@@ -61,6 +61,8 @@ pub struct SearcherSettings {
     pub min_frames: usize,
     /// Echoes at or past this range are left out of the cloud, metres.
     pub max_range: f64,
+    /// Most readings of the cloud searched, evenly spread (0: all).
+    pub max_groups: usize,
     /// Particles around each hypothesis …
     pub particles_per_hypothesis: usize,
     /// … spread this much, metres …
@@ -108,6 +110,7 @@ impl SearcherSettings {
                 min_driven_m: 1.5,
                 min_frames: 10,
                 max_range: 5.0,
+                max_groups: 0,
                 particles_per_hypothesis: 600,
                 min_verify_m: 1.5,
                 confirmations: 3,
@@ -129,12 +132,13 @@ impl SearcherSettings {
                 min_driven_m: 0.0,
                 min_frames: 1,
                 max_range: 30.0,
+                max_groups: 90,
                 particles_per_hypothesis: 300,
                 min_verify_m: 0.0,
                 confirmations: 3,
                 std_xy: 0.15,
                 std_theta: 0.06,
-                research_every_m: 0.5,
+                research_every_m: 1.0,
                 verify_every_m: 2.0,
                 rival_margin: 2.0,
             }
@@ -389,7 +393,10 @@ impl Searcher {
         let Some(grid) = &self.grid else {
             return Ok(None);
         };
-        let cloud = self.recent.cloud(&self.beams, self.settings.max_range);
+        let cloud = self
+            .recent
+            .cloud(&self.beams, self.settings.max_range)
+            .thinned(self.settings.max_groups);
         let outcome = search(grid, &cloud, window, &self.settings.search)?;
         self.stats.searches += 1;
         if !outcome.complete {

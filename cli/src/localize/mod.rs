@@ -174,8 +174,9 @@ pub struct LocalizeArgs {
     /// doubled, 2000 particles at least). A flag given beside it wins.
     #[arg(long, value_enum, default_value_t = PresetChoice::Sim)]
     pub preset: PresetChoice,
-    /// How a global start places its particles, and whether convergence
-    /// is checked: `search` (the default) waits until the robot's recent
+    /// How a global start places its particles, and whether its
+    /// convergence is checked (a start at --initial-pose is tracked as
+    /// with `uniform`): `search` (the default) waits until the robot's recent
     /// echoes outline where it is, searches the whole map for the poses
     /// that explain them (branch and bound, coarse to fine), and starts
     /// the filter around those few; a lost filter searches again; and the
@@ -478,11 +479,10 @@ fn start(
             theta = pose.theta,
             "tracking from the given pose"
         );
-        let localizer = Localizer::new(mcl, map, refresh, Instant::now());
-        return Ok(match searcher {
-            Some(searcher) => localizer.with_searcher(searcher),
-            None => localizer,
-        });
+        // A pose given is tracked as it always was: the search is for
+        // a robot that does not know where it is.
+        drop(searcher);
+        return Ok(Localizer::new(mcl, map, refresh, Instant::now()));
     }
     let Some(region) = info.bounds_cells else {
         bail!(
