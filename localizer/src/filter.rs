@@ -887,7 +887,7 @@ impl Mcl {
 
     /// Whether a frame of `readings` the filter does not correct with (the
     /// robot has not moved enough since the last) still fits at `pose` at
-    /// least [`CONVERGED_FRAME_FIT`] as well as frames have lately: a
+    /// least 0.3 as well as frames have lately: a
     /// robot carried off moves no odometry, and its filter would stay sure
     /// of the old pose until the robot drove on.
     pub fn still_fits(
