@@ -20,6 +20,7 @@ use deog_robot_client::MapClient;
 use deog_world::Point2;
 
 use crate::commands::{MAP, REFIT_MAP, REFIT_STEM};
+use crate::kidnap::KidnapDone;
 use crate::plan::DemoPlan;
 
 /// Where the map is right and wrong, drawn over the world.
@@ -64,7 +65,16 @@ pub(crate) struct RefitJudgement {
 
 /// Judges the map against the world and each localizer against its
 /// robot's true poses; writes the map files and the path plots to `out`.
-pub(crate) async fn judge(client: &MapClient, plan: &DemoPlan, out: &Path) -> Result<Judgement> {
+/// Each localizer is judged from the simulator's second it was started
+/// at (`localizer_starts_s`, in the plan's order); the kidnap the demo
+/// made is one the judge knows of, whatever the jump.
+pub(crate) async fn judge(
+    client: &MapClient,
+    plan: &DemoPlan,
+    localizer_starts_s: &[f64],
+    kidnap: Option<&KidnapDone>,
+    out: &Path,
+) -> Result<Judgement> {
     let map = read_map(client, MAP).await?;
     let seeds = robot_starts(client).await?;
     let quality = judge_map(&map, plan, &seeds, out, VERDICT_PNG)?;
@@ -83,8 +93,12 @@ pub(crate) async fn judge(client: &MapClient, plan: &DemoPlan, out: &Path) -> Re
     if plan.localize {
         let names: Vec<_> = plan.robot_names().collect();
         for (index, name) in names.iter().enumerate() {
-            let started_s = plan.schedule.localizer_start_s(index, names.len());
-            robots.push(judge_robot(client, &map, name, started_s, out).await?);
+            let started_s = localizer_starts_s
+                .get(index)
+                .copied()
+                .unwrap_or_else(|| plan.schedule.localizer_start_s(index, names.len()));
+            let kidnapped_at = kidnap.filter(|k| k.robot == *name).map(|k| k.time_s);
+            robots.push(judge_robot(client, &map, name, started_s, kidnapped_at, out).await?);
         }
     }
     Ok(Judgement {
@@ -120,12 +134,14 @@ fn judge_map(
 }
 
 /// Judges robot `name`'s localizer, started at simulated second
-/// `started_s`, and draws its paths over `map`.
+/// `started_s` (and its robot kidnapped at `kidnapped_at`), and draws its
+/// paths over `map`.
 async fn judge_robot(
     client: &MapClient,
     map: &TileMap,
     name: &str,
     started_s: f64,
+    kidnapped_at: Option<f64>,
     out: &Path,
 ) -> Result<RobotJudgement> {
     // Judge from the localizer's start, not from the mapping head start
@@ -150,13 +166,19 @@ async fn judge_robot(
     samples
         .truth
         .retain(|t| t.time_s >= started_s.min(first_time));
+    // The first frame at or after the simulator's kidnap.
+    let known: Vec<u64> = kidnapped_at
+        .and_then(|at| samples.truth.iter().find(|t| t.time_s >= at))
+        .map(|t| t.sequence)
+        .into_iter()
+        .collect();
     let report = evaluate(&EvalInput {
         robot: name,
         map: Some(MAP),
         truth: &samples.truth,
         estimates: &samples.estimates,
         params: EvalParams::default(),
-        known_kidnaps: &[],
+        known_kidnaps: &known,
     })
     .with_context(|| format!("judging the estimates of {name}"))?;
     let plot = format!("{name}.png");

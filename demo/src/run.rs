@@ -13,7 +13,7 @@ use deog_harness::{Role, Supervisor, connect, free_loopback_addr};
 use deog_robot_client::{ClientConfig, MapClient, SimClient};
 
 use crate::commands::{self, Addresses};
-use crate::coverage::CoverageCurve;
+use crate::coverage::{CoverageCurve, CoverageJudge, CoverageSampler};
 use crate::judge::judge;
 use crate::kidnap::{KidnapDone, kidnap_robot};
 use crate::markdown;
@@ -38,6 +38,17 @@ pub fn run(options: DemoOptions) -> Result<()> {
     runtime.block_on(demo(&plan))
 }
 
+/// How the robots drove: the kidnap, if one was made, each robot's
+/// largest localizer lag, the coverage curve, the robots' time and bumps,
+/// and the simulator's second at which each localizer started.
+struct Drove {
+    kidnap: Option<KidnapDone>,
+    max_lags_s: Vec<(String, Option<f64>)>,
+    coverage: CoverageCurve,
+    driven: Driven,
+    localizer_starts_s: Vec<f64>,
+}
+
 /// The running demo: its processes and its connections to them.
 struct Demo<'a> {
     plan: &'a DemoPlan,
@@ -52,7 +63,13 @@ struct Demo<'a> {
 async fn demo(plan: &DemoPlan) -> Result<()> {
     let started = Instant::now();
     let mut demo = Demo::start(plan).await?;
-    let (kidnap, max_lags_s, coverage, driven) = demo.drive().await?;
+    let Drove {
+        kidnap,
+        max_lags_s,
+        coverage,
+        driven,
+        localizer_starts_s,
+    } = demo.drive().await?;
     demo.drain().await?;
     if plan.refit {
         demo.refit().await?;
@@ -60,7 +77,14 @@ async fn demo(plan: &DemoPlan) -> Result<()> {
     demo.status.finish();
 
     let out = &plan.out;
-    let judgement = judge(&demo.map_client, plan, out).await?;
+    let judgement = judge(
+        &demo.map_client,
+        plan,
+        &localizer_starts_s,
+        kidnap.as_ref(),
+        out,
+    )
+    .await?;
     let outcome = DemoOutcome {
         plan,
         judgement: &judgement,
@@ -238,42 +262,42 @@ impl<'a> Demo<'a> {
 impl Demo<'_> {
     /// Until every wanderer has finished its simulated time: starts the
     /// localizers and makes the kidnap when their times come, and keeps
-    /// the status line. Returns the kidnap, if one was made, each
-    /// robot's largest localizer lag, the coverage curve and how the
-    /// robots drove.
-    async fn drive(
-        &mut self,
-    ) -> Result<(
-        Option<KidnapDone>,
-        Vec<(String, Option<f64>)>,
-        CoverageCurve,
-        Driven,
-    )> {
+    /// the status line. The plan's times count from the moment every
+    /// robot stands in the world (processes started on a busy machine
+    /// spawn their robots late); the coverage is sampled beside this
+    /// loop, so a slow sample delays nothing.
+    async fn drive(&mut self) -> Result<Drove> {
         let plan = self.plan;
         let mut progress = Progress::new(plan.robot_names());
-        let mut localizers_started = 0;
+        let mut localizer_starts_s = Vec::new();
         let mut kidnap: Option<KidnapDone> = None;
-        let mut coverage = CoverageCurve::default();
+        let coverage = CoverageSampler::spawn(self.map_client.clone(), CoverageJudge::of(plan));
+        // The simulator's second at which the last robot spawned.
+        let mut zero_s: Option<f64> = None;
         loop {
             self.pacer.next(&mut self.status).await?;
             self.children.check()?;
             let states = self.sim.robots().await.context("asking the simulator")?;
-            let now = states.iter().map(|s| s.time_s).fold(0.0, f64::max);
+            let sim_now = states.iter().map(|s| s.time_s).fold(0.0, f64::max);
+            if zero_s.is_none() && states.len() == plan.robots.len() {
+                zero_s = Some(sim_now);
+            }
+            let now = zero_s.map_or(0.0, |zero| sim_now - zero);
             while plan.localize
-                && localizers_started < plan.robots.len()
-                && states.len() == plan.robots.len()
+                && zero_s.is_some()
+                && localizer_starts_s.len() < plan.robots.len()
                 && now
                     >= plan
                         .schedule
-                        .localizer_start_s(localizers_started, plan.robots.len())
+                        .localizer_start_s(localizer_starts_s.len(), plan.robots.len())
             {
-                let robot = &plan.robots[localizers_started];
+                let robot = &plan.robots[localizer_starts_s.len()];
                 self.children.start(
                     &format!("localize-{}", robot.name),
                     Role::Task,
                     &commands::localize(plan, robot, &self.addresses),
                 )?;
-                localizers_started += 1;
+                localizer_starts_s.push(sim_now);
                 let knowing = if plan.explore && plan.explore_pose == ExplorePose::Estimate {
                     "knowing where the robot started"
                 } else {
@@ -286,6 +310,7 @@ impl Demo<'_> {
             }
             if let Some(at) = plan.schedule.kidnap_at_s
                 && kidnap.is_none()
+                && zero_s.is_some()
                 && now >= at
                 && let Some(first) = plan.robots.first()
                 && let Some(state) = states.iter().find(|s| s.name == first.name)
@@ -293,7 +318,12 @@ impl Demo<'_> {
                 let done = kidnap_robot(&self.sim, &plan.world, state, plan.seed).await?;
                 self.status.note(&format!(
                     "{:.0} s: {} kidnapped from ({:.2}, {:.2}) to ({:.2}, {:.2})",
-                    done.time_s, done.robot, done.from.x, done.from.y, done.to.x, done.to.y
+                    done.time_s - zero_s.unwrap_or(0.0),
+                    done.robot,
+                    done.from.x,
+                    done.from.y,
+                    done.to.x,
+                    done.to.y
                 ));
                 kidnap = Some(done);
             }
@@ -302,12 +332,12 @@ impl Demo<'_> {
                 .line(&self.map_client, now, plan.schedule.duration_s, &clocks)
                 .await;
             self.status.show(&line);
-            if !states.is_empty() {
-                coverage.sample_if_due(&self.map_client, plan, now).await?;
+            if zero_s.is_some() {
+                coverage.tick(now);
             }
             if self.children.all_done(plan.driver_prefix()) {
-                coverage.sample(&self.map_client, plan, now).await?;
-                let lags = progress
+                let coverage = coverage.finish(now).await?;
+                let max_lags_s = progress
                     .max_lags()
                     .map(|(robot, lag)| (robot.to_string(), lag))
                     .collect();
@@ -324,7 +354,13 @@ impl Demo<'_> {
                         })
                         .collect(),
                 };
-                return Ok((kidnap, lags, coverage, driven));
+                return Ok(Drove {
+                    kidnap,
+                    max_lags_s,
+                    coverage,
+                    driven,
+                    localizer_starts_s,
+                });
             }
         }
     }

@@ -84,9 +84,10 @@ pub async fn read_robot(
     let truth: Vec<TruthSample> = frames
         .iter()
         .filter_map(|f| {
-            f.true_pose
-                .or(f.reference_pose)
-                .map(|p| TruthSample::new(f.sequence, f.time_s, pose_from_wire(p)))
+            f.true_pose.or(f.reference_pose).map(|p| {
+                TruthSample::new(f.sequence, f.time_s, pose_from_wire(p))
+                    .with_odometry(f.odometry.map(pose_from_wire))
+            })
         })
         .collect();
     let by_reference = frames

@@ -346,6 +346,9 @@ pub struct Mcl {
     /// free cell: the global search's hypotheses
     /// ([`Mcl::set_injection_poses`]).
     injection_poses: Option<InjectionPoses>,
+    /// The most particles the set may hold now: the settings' most, or
+    /// fewer where a CPU budget says so ([`Mcl::set_most_particles`]).
+    most: usize,
 }
 
 /// Poses injected particles are drawn around, and how widely.
@@ -374,6 +377,7 @@ impl Mcl {
     ) -> Result<Self, LocalizerError> {
         let settings = settings.validate()?;
         Ok(Self {
+            most: settings.kld.max_particles,
             sensor,
             rng: ChaCha8Rng::seed_from_u64(settings.seed),
             settings,
@@ -400,6 +404,19 @@ impl Mcl {
     /// The settings.
     pub fn settings(&self) -> &FilterSettings {
         &self.settings
+    }
+
+    /// Holds the set to at most `most` particles from the next start or
+    /// resampling on (within the settings' fewest and most): what a CPU
+    /// budget per update affords. KLD-sampling still decides below it.
+    pub fn set_most_particles(&mut self, most: usize) {
+        let kld = self.settings.kld;
+        self.most = most.clamp(kld.min_particles, kld.max_particles);
+    }
+
+    /// The most particles the set may hold now.
+    pub fn most_particles(&self) -> usize {
+        self.most
     }
 
     /// The particles.
@@ -429,7 +446,7 @@ impl Mcl {
         if free.is_empty() {
             return Err(LocalizerError::NoFreeSpace);
         }
-        let n = self.settings.kld.max_particles;
+        let n = self.most;
         let res = map.settings().resolution;
         self.particles.clear();
         self.weights.clear();
@@ -468,7 +485,7 @@ impl Mcl {
         let n = poses
             .len()
             .saturating_mul(per_pose.max(1))
-            .clamp(kld.min_particles, kld.max_particles);
+            .clamp(kld.min_particles, self.most);
         self.particles.clear();
         self.weights.clear();
         for i in 0..n {
@@ -496,11 +513,7 @@ impl Mcl {
         if poses.is_empty() || self.particles.is_empty() {
             return Ok(());
         }
-        let room = self
-            .settings
-            .kld
-            .max_particles
-            .saturating_sub(self.particles.len());
+        let room = self.most.saturating_sub(self.particles.len());
         let per_pose = per_pose.min(room / poses.len());
         if per_pose == 0 {
             return Ok(());
@@ -560,7 +573,7 @@ impl Mcl {
         let pose = pose.validate("initial pose")?;
         within("initial std_xy", std_xy, 0.0, 1000.0)?;
         within("initial std_theta", std_theta, 0.0, 10.0)?;
-        let n = self.settings.kld.max_particles;
+        let n = self.most;
         self.particles.clear();
         self.weights.clear();
         for _ in 0..n {
@@ -980,7 +993,7 @@ impl Mcl {
     ) -> Result<usize, LocalizerError> {
         const INJECTED: u32 = u32::MAX;
         let kld = self.settings.kld;
-        let pool = kld.max_particles;
+        let pool = self.most;
         systematic_resample(
             &self.weights,
             pool,
@@ -1304,9 +1317,9 @@ impl Mcl {
         // modes the frames have favoured, come first. A filter searching
         // (after a kidnap, say) keeps every mode it can.
         let most = if self.settled() {
-            (2 * next.len()).min(self.settings.kld.max_particles)
+            (2 * next.len()).min(self.most)
         } else {
-            self.settings.kld.max_particles
+            self.most
         };
         for c in short {
             let room = most.saturating_sub(next.len());
@@ -1785,12 +1798,45 @@ mod tests {
     }
 
     #[test]
+    fn a_budget_holds_the_set_below_the_settings_most() {
+        let map = empty_map();
+        // Spread wide, the set fills many bins: KLD-sampling asks for more
+        // than the budget allows.
+        let spread = |most: Option<usize>| {
+            let mut mcl = two_modes(0, 0.0);
+            if let Some(most) = most {
+                mcl.set_most_particles(most);
+            }
+            mcl.start_at(Pose2::new(5.0, 4.0, 0.0), 2.0, 3.0)
+                .expect("starts");
+            mcl
+        };
+        let mut free = spread(None);
+        assert_eq!(free.particles.len(), 20_000);
+        resample_once(&mut free, &map);
+        assert!(free.particles.len() > 1_200, "{}", free.particles.len());
+        let mut held = spread(Some(1_200));
+        assert_eq!(held.most_particles(), 1_200);
+        assert_eq!(held.particles.len(), 1_200);
+        for _ in 0..3 {
+            resample_once(&mut held, &map);
+            assert!(held.particles.len() <= 1_200, "{}", held.particles.len());
+        }
+        // Never below the fewest, never above the most.
+        held.set_most_particles(1);
+        assert_eq!(held.most_particles(), held.settings.kld.min_particles);
+        held.set_most_particles(usize::MAX);
+        assert_eq!(held.most_particles(), held.settings.kld.max_particles);
+    }
+
+    #[test]
     fn a_fixed_count_is_that_count_after_resampling() {
         let map = empty_map();
         // One tight mode: the room kept for its top-up is what went missing.
         let mut mcl = two_modes(0, 0.0);
         mcl.settings.kld.min_particles = 500;
         mcl.settings.kld.max_particles = 500;
+        mcl.set_most_particles(500);
         for _ in 0..5 {
             resample_once(&mut mcl, &map);
             assert_eq!(mcl.particles.len(), 500);

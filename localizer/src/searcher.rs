@@ -19,10 +19,17 @@
 //!   the estimate ([`SearchSettings::min_score`]). Look-alike rooms are
 //!   ambiguity, not convergence: the rivals found go into the filter as
 //!   modes of their own, to be weighed against its pose frame by frame.
-//!   The check is made again every [`SearcherSettings::verify_every_m`].
+//!   The check is made again every [`SearcherSettings::verify_every_m`];
+//!   an estimate that jumps to another mode loses its confirmation, and
+//!   a check cut short by its budget confirms nothing.
 //!   A filter started at a given pose is checked too, more leniently:
 //!   one check confirms it, a rival must explain the frames better, and
 //!   rivals are not added to it.
+//! - **Searches run in slices** ([`SearchJob`]): each frame advances the
+//!   search under way by [`Searcher::slice_lookups`] point lookups, so a
+//!   building's search goes on over several frames while the filter
+//!   keeps their pace; the search ends on the grid it began with, however
+//!   the map changes meanwhile.
 
 use deog_grid::{Pose2, normalize_angle};
 use deog_rig::rig::{Beam, BeamShape};
@@ -32,8 +39,8 @@ use crate::filter::{Estimate, Mcl};
 use crate::local_map::LocalMap;
 use crate::motion::OdometryMove;
 use crate::search::{
-    Hypothesis, RecentFrames, ScanCloud, SearchGrid, SearchSettings, SearchWindow, score_pose,
-    search,
+    Hypothesis, RecentFrames, ScanCloud, SearchGrid, SearchJob, SearchOutcome, SearchSettings,
+    SearchWindow, score_pose,
 };
 
 /// How the localizer searches.
@@ -85,7 +92,24 @@ pub struct SearcherSettings {
     /// estimate's is a rival: the estimate is not converged (2: the pose
     /// must be about 7 times likelier than any other).
     pub rival_margin: f64,
+    /// Point lookups a search makes per frame ([`SearchJob::run`]): a
+    /// search of a building goes on over several frames while the filter
+    /// keeps their pace. A CPU budget sets it anew
+    /// ([`Searcher::set_slice_lookups`]); this is the figure without one,
+    /// the same on any machine.
+    pub slice_lookups: u64,
 }
+
+/// Point lookups per frame without a CPU budget: about a tenth of a
+/// second of one core.
+pub const DEFAULT_SLICE_LOOKUPS: u64 = 40_000_000;
+
+/// Hypotheses apart from the estimate weighed as rivals at a check.
+const MOST_RIVALS_WEIGHED: usize = 8;
+
+/// Most lookups of a whole search, over all its slices: several times a
+/// single search's default, since slices keep each frame short.
+const SEARCH_BUDGET: u64 = 1_500_000_000;
 
 impl SearcherSettings {
     /// The settings for frames from `beams`: one scan for a laser, two
@@ -99,6 +123,7 @@ impl SearcherSettings {
                 search: SearchSettings {
                     keep_ratio: 0.7,
                     max_hypotheses: 24,
+                    budget: SEARCH_BUDGET,
                     ..SearchSettings::default()
                 },
                 cell_factor: 4,
@@ -119,10 +144,14 @@ impl SearcherSettings {
                 research_every_m: 1.0,
                 verify_every_m: 2.0,
                 rival_margin: 2.0,
+                slice_lookups: DEFAULT_SLICE_LOOKUPS,
             }
         } else {
             Self {
-                search: SearchSettings::default(),
+                search: SearchSettings {
+                    budget: SEARCH_BUDGET,
+                    ..SearchSettings::default()
+                },
                 cell_factor: 2,
                 sigma_m: 0.1,
                 levels: 7,
@@ -141,6 +170,7 @@ impl SearcherSettings {
                 research_every_m: 1.0,
                 verify_every_m: 2.0,
                 rival_margin: 2.0,
+                slice_lookups: DEFAULT_SLICE_LOOKUPS,
             }
         }
     }
@@ -163,9 +193,14 @@ impl SearcherSettings {
         )?;
         within("search verify_every_m", self.verify_every_m, 0.0, 1000.0)?;
         within("search rival_margin", self.rival_margin, 0.0, 1000.0)?;
-        if self.cell_factor == 0 || self.frames == 0 || self.particles_per_hypothesis == 0 {
+        if self.cell_factor == 0
+            || self.frames == 0
+            || self.particles_per_hypothesis == 0
+            || self.slice_lookups == 0
+        {
             return Err(LocalizerError::Invalid(
-                "the search needs a cell factor, frames and particles above 0".into(),
+                "the search needs a cell factor, frames, particles and lookups per frame above 0"
+                    .into(),
             ));
         }
         Ok(self)
@@ -190,11 +225,42 @@ struct Found {
     hypotheses: Vec<Hypothesis>,
 }
 
+/// Why a search runs, and so what its end does.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Purpose {
+    /// A global start: the filter starts from what it finds.
+    Start,
+    /// A lost filter: it injects around what it finds.
+    Lost,
+    /// A settled filter: what it finds may be a rival.
+    Verify,
+}
+
+/// A search under way, over the frames to come.
+#[derive(Debug)]
+struct Pending {
+    job: SearchJob,
+    purpose: Purpose,
+    /// The odometry of the frame its cloud is of.
+    kept: Pose2,
+}
+
+/// A search at its end.
+struct Ended {
+    outcome: SearchOutcome,
+    cloud: ScanCloud,
+    kept: Pose2,
+}
+
 /// Counts of what the searcher did, for logs and benches.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct SearcherStats {
-    /// Searches made.
+    /// Searches begun.
     pub searches: u64,
+    /// Of those, ended (run to their end or out of budget).
+    pub ended: u64,
+    /// Point lookups made by every search.
+    pub lookups: u64,
     /// Of those, stopped by their budget.
     pub incomplete: u64,
     /// Checks of a settled estimate that found a rival or a bad fit.
@@ -226,8 +292,11 @@ pub struct Searcher {
     recent: RecentFrames,
     phase: Phase,
     /// The grid, built from the map when first needed and again after
-    /// the map changed.
+    /// the map changed (once no search is under way on it).
     grid: Option<SearchGrid>,
+    grid_stale: bool,
+    pending: Option<Pending>,
+    slice_lookups: u64,
     last_kept: Option<Pose2>,
     /// Odometry path driven since the searcher began, metres.
     driven_m: f64,
@@ -239,6 +308,10 @@ pub struct Searcher {
     verified: bool,
     /// Checks in a row that found no rival.
     streak: u32,
+    /// The estimate at the last frame while checks stand (a streak or a
+    /// confirmation), with its odometry: a filter whose estimate jumps to
+    /// another mode has had that mode checked by nothing.
+    checked: Option<(Pose2, Pose2)>,
     /// Started at a given pose ([`Self::start_tracking`]).
     tracking: bool,
     found: Option<Found>,
@@ -255,6 +328,9 @@ impl Searcher {
             beams,
             phase: Phase::Off,
             grid: None,
+            grid_stale: false,
+            pending: None,
+            slice_lookups: settings.slice_lookups,
             last_kept: None,
             driven_m: 0.0,
             last_odometry: None,
@@ -262,6 +338,7 @@ impl Searcher {
             verified_at_m: None,
             verified: false,
             streak: 0,
+            checked: None,
             tracking: false,
             found: None,
             stats: SearcherStats::default(),
@@ -278,13 +355,31 @@ impl Searcher {
         self.stats
     }
 
+    /// Sets the point lookups a search makes per frame: what a CPU
+    /// budget affords at the rate the machine makes them.
+    pub fn set_slice_lookups(&mut self, lookups: u64) {
+        self.slice_lookups = lookups.max(1);
+    }
+
+    /// The point lookups a search makes per frame.
+    pub fn slice_lookups(&self) -> u64 {
+        self.slice_lookups
+    }
+
+    /// Whether a search is under way.
+    pub fn searching(&self) -> bool {
+        self.pending.is_some()
+    }
+
     /// A global start: the filter waits for the first search.
     pub fn start_global(&mut self) {
         self.phase = Phase::Starting;
         self.tracking = false;
         self.verified = false;
         self.streak = 0;
+        self.checked = None;
         self.found = None;
+        self.pending = None;
     }
 
     /// The filter was started at a given pose: its flag is checked as
@@ -303,9 +398,10 @@ impl Searcher {
         self.phase == Phase::Starting
     }
 
-    /// The map changed: the grid is built again at the next search.
+    /// The map changed: the grid is built again at the next search (a
+    /// search under way ends on the grid it began with).
     pub fn map_changed(&mut self) {
-        self.grid = None;
+        self.grid_stale = true;
     }
 
     /// Notes a frame, keeping it for the cloud if the robot has moved
@@ -369,16 +465,20 @@ impl Searcher {
         self.phase == Phase::Off || self.verified
     }
 
-    /// Searches the map for the kept frames' cloud, at the odometry of
-    /// the latest one ([`Self::last_kept`]).
-    fn search(
+    /// Begins a search of the map for the kept frames' cloud, at the
+    /// odometry of the latest one; false when the map has no free space
+    /// to search yet.
+    fn begin(
         &mut self,
         map: &LocalMap,
-        window: SearchWindow,
-    ) -> Result<Option<(ScanCloud, Vec<Hypothesis>)>, LocalizerError> {
-        if self.grid.is_none() {
+        purpose: Purpose,
+        odometry: &Pose2,
+    ) -> Result<bool, LocalizerError> {
+        if self.grid.is_none() || self.grid_stale {
+            self.grid = None;
+            self.grid_stale = false;
             let Some(cells) = map.search_cells(self.settings.cell_factor)? else {
-                return Ok(None);
+                return Ok(false);
             };
             self.grid = Some(SearchGrid::new(
                 cells.origin,
@@ -391,19 +491,59 @@ impl Searcher {
             )?);
         }
         let Some(grid) = &self.grid else {
-            return Ok(None);
+            return Ok(false);
         };
         let cloud = self
             .recent
             .cloud(&self.beams, self.settings.max_range)
             .thinned(self.settings.max_groups);
-        let outcome = search(grid, &cloud, window, &self.settings.search)?;
+        let job = SearchJob::new(grid, cloud, SearchWindow::Global, &self.settings.search)?;
         self.stats.searches += 1;
+        self.stats.lookups += job.lookups();
+        self.searched_at_m = Some(self.driven_m);
+        self.pending = Some(Pending {
+            job,
+            purpose,
+            kept: self.last_kept.unwrap_or(*odometry),
+        });
+        Ok(true)
+    }
+
+    /// Runs the search under way for one frame's slice; returns it once
+    /// it has ended. A search of another purpose is left as it is.
+    fn advance(&mut self, purpose: Purpose) -> Option<Ended> {
+        let grid = self.grid.as_ref()?;
+        let pending = self.pending.as_mut().filter(|p| p.purpose == purpose)?;
+        let before = pending.job.lookups();
+        let done = pending.job.run(grid, self.slice_lookups);
+        self.stats.lookups += pending.job.lookups() - before;
+        if !done {
+            return None;
+        }
+        let Pending { job, kept, .. } = self.pending.take()?;
+        let cloud = job.cloud().clone();
+        let outcome = job.finish();
+        self.stats.ended += 1;
         if !outcome.complete {
             self.stats.incomplete += 1;
         }
-        self.searched_at_m = Some(self.driven_m);
-        Ok(Some((cloud, outcome.hypotheses)))
+        Some(Ended {
+            outcome,
+            cloud,
+            kept,
+        })
+    }
+
+    /// Drops a search of `purpose` under way.
+    fn abandon(&mut self, purpose: Purpose) {
+        if self.pending.as_ref().is_some_and(|p| p.purpose == purpose) {
+            self.pending = None;
+        }
+    }
+
+    fn research_due(&self) -> bool {
+        self.searched_at_m
+            .is_none_or(|at| self.driven_m - at >= self.settings.research_every_m)
     }
 
     /// Before the filter's step on a frame at `odometry`: a waiting
@@ -419,26 +559,25 @@ impl Searcher {
         match self.phase {
             Phase::Off => Ok(true),
             Phase::Starting => {
-                if !self.ready() {
-                    return Ok(false);
+                if self.pending.is_none() {
+                    if !self.ready() || !self.research_due() {
+                        return Ok(false);
+                    }
+                    if !self.begin(map, Purpose::Start, odometry)? {
+                        return Ok(false);
+                    }
                 }
-                let due = self
-                    .searched_at_m
-                    .is_none_or(|at| self.driven_m - at >= self.settings.research_every_m);
-                if !due {
-                    return Ok(false);
-                }
-                let Some((_, hypotheses)) = self.search(map, SearchWindow::Global)? else {
+                let Some(ended) = self.advance(Purpose::Start) else {
                     return Ok(false);
                 };
+                let hypotheses = ended.outcome.hypotheses;
                 if hypotheses.is_empty() {
                     return Ok(false);
                 }
-                let poses: Vec<Pose2> = hypotheses.iter().map(|h| h.pose).collect();
-                // The hypotheses are of the robot at the last frame kept.
-                let kept = self.last_kept.unwrap_or(*odometry);
-                let step = OdometryMove::between(&kept, odometry);
-                let poses: Vec<Pose2> = poses.iter().map(|p| step.apply(p)).collect();
+                // The hypotheses are of the robot at the frame the cloud
+                // is of: carried to now by the odometry since.
+                let step = OdometryMove::between(&ended.kept, odometry);
+                let poses: Vec<Pose2> = hypotheses.iter().map(|h| step.apply(&h.pose)).collect();
                 mcl.start_hypotheses(
                     &poses,
                     self.settings.particles_per_hypothesis,
@@ -446,7 +585,7 @@ impl Searcher {
                     self.settings.std_theta,
                 )?;
                 self.found = Some(Found {
-                    odometry: kept,
+                    odometry: ended.kept,
                     hypotheses,
                 });
                 self.phase = Phase::Running;
@@ -459,18 +598,16 @@ impl Searcher {
                 if lost {
                     self.verified = false;
                     self.streak = 0;
-                    let due = self
-                        .searched_at_m
-                        .is_none_or(|at| self.driven_m - at >= self.settings.research_every_m);
-                    if due
-                        && self.ready()
-                        && let Some((_, hypotheses)) = self.search(map, SearchWindow::Global)?
-                    {
-                        self.found = Some(Found {
-                            odometry: self.last_kept.unwrap_or(*odometry),
-                            hypotheses,
-                        });
+                    self.abandon(Purpose::Verify);
+                    if self.pending.is_none() && self.research_due() && self.ready() {
+                        self.begin(map, Purpose::Lost, odometry)?;
                     }
+                }
+                if let Some(ended) = self.advance(Purpose::Lost) {
+                    self.found = Some(Found {
+                        odometry: ended.kept,
+                        hypotheses: ended.outcome.hypotheses,
+                    });
                 }
                 // A lost filter's injections go around the last hypotheses
                 // carried to now by the odometry; a filter that is not lost
@@ -506,37 +643,80 @@ impl Searcher {
         // Frames fitting worse than they did (the filter injecting at all)
         // are not a filter sure of its pose: a kidnapped robot's filter
         // keeps its old, tight cluster until the fit has fallen.
-        if !estimate.converged || estimate.lost_score > 0.0 {
+        if !estimate.converged || estimate.lost_score > 0.0 || self.jumped(estimate, odometry) {
             self.verified = false;
             self.streak = 0;
+            self.checked = None;
+            // A check under way goes on (a flag that flickers would
+            // otherwise have every check begun and dropped), but what it
+            // finds is of an estimate no longer settled: no verdict.
+            let _ = self.advance(Purpose::Verify);
             return Ok(false);
         }
-        let due = !self.verified
-            || self
-                .verified_at_m
-                .is_none_or(|at| self.driven_m - at >= self.settings.verify_every_m);
-        if !due {
-            return Ok(true);
+        if self.streak > 0 {
+            self.checked = Some((*odometry, estimate.pose));
         }
-        if !self.ready() || self.recent.driven_m() < self.settings.min_verify_m {
-            return Ok(false);
+        if self.pending.is_none() {
+            let due = !self.verified
+                || self
+                    .verified_at_m
+                    .is_none_or(|at| self.driven_m - at >= self.settings.verify_every_m);
+            if !due {
+                return Ok(true);
+            }
+            if !self.ready() || self.recent.driven_m() < self.settings.min_verify_m {
+                return Ok(false);
+            }
+            // Not more often than the search's own pace while unconfirmed.
+            if !self.verified
+                && self
+                    .verified_at_m
+                    .is_some_and(|at| self.driven_m - at < self.settings.research_every_m)
+            {
+                return Ok(false);
+            }
+            self.verified_at_m = Some(self.driven_m);
+            if !self.begin(map, Purpose::Verify, odometry)? {
+                return Ok(false);
+            }
         }
-        // Not more often than the search's own pace while unconfirmed.
-        if !self.verified
-            && self
-                .verified_at_m
-                .is_some_and(|at| self.driven_m - at < self.settings.research_every_m)
-        {
-            return Ok(false);
-        }
-        self.verified_at_m = Some(self.driven_m);
-        let Some((cloud, hypotheses)) = self.search(map, SearchWindow::Global)? else {
-            return Ok(false);
+        // A check under way keeps the flag as the last one left it.
+        let Some(ended) = self.advance(Purpose::Verify) else {
+            return Ok(self.verified);
         };
+        self.judge(mcl, map, estimate, odometry, ended)
+    }
+
+    /// Whether the estimate left the pose the checks stand for, carried
+    /// by the odometry: by more than the search tells hypotheses apart.
+    fn jumped(&self, estimate: &Estimate, odometry: &Pose2) -> bool {
+        let Some((then, pose)) = self.checked else {
+            return false;
+        };
+        let carried = OdometryMove::between(&then, odometry).apply(&pose);
+        let search = &self.settings.search;
+        (carried.x - estimate.pose.x).hypot(carried.y - estimate.pose.y) > search.separation_m
+            || normalize_angle(carried.theta - estimate.pose.theta).abs() > search.separation_rad
+    }
+
+    /// A check's end: the estimate against the search's hypotheses.
+    fn judge(
+        &mut self,
+        mcl: &mut Mcl,
+        map: &mut LocalMap,
+        estimate: &Estimate,
+        odometry: &Pose2,
+        ended: Ended,
+    ) -> Result<bool, LocalizerError> {
+        let Ended {
+            outcome,
+            cloud,
+            kept,
+        } = ended;
+        let hypotheses = outcome.hypotheses;
         let grid = self.grid.as_ref().ok_or(LocalizerError::NoFreeSpace)?;
-        // The cloud is of the robot at the last frame kept: the estimate
-        // is carried back there, the hypotheses forward to now.
-        let kept = self.last_kept.unwrap_or(*odometry);
+        // The cloud is of the robot at the frame it was made at: the
+        // estimate is carried back there, the hypotheses forward to now.
         let forward = OdometryMove::between(&kept, odometry);
         let pose = estimate.pose;
         let own_cloud = score_pose(
@@ -562,27 +742,37 @@ impl Searcher {
                 self.settings.confirmations.max(1),
             )
         };
+        // The best few apart from the pose: each is weighed over every
+        // frame kept, with the tables its tiles need, and one far down the
+        // search's ranking seldom comes near the pose's own.
         let mut rivals = Vec::new();
-        for h in &hypotheses {
-            let at = forward.apply(&h.pose);
-            if !separated(&at) {
-                continue;
-            }
+        let apart = hypotheses
+            .iter()
+            .map(|h| forward.apply(&h.pose))
+            .filter(|at| separated(at))
+            .take(MOST_RIVALS_WEIGHED);
+        for at in apart {
             let score = mcl.path_score(map, odometry, &at, self.recent.frames())?;
             if score >= own - margin {
                 rivals.push(at);
             }
         }
         let fits = own_cloud >= self.settings.search.min_score;
-        let passed = fits && rivals.is_empty();
-        self.streak = if passed { self.streak + 1 } else { 0 };
-        self.verified = self.streak >= needed;
+        // A search cut short by its budget may have missed a rival: it
+        // confirms nothing, though a rival it found still counts.
+        let passed = fits && rivals.is_empty() && outcome.complete;
+        let vetoed = !fits || !rivals.is_empty();
         if passed {
+            self.streak += 1;
             self.stats.confirmations += 1;
-        } else {
+            self.checked = Some((*odometry, pose));
+        } else if vetoed {
+            self.streak = 0;
+            self.checked = None;
             self.stats.vetoes += 1;
         }
-        if !passed && !self.tracking {
+        self.verified = self.streak >= needed;
+        if vetoed && !self.tracking {
             mcl.add_rivals(
                 &rivals,
                 self.settings.particles_per_hypothesis,

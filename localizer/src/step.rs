@@ -89,6 +89,61 @@ pub struct Localizer {
     stretch_refresh: bool,
     /// The global search beside the filter, when it has one.
     searcher: Option<Searcher>,
+    /// The CPU budget per step, when the work is fitted to one.
+    budget: Option<StepBudget>,
+}
+
+/// Shares of a step's budget: the filter's update, and a search's slice;
+/// the rest is left for the refinement, the tiles and the publishing.
+const FILTER_SHARE: f64 = 0.5;
+const SEARCH_SHARE: f64 = 0.3;
+
+/// How much of each new measure the running figures take …
+const MEASURE_WEIGHT: f64 = 0.25;
+/// … and of one that says the work got dearer: most of it, so that a
+/// spread set is not sized by a tight one's cost, but not all, so that
+/// one update held up by the machine does not cut the set to its fewest.
+const RISE_WEIGHT: f64 = 0.6;
+
+/// A wall-clock budget per step and what the machine has been measured
+/// to do within it.
+#[derive(Debug, Clone, Copy)]
+struct StepBudget {
+    per_step: Duration,
+    /// Seconds a sensor update took per particle, running mean.
+    per_particle_s: Option<f64>,
+    /// Point lookups the search made per second, running mean.
+    lookups_per_s: Option<f64>,
+}
+
+/// An update that built more than a table per this many particles is
+/// not timed for the particles' cost.
+const PARTICLES_PER_TABLE: usize = 500;
+
+impl StepBudget {
+    /// A running figure: a cost that rose is taken mostly (a spread set
+    /// costs many times a tight one per particle), one that fell in part.
+    fn measure_cost(running: &mut Option<f64>, value: f64) {
+        if value.is_finite() && value > 0.0 {
+            *running = Some(match *running {
+                Some(r) if value < r => r + MEASURE_WEIGHT * (value - r),
+                Some(r) => r + RISE_WEIGHT * (value - r),
+                None => value,
+            });
+        }
+    }
+
+    /// A running rate: a rate that fell is taken mostly, one that rose in
+    /// part.
+    fn measure_rate(running: &mut Option<f64>, value: f64) {
+        if value.is_finite() && value > 0.0 {
+            *running = Some(match *running {
+                Some(r) if value > r => r + MEASURE_WEIGHT * (value - r),
+                Some(r) => r + RISE_WEIGHT * (value - r),
+                None => value,
+            });
+        }
+    }
 }
 
 impl Localizer {
@@ -106,7 +161,35 @@ impl Localizer {
             last_rebuild: Duration::ZERO,
             stretch_refresh: true,
             searcher: None,
+            budget: None,
         }
+    }
+
+    /// Fits each step's work to `per_step` of wall-clock time, as an
+    /// any-time filter: the particles to what the machine updates within
+    /// half of it, a search's slice to what it looks up within a third
+    /// (a search then runs over more frames). Both are measured as the
+    /// steps run, so a loaded machine gets fewer particles and longer
+    /// searches: it converges later, and the checks of its flag are the
+    /// same. Without a budget the work is the settings', the same on any
+    /// machine (for runs that must repeat).
+    pub fn with_step_budget(mut self, per_step: Duration) -> Self {
+        self.budget = Some(StepBudget {
+            per_step,
+            per_particle_s: None,
+            lookups_per_s: None,
+        });
+        self
+    }
+
+    /// The most particles the budget affords now, and the search's
+    /// lookups per frame; `None` without a budget.
+    pub fn budget_fit(&self) -> Option<(usize, Option<u64>)> {
+        self.budget?;
+        Some((
+            self.mcl.most_particles(),
+            self.searcher.as_ref().map(Searcher::slice_lookups),
+        ))
     }
 
     /// Gives the filter a global search ([`crate::searcher`]): a global
@@ -282,18 +365,31 @@ impl Localizer {
                 searcher.map_changed();
             }
         }
+        let mut searched = SearchTime::default();
         if let Some(searcher) = &mut self.searcher {
             searcher.note_frame(odometry, readings);
-            if !searcher.before_step(&mut self.mcl, &self.map, odometry)? {
+            let proceed = searched.time(searcher, |searcher| {
+                searcher.before_step(&mut self.mcl, &self.map, odometry)
+            })?;
+            if !proceed {
+                self.fit_budget(None, searched);
                 return Ok(report);
             }
         }
+        let mut updated = None;
         if self.mcl.predict(odometry)? {
             let needed = self.mcl.tiles_for_frame(&self.map, readings);
             let missing = self.mcl.missing_tiles(&self.map, &needed);
             report.tiles_fetched += fetch_into(tiles, &missing, &mut self.map)?;
             let started = Instant::now();
+            let particles = self.mcl.particles().len();
             let correction = self.mcl.correct(&mut self.map, readings)?;
+            // Table builds are the map's cost, not the particles': an
+            // update that built many for its particles says little of
+            // what a particle costs.
+            if correction.tables_built.saturating_mul(PARTICLES_PER_TABLE) <= particles {
+                updated = Some((particles, started.elapsed()));
+            }
             if correction.tables_built > 0 && self.stretch_refresh {
                 self.last_rebuild = started.elapsed();
             }
@@ -322,10 +418,69 @@ impl Localizer {
             estimate.converged = false;
         }
         if let (Some(searcher), Some(estimate)) = (&mut self.searcher, &mut report.estimate) {
-            estimate.converged =
-                searcher.verify(&mut self.mcl, &mut self.map, estimate, odometry)?;
+            let (mcl, map) = (&mut self.mcl, &mut self.map);
+            estimate.converged = searched.time(searcher, |searcher| {
+                searcher.verify(mcl, map, estimate, odometry)
+            })?;
         }
+        self.fit_budget(updated, searched);
         Ok(report)
+    }
+
+    /// Measures the step's update (particles, time) and search slices,
+    /// and fits the next steps' work to the budget.
+    fn fit_budget(&mut self, updated: Option<(usize, Duration)>, searched: SearchTime) {
+        let Some(budget) = &mut self.budget else {
+            return;
+        };
+        if let Some((particles, took)) = updated
+            && particles > 0
+        {
+            StepBudget::measure_cost(
+                &mut budget.per_particle_s,
+                took.as_secs_f64() / particles as f64,
+            );
+        }
+        // Slices too short to time say little of the rate.
+        if searched.lookups >= MIN_TIMED_LOOKUPS {
+            StepBudget::measure_rate(
+                &mut budget.lookups_per_s,
+                searched.lookups as f64 / searched.took.as_secs_f64().max(1e-6),
+            );
+        }
+        let seconds = budget.per_step.as_secs_f64();
+        if let Some(per_particle) = budget.per_particle_s {
+            let most = (seconds * FILTER_SHARE / per_particle).min(usize::MAX as f64);
+            self.mcl.set_most_particles(most as usize);
+        }
+        if let (Some(rate), Some(searcher)) = (budget.lookups_per_s, &mut self.searcher) {
+            searcher.set_slice_lookups((seconds * SEARCH_SHARE * rate).min(u64::MAX as f64) as u64);
+        }
+    }
+}
+
+/// Fewest lookups of a step's slices that time the search's rate.
+const MIN_TIMED_LOOKUPS: u64 = 1_000_000;
+
+/// The search's share of a step: lookups made, and the time it took.
+#[derive(Debug, Clone, Copy, Default)]
+struct SearchTime {
+    lookups: u64,
+    took: Duration,
+}
+
+impl SearchTime {
+    /// Runs `work` on the searcher, adding its lookups and time.
+    fn time<T>(
+        &mut self,
+        searcher: &mut Searcher,
+        work: impl FnOnce(&mut Searcher) -> Result<T, LocalizerError>,
+    ) -> Result<T, LocalizerError> {
+        let (before, started) = (searcher.stats().lookups, Instant::now());
+        let out = work(searcher);
+        self.lookups += searcher.stats().lookups - before;
+        self.took += started.elapsed();
+        out
     }
 }
 

@@ -355,3 +355,52 @@ fn a_searching_global_start_finds_the_robot_and_claims_only_what_is_right() {
     let stats = localizer.searcher().unwrap().stats();
     assert!(stats.searches >= 1 && stats.confirmations >= 2, "{stats:?}");
 }
+
+#[test]
+fn a_step_budget_fits_the_particles_and_the_search_to_the_machine() {
+    let reference = room();
+    let steps = path(300);
+    let beams = deog_rig::builtin::scout().beams().to_vec();
+    // (budget, converges): a microsecond affords the fewest particles and
+    // a search of a block a frame, a minute everything the settings allow.
+    for (budget, generous) in [
+        (Duration::from_micros(1), false),
+        (Duration::from_secs(60), true),
+    ] {
+        let mut tiles = room_tiles();
+        let searcher = Searcher::new(beams.clone(), SearcherSettings::for_beams(&beams)).unwrap();
+        let map = LocalMap::new(settings(1 << 30)).unwrap();
+        let now = Instant::now();
+        let mut localizer = Localizer::new(filter(100_000, 3), map, Duration::MAX, now)
+            .with_searcher(searcher)
+            .with_step_budget(budget);
+        let keys: Vec<TileKey> = tiles.tiles().map(|(k, _)| *k).collect();
+        localizer.start_global(tiles.fetch(&keys).unwrap()).unwrap();
+        let mut last = None;
+        for (truth, odometry) in &steps {
+            let ranges = frame(&reference, truth);
+            let report = localizer.step(odometry, &ranges, now, &mut tiles).unwrap();
+            if let Some(estimate) = report.estimate {
+                let (metres, radians) = error(&estimate.pose, truth);
+                assert!(
+                    !estimate.converged || (metres <= 0.5 && radians <= 0.25),
+                    "budget {budget:?}: converged {metres} m, {radians} rad off"
+                );
+                last = Some(estimate.converged);
+            }
+        }
+        let (most, slice) = localizer.budget_fit().expect("a budget");
+        let slice = slice.expect("a searcher");
+        let fewest = localizer.mcl().settings().kld.min_particles;
+        if generous {
+            assert_eq!(most, 100_000);
+            assert!(slice > 10_000_000, "{slice} lookups a frame");
+            assert_eq!(last, Some(true), "a minute a step converges");
+        } else {
+            assert_eq!(most, fewest);
+            assert!(slice < 1_000_000, "{slice} lookups a frame");
+            let stats = localizer.searcher().unwrap().stats();
+            assert!(stats.searches >= 1, "{stats:?}");
+        }
+    }
+}

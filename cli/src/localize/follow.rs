@@ -8,6 +8,7 @@ use std::future::Future;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
+use deog_localizer::searcher::SearcherStats;
 use deog_localizer::step::Localizer;
 use deog_proto::rig::frame_rig_name;
 use deog_proto::v1 as pb;
@@ -215,7 +216,7 @@ impl Following<'_> {
             .with_context(|| format!("frame {} has no odometry pose", frame.sequence))?;
         localizer.note_frame(&odometry, frame.time_s);
         let particles = localizer.mcl().particles().len();
-        let searched_before = localizer.searcher().map(|s| s.stats());
+        let searched_before = localizer.searcher().map(|s| search_events(&s.stats()));
         let started = Instant::now();
         let carried = localizer
             .carried()
@@ -244,17 +245,20 @@ impl Following<'_> {
         let took = started.elapsed();
         self.last_took = took;
         if let Some(searcher) = localizer.searcher()
-            && Some(searcher.stats()) != searched_before
+            && Some(search_events(&searcher.stats())) != searched_before
         {
             let stats = searcher.stats();
             tracing::info!(
                 frame = frame.sequence,
                 ms = took.as_millis() as u64,
                 searches = stats.searches,
+                ended = stats.ended,
                 cut_short = stats.incomplete,
                 confirmations = stats.confirmations,
                 vetoes = stats.vetoes,
+                lookups_per_frame = searcher.slice_lookups(),
                 particles = localizer.mcl().particles().len(),
+                most_particles = localizer.mcl().most_particles(),
                 "global search"
             );
         }
@@ -290,4 +294,15 @@ impl Following<'_> {
         }
         Ok(())
     }
+}
+
+/// What a search log line is written for: a search begun or ended, a
+/// check's verdict (not the lookups each frame's slice makes).
+fn search_events(stats: &SearcherStats) -> [u64; 4] {
+    [
+        stats.searches,
+        stats.ended,
+        stats.confirmations,
+        stats.vetoes,
+    ]
 }

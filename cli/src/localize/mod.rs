@@ -212,6 +212,15 @@ pub struct LocalizeArgs {
     /// the next update slower still.
     #[arg(long, default_value_t = 1.0)]
     pub max_skip_s: f64,
+    /// Wall-clock time each step may take while following a live robot,
+    /// milliseconds: the particles are held to what the machine updates
+    /// in half of it and a global search runs in slices of a third, both
+    /// measured as the steps run, so a busy machine gets fewer particles
+    /// and longer searches rather than a localizer that falls behind.
+    /// 0 turns it off. Runs with --from, --to or --every-frame do the
+    /// settings' work whatever the machine, so that they repeat.
+    #[arg(long, default_value_t = 100.0)]
+    pub step_budget_ms: f64,
     /// Particles sent with an estimate for viewers (`deog view`, Foxglove),
     /// drawn by weight; 0 sends none.
     #[arg(long, default_value_t = 200)]
@@ -365,6 +374,11 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         StartChoice::Uniform => None,
     };
     let mut localizer = start(mcl, map, around, searcher, refresh, &info, &tiles)?;
+    let keep_up = !args.every_frame && args.from == 0 && args.to == 0;
+    if keep_up && args.step_budget_ms > 0.0 {
+        localizer =
+            localizer.with_step_budget(Duration::from_secs_f64(args.step_budget_ms / 1000.0));
+    }
     // The tables the first correction needs are built before it takes its
     // frame: with a global start that is the whole map's.
     let started = Instant::now();
@@ -377,7 +391,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         "range tables ready"
     );
     let settings = FollowSettings {
-        keep_up: !args.every_frame && args.from == 0 && args.to == 0,
+        keep_up,
         to: args.to,
         max_skip_s: args.max_skip_s,
         particle_sample: args.particle_sample,

@@ -71,6 +71,11 @@ impl LocalizeArgs {
             );
         }
         ensure!(
+            self.step_budget_ms.is_finite() && (0.0..=60_000.0).contains(&self.step_budget_ms),
+            "--step-budget-ms must be 0 (no budget) to 60000 milliseconds, got {}",
+            self.step_budget_ms
+        );
+        ensure!(
             self.max_skip_s.is_finite() && self.max_skip_s > 0.0,
             "--max-skip-s must be a positive number of seconds, got {}",
             self.max_skip_s

@@ -274,11 +274,8 @@ pub fn evaluate(input: &EvalInput<'_>) -> Result<LocalizationReport, EvaluationE
     let mut kidnap_starts = Vec::new();
     for (i, pair) in truth.windows(2).enumerate() {
         let (a, b) = (&pair[0], &pair[1]);
-        let dt = b.time_s - a.time_s;
         let jump = (b.pose.x - a.pose.x).hypot(b.pose.y - a.pose.y);
-        let turn = normalize_angle(b.pose.theta - a.pose.theta).abs();
-        let teleported = jump > params.kidnap_jump_m + params.max_speed_mps * dt
-            || turn > params.kidnap_turn_rad + params.max_turn_rate_rad_s * dt;
+        let teleported = unexplained(a, b, &params);
         let known = input
             .known_kidnaps
             .iter()
@@ -413,4 +410,42 @@ fn pair(truth: &[TruthSample], estimates: &[EstimateSample]) -> Vec<Paired> {
             })
         })
         .collect()
+}
+
+/// Share of the odometry's step its slip may add to the jump and the turn
+/// that driving explains.
+const ODOMETRY_SLIP: f64 = 0.2;
+
+/// Whether the true pose's step from `a` to `b` is more than driving
+/// explains: with both frames' odometry, a step the odometry does not
+/// make (the true pose's move in `a`'s frame against the odometry's,
+/// beyond `kidnap_jump_m` and `kidnap_turn_rad` plus a fifth of the
+/// odometry's own move for slip); without it, more than the robot's top
+/// speed and turn rate make in the time between them.
+fn unexplained(a: &TruthSample, b: &TruthSample, params: &EvalParams) -> bool {
+    if let (Some(from), Some(to)) = (a.odometry, b.odometry) {
+        let truth = relative(&a.pose, &b.pose);
+        let odometry = relative(&from, &to);
+        let jump = (truth.x - odometry.x).hypot(truth.y - odometry.y);
+        let turn = normalize_angle(truth.theta - odometry.theta).abs();
+        let moved = odometry.x.hypot(odometry.y);
+        return jump > params.kidnap_jump_m + ODOMETRY_SLIP * moved
+            || turn > params.kidnap_turn_rad + ODOMETRY_SLIP * odometry.theta.abs();
+    }
+    let dt = b.time_s - a.time_s;
+    let jump = (b.pose.x - a.pose.x).hypot(b.pose.y - a.pose.y);
+    let turn = normalize_angle(b.pose.theta - a.pose.theta).abs();
+    jump > params.kidnap_jump_m + params.max_speed_mps * dt
+        || turn > params.kidnap_turn_rad + params.max_turn_rate_rad_s * dt
+}
+
+/// `to` in the frame of `from`.
+fn relative(from: &Pose2, to: &Pose2) -> Pose2 {
+    let (s, c) = from.theta.sin_cos();
+    let (dx, dy) = (to.x - from.x, to.y - from.y);
+    Pose2::new(
+        c * dx + s * dy,
+        -s * dx + c * dy,
+        normalize_angle(to.theta - from.theta),
+    )
 }

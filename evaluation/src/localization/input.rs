@@ -20,16 +20,27 @@ pub struct TruthSample {
     /// The true pose: metres, world frame; radians, counter-clockwise
     /// from +x.
     pub pose: Pose2,
+    /// The frame's odometry pose, when it has one: a jump of the true
+    /// pose that the odometry does not make is a kidnap, however short
+    /// the time between the frames.
+    pub odometry: Option<Pose2>,
 }
 
 impl TruthSample {
-    /// A sample from its parts.
+    /// A sample from its parts, without odometry.
     pub const fn new(sequence: u64, time_s: f64, pose: Pose2) -> Self {
         Self {
             sequence,
             time_s,
             pose,
+            odometry: None,
         }
+    }
+
+    /// The sample with the frame's odometry pose.
+    pub const fn with_odometry(mut self, odometry: Option<Pose2>) -> Self {
+        self.odometry = odometry;
+        self
     }
 }
 
@@ -175,6 +186,9 @@ fn check_pose(field: String, pose: &Pose2) -> Result<(), EvaluationError> {
 pub(super) fn check_truth(truth: &[TruthSample]) -> Result<(), EvaluationError> {
     for (i, t) in truth.iter().enumerate() {
         check_pose(format!("truth[{i}].pose"), &t.pose)?;
+        if let Some(odometry) = &t.odometry {
+            check_pose(format!("truth[{i}].odometry"), odometry)?;
+        }
         if !t.time_s.is_finite() {
             return Err(EvaluationError::invalid(
                 format!("truth[{i}].time_s"),

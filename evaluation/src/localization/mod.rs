@@ -36,11 +36,18 @@
 //! - **Within the bounds**: position error ≤ `converge_m` and
 //!   |theta error| ≤ `converge_rad` (defaults 0.25 m and 0.25 rad).
 //! - **Kidnap**: a jump between consecutive truth samples `a`, `b` that
-//!   driving cannot explain. With `dt = b.time - a.time`: the distance is
+//!   driving cannot explain. When both carry the frame's odometry pose, a
+//!   step of the true pose that the odometry does not make: the true
+//!   pose's move expressed in `a`'s frame, against the odometry's, differs
+//!   by more than `kidnap_jump_m` plus a fifth of the odometry's distance,
+//!   or turns by more than `kidnap_turn_rad` plus a fifth of the
+//!   odometry's turn (a corrected log's scans a metre apart are driving;
+//!   its reference pose jumping where the wheels did not is a kidnap).
+//!   Without odometry, with `dt = b.time - a.time`: the distance is
 //!   more than `kidnap_jump_m + max_speed_mps · dt`, or the heading change
 //!   (normalised) is more than `kidnap_turn_rad + max_turn_rate_rad_s · dt`
 //!   (defaults 0.5 m, 45°, and the simulated Scout's limits, 1 m/s and
-//!   π/2 rad/s); or a kidnap the caller knows of
+//!   π/2 rad/s). Either way, a kidnap the caller knows of
 //!   ([`EvalInput::known_kidnaps`]) falls after `a` and by `b`. The kidnap
 //!   happens at `b`: its sequence and time are `b`'s.
 //! - **Segments**: the kidnaps cut the run in segments: the first from the

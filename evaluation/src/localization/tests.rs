@@ -354,6 +354,51 @@ fn a_sudden_turn_is_a_kidnap_and_a_long_gap_is_not() {
 }
 
 #[test]
+fn with_odometry_a_kidnap_is_a_jump_the_wheels_did_not_make() {
+    // Scans a metre apart in a tenth of a second, as a corrected log's
+    // may be: faster than the top speed, but the odometry drove them.
+    let with_odometry = |jump_at: Option<u64>| -> Vec<TruthSample> {
+        (1..=10)
+            .map(|s| {
+                let x = s as f64;
+                // The odometry's frame is turned and shifted: only its
+                // moves count.
+                let odometry = Pose2::new(5.0, -3.0 + x, FRAC_PI_2);
+                let pose = match jump_at {
+                    Some(at) if s >= at => Pose2::new(x + 2.0, 0.0, 0.0),
+                    _ => Pose2::new(x, 0.0, 0.0),
+                };
+                TruthSample::new(s, 0.1 * s as f64, pose).with_odometry(Some(odometry))
+            })
+            .collect()
+    };
+    let truth = with_odometry(None);
+    let estimates = offset(&truth, |_| (0.0, 0.0, 0.0));
+    assert!(!run(&truth, &estimates).kidnapped());
+    // Without the odometry the same steps are faster than driving.
+    let bare: Vec<TruthSample> = truth
+        .iter()
+        .map(|t| TruthSample::new(t.sequence, t.time_s, t.pose))
+        .collect();
+    assert!(run(&bare, &estimates).kidnapped());
+    // The reference jumping 2 m where the wheels drove 1 m is a kidnap.
+    let truth = with_odometry(Some(6));
+    let estimates = offset(&truth, |_| (0.0, 0.0, 0.0));
+    let r = run(&truth, &estimates);
+    assert_eq!(r.kidnaps.len(), 1);
+    assert_eq!(r.kidnaps[0].sequence, 6);
+}
+
+#[test]
+fn a_truth_sample_with_odometry_that_is_not_finite_is_refused() {
+    let mut truth = straight(3);
+    truth[1].odometry = Some(Pose2::new(f64::NAN, 0.0, 0.0));
+    let estimates = offset(&truth, |_| (0.0, 0.0, 0.0));
+    let err = evaluate(&EvalInput::new("r", &truth, &estimates)).unwrap_err();
+    assert!(err.to_string().contains("truth[1].odometry"), "{err}");
+}
+
+#[test]
 fn unpaired_estimates_and_frames_after_the_last_estimate_are_left_out() {
     let truth = straight(10);
     let mut estimates = offset(&truth[..6], |_| (0.1, 0.0, 0.0));

@@ -128,13 +128,14 @@ impl SearchOutcome {
 
 /// The scan's points turned to one heading and put in cells, relative to
 /// the cell the robot stands in.
+#[derive(Debug, Clone)]
 struct Turned {
     theta: f64,
     /// Each point's cell offset.
     cells: Vec<(i64, i64)>,
 }
 
-#[derive(Clone, Copy)]
+#[derive(Debug, Clone, Copy)]
 struct Candidate {
     turn: usize,
     x: i64,
@@ -143,146 +144,290 @@ struct Candidate {
 }
 
 /// Searches `grid` for the poses that best explain `cloud` within
-/// `window`.
+/// `window`, to the end (or its budget) at once.
 pub fn search(
     grid: &SearchGrid,
     cloud: &ScanCloud,
     window: SearchWindow,
     settings: &SearchSettings,
 ) -> Result<SearchOutcome, LocalizerError> {
-    let settings = settings.validate()?;
-    let mut outcome = SearchOutcome {
-        hypotheses: Vec::new(),
-        evaluations: 0,
-        lookups: 0,
-        complete: true,
-    };
-    if cloud.groups() == 0 {
-        return Ok(outcome);
-    }
-    let cell = grid.cell_m();
-    let reach = cloud.reach().max(cell);
-    // A turn that moves the farthest point by at most one cell.
-    let step = (1.0 - cell * cell / (2.0 * reach * reach))
-        .clamp(-1.0, 1.0)
-        .acos()
-        .clamp(1e-4, settings.max_angle_step);
-    let (width, height) = grid.size();
-    let (thetas, x_range, y_range) = match window {
-        SearchWindow::Global => {
-            let n = (std::f64::consts::TAU / step).ceil() as usize;
-            let thetas: Vec<f64> = (0..n)
-                .map(|i| normalize_angle(i as f64 * std::f64::consts::TAU / n as f64))
-                .collect();
-            (thetas, (0, width as i64 - 1), (0, height as i64 - 1))
+    let mut job = SearchJob::new(grid, cloud.clone(), window, settings)?;
+    job.run(grid, u64::MAX);
+    Ok(job.finish())
+}
+
+/// A search that runs in slices: [`SearchJob::run`] works through it a
+/// number of point lookups at a time, so that a filter beside it keeps
+/// its frames' pace while a search of a whole building goes on over
+/// several of them. Run on the grid it was made with, it finds what
+/// [`search`] finds, however it is sliced.
+#[derive(Debug, Clone)]
+pub struct SearchJob {
+    settings: SearchSettings,
+    cloud: ScanCloud,
+    turns: Vec<Turned>,
+    x_max: i64,
+    y_max: i64,
+    /// Blocks still to look into, with their level; the best on top.
+    stack: Vec<(Candidate, usize)>,
+    found: Vec<Hypothesis>,
+    best: f64,
+    evaluations: u64,
+    lookups: u64,
+    /// Lookups at which the search stops splitting blocks.
+    budget: u64,
+    out_of_budget: bool,
+}
+
+impl SearchJob {
+    /// A search of `grid` for `cloud` within `window`, its coarsest level
+    /// scored (the whole of it, whatever the budget: a few thousand
+    /// blocks for a building).
+    pub fn new(
+        grid: &SearchGrid,
+        cloud: ScanCloud,
+        window: SearchWindow,
+        settings: &SearchSettings,
+    ) -> Result<Self, LocalizerError> {
+        let settings = settings.validate()?;
+        let mut job = Self {
+            settings,
+            cloud,
+            turns: Vec::new(),
+            x_max: 0,
+            y_max: 0,
+            stack: Vec::new(),
+            found: Vec::new(),
+            best: 0.0,
+            evaluations: 0,
+            lookups: 0,
+            budget: u64::MAX,
+            out_of_budget: false,
+        };
+        if job.cloud.groups() == 0 {
+            return Ok(job);
         }
-        SearchWindow::Around {
-            around,
-            linear_m,
-            angular_rad,
-        } => {
-            let around = around.validate("search window centre")?;
-            within("search window linear_m", linear_m, 0.0, 1.0e4)?;
-            within("search window angular_rad", angular_rad, 0.0, 4.0)?;
-            let k = (angular_rad / step).ceil() as i64;
-            let thetas = (-k..=k)
-                .map(|i| normalize_angle(around.theta + i as f64 * step))
-                .collect();
-            let (cx, cy) = grid.cell_at(around.x, around.y);
-            let r = (linear_m / cell).ceil() as i64;
-            let x_range = ((cx - r).max(0), (cx + r).min(width as i64 - 1));
-            let y_range = ((cy - r).max(0), (cy + r).min(height as i64 - 1));
-            (thetas, x_range, y_range)
-        }
-    };
-    if x_range.0 > x_range.1 || y_range.0 > y_range.1 {
-        return Ok(outcome);
-    }
-    let turns: Vec<Turned> = thetas
-        .iter()
-        .map(|&theta| {
-            let (s, c) = theta.sin_cos();
-            let turn = |p: &[f64; 2]| {
-                let x = c * p[0] - s * p[1];
-                let y = s * p[0] + c * p[1];
-                // The robot stands at its cell's centre.
-                (
-                    (x / cell + 0.5).floor() as i64,
-                    (y / cell + 0.5).floor() as i64,
-                )
-            };
-            Turned {
-                theta,
-                cells: cloud.points().iter().map(turn).collect(),
+        let cell = grid.cell_m();
+        let reach = job.cloud.reach().max(cell);
+        // A turn that moves the farthest point by at most one cell.
+        let step = (1.0 - cell * cell / (2.0 * reach * reach))
+            .clamp(-1.0, 1.0)
+            .acos()
+            .clamp(1e-4, settings.max_angle_step);
+        let (width, height) = grid.size();
+        let (thetas, x_range, y_range) = match window {
+            SearchWindow::Global => {
+                let n = (std::f64::consts::TAU / step).ceil() as usize;
+                let thetas: Vec<f64> = (0..n)
+                    .map(|i| normalize_angle(i as f64 * std::f64::consts::TAU / n as f64))
+                    .collect();
+                (thetas, (0, width as i64 - 1), (0, height as i64 - 1))
             }
-        })
-        .collect();
-    let top = grid.levels() - 1;
-    let side = 1i64 << top;
-    let mut candidates = Vec::new();
-    for turn in 0..turns.len() {
-        let mut y = y_range.0;
-        while y <= y_range.1 {
-            let mut x = x_range.0;
-            while x <= x_range.1 {
-                candidates.push(Candidate {
-                    turn,
+            SearchWindow::Around {
+                around,
+                linear_m,
+                angular_rad,
+            } => {
+                let around = around.validate("search window centre")?;
+                within("search window linear_m", linear_m, 0.0, 1.0e4)?;
+                within("search window angular_rad", angular_rad, 0.0, 4.0)?;
+                let k = (angular_rad / step).ceil() as i64;
+                let thetas = (-k..=k)
+                    .map(|i| normalize_angle(around.theta + i as f64 * step))
+                    .collect();
+                let (cx, cy) = grid.cell_at(around.x, around.y);
+                let r = (linear_m / cell).ceil() as i64;
+                let x_range = ((cx - r).max(0), (cx + r).min(width as i64 - 1));
+                let y_range = ((cy - r).max(0), (cy + r).min(height as i64 - 1));
+                (thetas, x_range, y_range)
+            }
+        };
+        if x_range.0 > x_range.1 || y_range.0 > y_range.1 {
+            return Ok(job);
+        }
+        job.x_max = x_range.1;
+        job.y_max = y_range.1;
+        job.turns = thetas
+            .iter()
+            .map(|&theta| {
+                let (s, c) = theta.sin_cos();
+                let turn = |p: &[f64; 2]| {
+                    let x = c * p[0] - s * p[1];
+                    let y = s * p[0] + c * p[1];
+                    // The robot stands at its cell's centre.
+                    (
+                        (x / cell + 0.5).floor() as i64,
+                        (y / cell + 0.5).floor() as i64,
+                    )
+                };
+                Turned {
+                    theta,
+                    cells: job.cloud.points().iter().map(turn).collect(),
+                }
+            })
+            .collect();
+        let top = grid.levels() - 1;
+        let side = 1i64 << top;
+        let mut candidates = Vec::new();
+        for turn in 0..job.turns.len() {
+            let mut y = y_range.0;
+            while y <= y_range.1 {
+                let mut x = x_range.0;
+                while x <= x_range.1 {
+                    candidates.push(Candidate {
+                        turn,
+                        x,
+                        y,
+                        bound: 0.0,
+                    });
+                    x += side;
+                }
+                y += side;
+            }
+        }
+        job.bound_all(grid, &mut candidates, top);
+        job.budget = job.lookups.saturating_add(settings.budget);
+        // Best last: the stack pops it first.
+        job.stack = candidates.into_iter().rev().map(|c| (c, top)).collect();
+        Ok(job)
+    }
+
+    /// Works through the search for about `lookups` point lookups more
+    /// (at least one block's split), on the grid it was made with.
+    /// Returns whether it is done: run to its end, or out of its budget.
+    pub fn run(&mut self, grid: &SearchGrid, lookups: u64) -> bool {
+        let stop_at = self.lookups.saturating_add(lookups);
+        while let Some((candidate, level)) = self.stack.pop() {
+            if self.out_of_budget {
+                break;
+            }
+            let threshold = self.threshold();
+            if candidate.bound < threshold {
+                // Every block below it on the stack was bounded before
+                // the best grew: it is either lower (its siblings) or was
+                // checked against a lower threshold; look at each.
+                continue;
+            }
+            if level == 0 {
+                // A leaf: its bound is its score, for a free cell.
+                let (x, y) = grid.centre(candidate.x, candidate.y);
+                self.best = self.best.max(candidate.bound);
+                self.found.push(Hypothesis {
+                    pose: Pose2::new(x, y, self.turns[candidate.turn].theta),
+                    score: candidate.bound,
+                });
+                continue;
+            }
+            let half = 1i64 << (level - 1);
+            let mut children = Vec::with_capacity(4);
+            for (dx, dy) in [(0, 0), (half, 0), (0, half), (half, half)] {
+                let (x, y) = (candidate.x + dx, candidate.y + dy);
+                if x > self.x_max || y > self.y_max {
+                    continue;
+                }
+                children.push(Candidate {
                     x,
                     y,
                     bound: 0.0,
+                    ..candidate
                 });
-                x += side;
             }
-            y += side;
+            self.bound_all(grid, &mut children, level - 1);
+            if self.out_of_budget {
+                break;
+            }
+            self.stack
+                .extend(children.into_iter().rev().map(|c| (c, level - 1)));
+            if self.lookups >= stop_at {
+                break;
+            }
         }
+        self.done()
     }
-    let mut found: Vec<Hypothesis> = Vec::new();
-    let mut best = 0.0f64;
-    let mut state = Walk {
-        grid,
-        cloud,
-        turns: &turns,
-        settings: &settings,
-        x_max: x_range.1,
-        y_max: y_range.1,
-        evaluations: 0,
-        lookups: 0,
-        budget: u64::MAX,
-        out_of_budget: false,
-    };
-    state.bound_all(&mut candidates, top);
-    state.budget = state.lookups.saturating_add(settings.budget);
-    for candidate in candidates {
-        let threshold = settings.min_score.max(best * settings.keep_ratio);
-        if candidate.bound < threshold {
-            // Sorted: every later one is lower still.
-            break;
-        }
-        state.branch(candidate, top, &mut best, &mut found);
-        if state.out_of_budget {
-            break;
-        }
+
+    /// Whether the search is over: nothing left to look into, or its
+    /// budget spent.
+    pub fn done(&self) -> bool {
+        self.out_of_budget || self.stack.is_empty()
     }
-    outcome.evaluations = state.evaluations;
-    outcome.lookups = state.lookups;
-    outcome.complete = !state.out_of_budget;
-    let threshold = settings.min_score.max(best * settings.keep_ratio);
-    found.retain(|h| h.score >= threshold);
-    found.sort_by(|a, b| b.score.partial_cmp(&a.score).unwrap_or(Ordering::Equal));
-    for h in found {
-        if outcome.hypotheses.len() >= settings.max_hypotheses {
-            break;
-        }
-        let apart = outcome.hypotheses.iter().all(|kept| {
-            let d = (kept.pose.x - h.pose.x).hypot(kept.pose.y - h.pose.y);
-            d > settings.separation_m
-                || normalize_angle(kept.pose.theta - h.pose.theta).abs() > settings.separation_rad
-        });
-        if apart {
-            outcome.hypotheses.push(h);
-        }
+
+    /// Point lookups made so far.
+    pub fn lookups(&self) -> u64 {
+        self.lookups
     }
-    Ok(outcome)
+
+    /// The cloud searched for.
+    pub fn cloud(&self) -> &ScanCloud {
+        &self.cloud
+    }
+
+    /// What the search found; called before it is done, what it found so
+    /// far, as incomplete.
+    pub fn finish(self) -> SearchOutcome {
+        let settings = self.settings;
+        let mut outcome = SearchOutcome {
+            hypotheses: Vec::new(),
+            evaluations: self.evaluations,
+            lookups: self.lookups,
+            complete: !self.out_of_budget && self.stack.is_empty(),
+        };
+        let threshold = self.threshold();
+        let mut found = self.found;
+        found.retain(|h| h.score >= threshold);
+        found.sort_by(|a, b| b.score.partial_cmp(&a.score).unwrap_or(Ordering::Equal));
+        for h in found {
+            if outcome.hypotheses.len() >= settings.max_hypotheses {
+                break;
+            }
+            let apart = outcome.hypotheses.iter().all(|kept| {
+                let d = (kept.pose.x - h.pose.x).hypot(kept.pose.y - h.pose.y);
+                d > settings.separation_m
+                    || normalize_angle(kept.pose.theta - h.pose.theta).abs()
+                        > settings.separation_rad
+            });
+            if apart {
+                outcome.hypotheses.push(h);
+            }
+        }
+        outcome
+    }
+
+    fn threshold(&self) -> f64 {
+        self.settings
+            .min_score
+            .max(self.best * self.settings.keep_ratio)
+    }
+
+    /// The candidate's bound at `level`: the mean over readings of each
+    /// reading's best block maximum; 0 for a block with no free cell.
+    fn bound(&mut self, grid: &SearchGrid, c: &Candidate, level: usize) -> f64 {
+        self.evaluations += 1;
+        self.lookups += self.cloud.points().len() as u64;
+        if self.lookups > self.budget {
+            self.out_of_budget = true;
+        }
+        if !grid.any_free(level, c.x, c.y) {
+            return 0.0;
+        }
+        let cells = &self.turns[c.turn].cells;
+        let mut total = 0u64;
+        for group in self.cloud.group_ranges() {
+            let mut best = 0u8;
+            for &(dx, dy) in &cells[group] {
+                best = best.max(grid.score(level, c.x + dx, c.y + dy));
+            }
+            total += u64::from(best);
+        }
+        total as f64 / (255.0 * self.cloud.groups() as f64)
+    }
+
+    /// Bounds every candidate at `level` and sorts them best first.
+    fn bound_all(&mut self, grid: &SearchGrid, candidates: &mut [Candidate], level: usize) {
+        for c in candidates.iter_mut() {
+            c.bound = self.bound(grid, c, level);
+        }
+        candidates.sort_by(|a, b| b.bound.partial_cmp(&a.bound).unwrap_or(Ordering::Equal));
+    }
 }
 
 /// Scores `pose` as the search would at its finest level: the mean over
@@ -310,98 +455,4 @@ pub fn score_pose(grid: &SearchGrid, cloud: &ScanCloud, pose: &Pose2) -> f64 {
         total += u64::from(best);
     }
     total as f64 / (255.0 * cloud.groups() as f64)
-}
-
-struct Walk<'a> {
-    grid: &'a SearchGrid,
-    cloud: &'a ScanCloud,
-    turns: &'a [Turned],
-    settings: &'a SearchSettings,
-    x_max: i64,
-    y_max: i64,
-    evaluations: u64,
-    lookups: u64,
-    /// Lookups at which the search stops splitting blocks.
-    budget: u64,
-    out_of_budget: bool,
-}
-
-impl Walk<'_> {
-    /// The candidate's bound at `level`: the mean over readings of each
-    /// reading's best block maximum; 0 for a block with no free cell.
-    fn bound(&mut self, c: &Candidate, level: usize) -> f64 {
-        self.evaluations += 1;
-        self.lookups += self.cloud.points().len() as u64;
-        if self.lookups > self.budget {
-            self.out_of_budget = true;
-        }
-        if !self.grid.any_free(level, c.x, c.y) {
-            return 0.0;
-        }
-        let cells = &self.turns[c.turn].cells;
-        let mut total = 0u64;
-        for group in self.cloud.group_ranges() {
-            let mut best = 0u8;
-            for &(dx, dy) in &cells[group] {
-                best = best.max(self.grid.score(level, c.x + dx, c.y + dy));
-            }
-            total += u64::from(best);
-        }
-        total as f64 / (255.0 * self.cloud.groups() as f64)
-    }
-
-    /// Bounds every candidate at `level` and sorts them best first.
-    fn bound_all(&mut self, candidates: &mut [Candidate], level: usize) {
-        for c in candidates.iter_mut() {
-            c.bound = self.bound(c, level);
-        }
-        candidates.sort_by(|a, b| b.bound.partial_cmp(&a.bound).unwrap_or(Ordering::Equal));
-    }
-
-    fn branch(
-        &mut self,
-        candidate: Candidate,
-        level: usize,
-        best: &mut f64,
-        found: &mut Vec<Hypothesis>,
-    ) {
-        if level == 0 {
-            // A leaf: its bound is its score, for a free cell.
-            let (x, y) = self.grid.centre(candidate.x, candidate.y);
-            *best = best.max(candidate.bound);
-            found.push(Hypothesis {
-                pose: Pose2::new(x, y, self.turns[candidate.turn].theta),
-                score: candidate.bound,
-            });
-            return;
-        }
-        let half = 1i64 << (level - 1);
-        let mut children = Vec::with_capacity(4);
-        for (dx, dy) in [(0, 0), (half, 0), (0, half), (half, half)] {
-            let (x, y) = (candidate.x + dx, candidate.y + dy);
-            if x > self.x_max || y > self.y_max {
-                continue;
-            }
-            children.push(Candidate {
-                x,
-                y,
-                bound: 0.0,
-                ..candidate
-            });
-        }
-        self.bound_all(&mut children, level - 1);
-        for child in children {
-            if self.out_of_budget {
-                return;
-            }
-            let threshold = self
-                .settings
-                .min_score
-                .max(*best * self.settings.keep_ratio);
-            if child.bound < threshold {
-                break;
-            }
-            self.branch(child, level - 1, best, found);
-        }
-    }
 }

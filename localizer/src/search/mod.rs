@@ -12,7 +12,8 @@
 //! - [`cloud`]: [`ScanCloud`], echoes as points in the robot's frame
 //!   (sonar cones as groups), and [`RecentFrames`], the last frames
 //!   carried to the present by the odometry.
-//! - [`branch_bound`]: [`search`] itself, its [`SearchSettings`] and what
+//! - [`branch_bound`]: [`search`] itself (whole, or in slices as a
+//!   [`SearchJob`]), its [`SearchSettings`] and what
 //!   it returns ([`SearchOutcome`], [`Hypothesis`]).
 //!
 //! Pure and synchronous, as the rest of the crate.
@@ -22,7 +23,7 @@ pub mod cloud;
 pub mod grid;
 
 pub use branch_bound::{
-    Hypothesis, SearchOutcome, SearchSettings, SearchWindow, score_pose, search,
+    Hypothesis, SearchJob, SearchOutcome, SearchSettings, SearchWindow, score_pose, search,
 };
 pub use cloud::{RecentFrames, ScanCloud};
 pub use grid::{MAX_SEARCH_CELLS, SearchCell, SearchGrid};

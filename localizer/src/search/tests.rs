@@ -245,3 +245,44 @@ fn an_empty_cloud_or_bad_settings() {
     };
     assert!(search(&grid, &cloud, window, &SearchSettings::default()).is_err());
 }
+
+#[test]
+fn a_search_in_slices_finds_what_a_whole_one_finds() {
+    let (w, h, cells) = l_room();
+    let grid = grid_of(w, h, &cells);
+    let truth = Pose2::new(3.03, 2.47, 0.4);
+    let cloud = scan(w, h, &cells, &truth);
+    let settings = SearchSettings::default();
+    let whole = search(&grid, &cloud, SearchWindow::Global, &settings).expect("searches");
+    for slice in [1, 10_000, 1_000_000] {
+        let mut job =
+            SearchJob::new(&grid, cloud.clone(), SearchWindow::Global, &settings).expect("job");
+        let mut runs = 0;
+        while !job.run(&grid, slice) {
+            runs += 1;
+            assert!(runs < 10_000_000, "slices of {slice} never end");
+        }
+        assert!(job.done());
+        assert!(slice >= 1_000_000 || runs > 1, "slices of {slice}: {runs}");
+        let sliced = job.finish();
+        assert_eq!(sliced, whole, "slices of {slice}");
+    }
+}
+
+#[test]
+fn a_job_finished_early_is_incomplete_with_what_it_found() {
+    let (w, h, cells) = l_room();
+    let grid = grid_of(w, h, &cells);
+    let cloud = scan(w, h, &cells, &Pose2::new(3.03, 2.47, 0.4));
+    let mut job = SearchJob::new(
+        &grid,
+        cloud,
+        SearchWindow::Global,
+        &SearchSettings::default(),
+    )
+    .expect("job");
+    assert!(!job.run(&grid, 1));
+    let outcome = job.finish();
+    assert!(!outcome.complete);
+    assert!(outcome.lookups > 0);
+}
