@@ -21,7 +21,8 @@
 //!   modes of their own, to be weighed against its pose frame by frame.
 //!   The check is made again every [`SearcherSettings::verify_every_m`];
 //!   an estimate that jumps to another mode loses its confirmation, and
-//!   a check cut short by its budget confirms nothing.
+//!   a check cut short by its budget, or whose list of hypotheses is full
+//!   (a corridor's look-alikes along it), confirms nothing.
 //!   A filter started at a given pose is checked too, more leniently:
 //!   one check confirms it, a rival must explain the frames better, and
 //!   rivals are not added to it.
@@ -104,8 +105,14 @@ pub struct SearcherSettings {
 /// second of one core.
 pub const DEFAULT_SLICE_LOOKUPS: u64 = 40_000_000;
 
-/// Hypotheses apart from the estimate weighed as rivals at a check.
-const MOST_RIVALS_WEIGHED: usize = 8;
+/// Hypotheses nearer than this to a better one are one at a check,
+/// metres.
+const CHECK_SEPARATION_M: f64 = 2.0;
+/// Most hypotheses a check lists.
+const CHECK_HYPOTHESES: usize = 32;
+
+/// Rivals a check weighs per frame once its search has ended.
+const RIVALS_PER_FRAME: usize = 4;
 
 /// Most lookups of a whole search, over all its slices: several times a
 /// single search's default, since slices keep each frame short.
@@ -245,6 +252,21 @@ struct Pending {
     kept: Pose2,
 }
 
+/// A check whose search has ended, weighing its rivals frame by frame.
+#[derive(Debug)]
+struct Judging {
+    /// Whether the frames' cloud fits the map at the estimate.
+    fits: bool,
+    /// Whether the search ran to its end with room in its list.
+    complete: bool,
+    /// The odometry the poses below are of.
+    odometry: Pose2,
+    /// Hypotheses apart from the estimate still to weigh, best last.
+    left: Vec<Pose2>,
+    /// Those weighed that explain the frames nearly as well.
+    rivals: Vec<Pose2>,
+}
+
 /// A search at its end.
 struct Ended {
     outcome: SearchOutcome,
@@ -296,6 +318,7 @@ pub struct Searcher {
     grid: Option<SearchGrid>,
     grid_stale: bool,
     pending: Option<Pending>,
+    judging: Option<Judging>,
     slice_lookups: u64,
     last_kept: Option<Pose2>,
     /// Odometry path driven since the searcher began, metres.
@@ -330,6 +353,7 @@ impl Searcher {
             grid: None,
             grid_stale: false,
             pending: None,
+            judging: None,
             slice_lookups: settings.slice_lookups,
             last_kept: None,
             driven_m: 0.0,
@@ -380,6 +404,7 @@ impl Searcher {
         self.checked = None;
         self.found = None;
         self.pending = None;
+        self.judging = None;
     }
 
     /// The filter was started at a given pose: its flag is checked as
@@ -497,7 +522,17 @@ impl Searcher {
             .recent
             .cloud(&self.beams, self.settings.max_range)
             .thinned(self.settings.max_groups);
-        let job = SearchJob::new(grid, cloud, SearchWindow::Global, &self.settings.search)?;
+        // A check lists rivals apart: look-alikes along one corridor are one
+        // ambiguity, and a list full of them would leave out the rest.
+        let settings = match purpose {
+            Purpose::Verify => SearchSettings {
+                separation_m: self.settings.search.separation_m.max(CHECK_SEPARATION_M),
+                max_hypotheses: self.settings.search.max_hypotheses.max(CHECK_HYPOTHESES),
+                ..self.settings.search
+            },
+            Purpose::Start | Purpose::Lost => self.settings.search,
+        };
+        let job = SearchJob::new(grid, cloud, SearchWindow::Global, &settings)?;
         self.stats.searches += 1;
         self.stats.lookups += job.lookups();
         self.searched_at_m = Some(self.driven_m);
@@ -599,6 +634,7 @@ impl Searcher {
                     self.verified = false;
                     self.streak = 0;
                     self.abandon(Purpose::Verify);
+                    self.judging = None;
                     if self.pending.is_none() && self.research_due() && self.ready() {
                         self.begin(map, Purpose::Lost, odometry)?;
                     }
@@ -651,12 +687,13 @@ impl Searcher {
             // otherwise have every check begun and dropped), but what it
             // finds is of an estimate no longer settled: no verdict.
             let _ = self.advance(Purpose::Verify);
+            self.judging = None;
             return Ok(false);
         }
         if self.streak > 0 {
             self.checked = Some((*odometry, estimate.pose));
         }
-        if self.pending.is_none() {
+        if self.pending.is_none() && self.judging.is_none() {
             let due = !self.verified
                 || self
                     .verified_at_m
@@ -681,10 +718,13 @@ impl Searcher {
             }
         }
         // A check under way keeps the flag as the last one left it.
-        let Some(ended) = self.advance(Purpose::Verify) else {
-            return Ok(self.verified);
-        };
-        self.judge(mcl, map, estimate, odometry, ended)
+        if self.judging.is_none() {
+            let Some(ended) = self.advance(Purpose::Verify) else {
+                return Ok(self.verified);
+            };
+            self.begin_judging(estimate, odometry, ended);
+        }
+        self.judge(mcl, map, estimate, odometry)
     }
 
     /// Whether the estimate left the pose the checks stand for, carried
@@ -699,38 +739,76 @@ impl Searcher {
             || normalize_angle(carried.theta - estimate.pose.theta).abs() > search.separation_rad
     }
 
-    /// A check's end: the estimate against the search's hypotheses.
+    /// A check's search has ended: the estimate's fit to its cloud, and
+    /// the hypotheses apart from the estimate to weigh as rivals over the
+    /// frames to come.
+    fn begin_judging(&mut self, estimate: &Estimate, odometry: &Pose2, ended: Ended) {
+        let Ended {
+            outcome,
+            cloud,
+            kept,
+        } = ended;
+        let pose = estimate.pose;
+        // The cloud is of the robot at the frame it was made at: the
+        // estimate is carried back there, the hypotheses forward to now.
+        let own_cloud = self.grid.as_ref().map_or(0.0, |grid| {
+            score_pose(
+                grid,
+                &cloud,
+                &OdometryMove::between(odometry, &kept).apply(&pose),
+            )
+        });
+        let forward = OdometryMove::between(&kept, odometry);
+        let search = &self.settings.search;
+        let left = outcome
+            .hypotheses
+            .iter()
+            .map(|h| forward.apply(&h.pose))
+            .filter(|p| {
+                (p.x - pose.x).hypot(p.y - pose.y) > search.separation_m
+                    || normalize_angle(p.theta - pose.theta).abs() > search.separation_rad
+            })
+            // Weighed from the last: the best first.
+            .rev()
+            .collect();
+        // A search whose list of hypotheses is full may have left out a
+        // rival (a corridor fills it with look-alikes along itself): like
+        // one cut short, it confirms nothing.
+        let whole = outcome.complete
+            && outcome.hypotheses.len() < search.max_hypotheses.max(CHECK_HYPOTHESES);
+        self.found = Some(Found {
+            odometry: kept,
+            hypotheses: outcome.hypotheses,
+        });
+        self.judging = Some(Judging {
+            fits: own_cloud >= search.min_score,
+            complete: whole,
+            odometry: *odometry,
+            left,
+            rivals: Vec::new(),
+        });
+    }
+
+    /// Weighs a few more of the check's rivals against the estimate, by
+    /// the filter's own model over the frames kept (each costs the
+    /// tables its tiles need, so a building's two dozen are spread over
+    /// frames); once all are weighed, the verdict.
     fn judge(
         &mut self,
         mcl: &mut Mcl,
         map: &mut LocalMap,
         estimate: &Estimate,
         odometry: &Pose2,
-        ended: Ended,
     ) -> Result<bool, LocalizerError> {
-        let Ended {
-            outcome,
-            cloud,
-            kept,
-        } = ended;
-        let hypotheses = outcome.hypotheses;
-        let grid = self.grid.as_ref().ok_or(LocalizerError::NoFreeSpace)?;
-        // The cloud is of the robot at the frame it was made at: the
-        // estimate is carried back there, the hypotheses forward to now.
-        let forward = OdometryMove::between(&kept, odometry);
-        let pose = estimate.pose;
-        let own_cloud = score_pose(
-            grid,
-            &cloud,
-            &OdometryMove::between(odometry, &kept).apply(&pose),
-        );
-        let separated = |p: &Pose2| {
-            (p.x - pose.x).hypot(p.y - pose.y) > self.settings.search.separation_m
-                || normalize_angle(p.theta - pose.theta).abs() > self.settings.search.separation_rad
+        let Some(judging) = &mut self.judging else {
+            return Ok(self.verified);
         };
-        // The search ranks by one blurred cloud; the filter's own model
-        // over the frames kept is what weighs a rival against the pose.
-        let own = mcl.path_score(map, odometry, &pose, self.recent.frames())?;
+        // Poses found frames ago are carried to now by the odometry.
+        let step = OdometryMove::between(&judging.odometry, odometry);
+        for p in judging.left.iter_mut().chain(judging.rivals.iter_mut()) {
+            *p = step.apply(p);
+        }
+        judging.odometry = *odometry;
         // A pose given at the start is a prior the search does not
         // overrule: there a rival must explain the frames better, and one
         // check confirms.
@@ -742,25 +820,34 @@ impl Searcher {
                 self.settings.confirmations.max(1),
             )
         };
-        // The best few apart from the pose: each is weighed over every
-        // frame kept, with the tables its tiles need, and one far down the
-        // search's ranking seldom comes near the pose's own.
-        let mut rivals = Vec::new();
-        let apart = hypotheses
-            .iter()
-            .map(|h| forward.apply(&h.pose))
-            .filter(|at| separated(at))
-            .take(MOST_RIVALS_WEIGHED);
-        for at in apart {
-            let score = mcl.path_score(map, odometry, &at, self.recent.frames())?;
-            if score >= own - margin {
-                rivals.push(at);
+        let pose = estimate.pose;
+        if !judging.left.is_empty() {
+            let own = mcl.path_score(map, odometry, &pose, self.recent.frames())?;
+            for _ in 0..RIVALS_PER_FRAME {
+                let Some(at) = judging.left.pop() else {
+                    break;
+                };
+                let score = mcl.path_score(map, odometry, &at, self.recent.frames())?;
+                if score >= own - margin {
+                    judging.rivals.push(at);
+                }
+            }
+            if !judging.left.is_empty() {
+                return Ok(self.verified);
             }
         }
-        let fits = own_cloud >= self.settings.search.min_score;
+        let Some(Judging {
+            fits,
+            complete,
+            rivals,
+            ..
+        }) = self.judging.take()
+        else {
+            return Ok(self.verified);
+        };
         // A search cut short by its budget may have missed a rival: it
         // confirms nothing, though a rival it found still counts.
-        let passed = fits && rivals.is_empty() && outcome.complete;
+        let passed = fits && rivals.is_empty() && complete;
         let vetoed = !fits || !rivals.is_empty();
         if passed {
             self.streak += 1;
@@ -780,10 +867,6 @@ impl Searcher {
                 self.settings.std_theta,
             )?;
         }
-        self.found = Some(Found {
-            odometry: kept,
-            hypotheses,
-        });
         Ok(self.verified)
     }
 }
