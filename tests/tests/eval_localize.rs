@@ -35,6 +35,16 @@ fn truth(sequence: u64) -> pb::Pose2 {
     }
 }
 
+/// Frame 1..=60's odometry: the true path's steps, but not the kidnap's
+/// jump (the wheels do not notice a robot carried off).
+fn odometry(sequence: u64) -> pb::Pose2 {
+    if sequence <= 30 {
+        truth(sequence)
+    } else {
+        pose(3.4 + 0.05 * (sequence - 30) as f64, 1.0, 0.0)
+    }
+}
+
 /// The localizer's estimate of frame 1..=60 and its map: 1 m off at
 /// first, then (+0.10, -0.05, +0.02 rad) off from frame 6; after the
 /// kidnap it stays where the robot was for frames 31..=37, then is
@@ -59,7 +69,7 @@ async fn publish(client: &MapClient) {
             robot: ROBOT.into(),
             sequence: s,
             time_s: time(s),
-            odometry: Some(truth(s.min(60))),
+            odometry: Some(odometry(s.min(60))),
             true_pose: (s <= 60).then(|| truth(s)),
             ranges: vec![2.0; 16],
             rig: String::new(),
