@@ -6,6 +6,11 @@
 //! the cache cannot hold, and refine the estimate where the sensor model
 //! does (the likelihood field: [`crate::refine`]).
 //!
+//! With a CPU budget ([`Localizer::with_step_budget`]) the particles and
+//! the global search's slices are fitted to it as the steps run: the
+//! filter is any-time, doing less on a busy machine rather than falling
+//! behind.
+//!
 //! The map server is behind [`TileSource`]: the process fetches over the
 //! network, the bench from a map in memory. The step itself does no I/O.
 

