@@ -390,9 +390,9 @@ impl Searcher {
         self.slice_lookups
     }
 
-    /// Whether a search is under way.
+    /// Whether a search, or the weighing of its rivals, is under way.
     pub fn searching(&self) -> bool {
-        self.pending.is_some()
+        self.pending.is_some() || self.judging.is_some()
     }
 
     /// A global start: the filter waits for the first search.
@@ -734,9 +734,7 @@ impl Searcher {
             return false;
         };
         let carried = OdometryMove::between(&then, odometry).apply(&pose);
-        let search = &self.settings.search;
-        (carried.x - estimate.pose.x).hypot(carried.y - estimate.pose.y) > search.separation_m
-            || normalize_angle(carried.theta - estimate.pose.theta).abs() > search.separation_rad
+        apart(&carried, &estimate.pose, &self.settings.search)
     }
 
     /// A check's search has ended: the estimate's fit to its cloud, and
@@ -764,10 +762,7 @@ impl Searcher {
             .hypotheses
             .iter()
             .map(|h| forward.apply(&h.pose))
-            .filter(|p| {
-                (p.x - pose.x).hypot(p.y - pose.y) > search.separation_m
-                    || normalize_angle(p.theta - pose.theta).abs() > search.separation_rad
-            })
+            .filter(|p| apart(p, &pose, search))
             // Weighed from the last: the best first.
             .rev()
             .collect();
@@ -869,4 +864,11 @@ impl Searcher {
         }
         Ok(self.verified)
     }
+}
+
+/// Whether two poses are different hypotheses: farther apart than the
+/// search tells them apart, in position or heading.
+fn apart(a: &Pose2, b: &Pose2, search: &SearchSettings) -> bool {
+    (a.x - b.x).hypot(a.y - b.y) > search.separation_m
+        || normalize_angle(a.theta - b.theta).abs() > search.separation_rad
 }
