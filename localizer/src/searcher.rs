@@ -289,6 +289,19 @@ pub struct SearcherStats {
     pub vetoes: u64,
     /// Checks that confirmed it.
     pub confirmations: u64,
+    /// Checks that ended with neither: their search cut short or their
+    /// list of hypotheses full.
+    pub undecided: u64,
+    /// Checks dropped because the estimate stopped being settled while
+    /// they ran.
+    pub dropped: u64,
+    /// Standing checks (a streak or a confirmation) undone because the
+    /// filter stopped calling itself settled …
+    pub unsettled: u64,
+    /// … because its frames fit worse than they did …
+    pub fits_worse: u64,
+    /// … or because its estimate jumped to another mode.
+    pub jumps: u64,
 }
 
 /// What [`Searcher::probe`] tells.
@@ -679,15 +692,29 @@ impl Searcher {
         // Frames fitting worse than they did (the filter injecting at all)
         // are not a filter sure of its pose: a kidnapped robot's filter
         // keeps its old, tight cluster until the fit has fallen.
-        if !estimate.converged || estimate.lost_score > 0.0 || self.jumped(estimate, odometry) {
+        let jumped = self.jumped(estimate, odometry);
+        if !estimate.converged || estimate.lost_score > 0.0 || jumped {
+            if self.streak > 0 || self.verified {
+                if !estimate.converged {
+                    self.stats.unsettled += 1;
+                } else if jumped {
+                    self.stats.jumps += 1;
+                } else {
+                    self.stats.fits_worse += 1;
+                }
+            }
             self.verified = false;
             self.streak = 0;
             self.checked = None;
             // A check under way goes on (a flag that flickers would
             // otherwise have every check begun and dropped), but what it
             // finds is of an estimate no longer settled: no verdict.
-            let _ = self.advance(Purpose::Verify);
-            self.judging = None;
+            if self.advance(Purpose::Verify).is_some() {
+                self.stats.dropped += 1;
+            }
+            if self.judging.take().is_some() {
+                self.stats.dropped += 1;
+            }
             return Ok(false);
         }
         if self.streak > 0 {
@@ -852,6 +879,8 @@ impl Searcher {
             self.streak = 0;
             self.checked = None;
             self.stats.vetoes += 1;
+        } else {
+            self.stats.undecided += 1;
         }
         self.verified = self.streak >= needed;
         if vetoed && !self.tracking {

@@ -493,10 +493,14 @@ fn start(
             theta = pose.theta,
             "tracking from the given pose"
         );
-        // A pose given is tracked as it always was: the search is for
-        // a robot that does not know where it is.
-        drop(searcher);
-        return Ok(Localizer::new(mcl, map, refresh, Instant::now()));
+        // A pose given is tracked, its flag checked by the search as any
+        // (more leniently: a prior the search does not overrule), so that
+        // a filter that slides off its pose does not stay sure of it.
+        let localizer = Localizer::new(mcl, map, refresh, Instant::now());
+        return Ok(match searcher {
+            Some(searcher) => localizer.with_searcher(searcher),
+            None => localizer,
+        });
     }
     let Some(region) = info.bounds_cells else {
         bail!(

@@ -101,6 +101,13 @@ pub(super) fn log_estimate(
             true_y = format!("{:.3}", truth.y),
             true_theta = format!("{:.3}", truth.theta),
             particles = estimate.particle_count,
+            weight = format!("{:.2}", estimate.cluster_weight),
+            spread_m = format!(
+                "{:.2}",
+                (estimate.covariance[0] + estimate.covariance[4])
+                    .max(0.0)
+                    .sqrt()
+            ),
             converged = estimate.converged,
             lost = format!("{:.2}", estimate.lost_score),
             "estimate beside the simulator's true pose"
@@ -113,6 +120,13 @@ pub(super) fn log_estimate(
             y = format!("{:.3}", estimate.pose.y),
             theta = format!("{:.3}", estimate.pose.theta),
             particles = estimate.particle_count,
+            weight = format!("{:.2}", estimate.cluster_weight),
+            spread_m = format!(
+                "{:.2}",
+                (estimate.covariance[0] + estimate.covariance[4])
+                    .max(0.0)
+                    .sqrt()
+            ),
             converged = estimate.converged,
             lost = format!("{:.2}", estimate.lost_score),
             cache_mb = format!("{:.1}", cache_bytes as f64 / f64::from(1 << 20)),
