@@ -102,12 +102,7 @@ pub(super) fn log_estimate(
             true_theta = format!("{:.3}", truth.theta),
             particles = estimate.particle_count,
             weight = format!("{:.2}", estimate.cluster_weight),
-            spread_m = format!(
-                "{:.2}",
-                (estimate.covariance[0] + estimate.covariance[4])
-                    .max(0.0)
-                    .sqrt()
-            ),
+            spread_m = spread_m(estimate),
             converged = estimate.converged,
             lost = format!("{:.2}", estimate.lost_score),
             "estimate beside the simulator's true pose"
@@ -121,16 +116,18 @@ pub(super) fn log_estimate(
             theta = format!("{:.3}", estimate.pose.theta),
             particles = estimate.particle_count,
             weight = format!("{:.2}", estimate.cluster_weight),
-            spread_m = format!(
-                "{:.2}",
-                (estimate.covariance[0] + estimate.covariance[4])
-                    .max(0.0)
-                    .sqrt()
-            ),
+            spread_m = spread_m(estimate),
             converged = estimate.converged,
             lost = format!("{:.2}", estimate.lost_score),
             cache_mb = format!("{:.1}", cache_bytes as f64 / f64::from(1 << 20)),
             "estimate"
         );
     }
+}
+
+/// The estimate's position spread for a log line: the root of its x and
+/// y variances' sum, metres, as the filter's settling compares it.
+fn spread_m(estimate: &Estimate) -> String {
+    let c = &estimate.covariance;
+    format!("{:.2}", (c[0] + c[4]).max(0.0).sqrt())
 }
