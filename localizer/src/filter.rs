@@ -65,6 +65,7 @@ use crate::error::{LocalizerError, within};
 use crate::local_map::LocalMap;
 use crate::motion::{MotionNoise, OdometryMove};
 use crate::numeric::floor_i64;
+use crate::realign::{RealignSettings, best_in_window, move_rigidly};
 use crate::sampling::{KldSettings, systematic_resample};
 use crate::sensors::{SensorModel, SonarCone};
 
@@ -117,6 +118,9 @@ pub struct FilterSettings {
     pub cluster_keep_weight: f64,
     /// The fewest particles a cluster that is kept gets at a resampling.
     pub cluster_min_particles: usize,
+    /// How a tracked pose whose frame stops fitting is realigned
+    /// ([`Mcl::realign`]); `None` never realigns.
+    pub realign: Option<RealignSettings>,
     /// Seed of every random draw.
     pub seed: u64,
 }
@@ -141,6 +145,7 @@ impl Default for FilterSettings {
             converged_spread_rad: 0.2,
             cluster_keep_weight: 1e-6,
             cluster_min_particles: 300,
+            realign: Some(RealignSettings::default()),
             seed: 1,
         }
     }
@@ -181,6 +186,9 @@ impl FilterSettings {
             return Err(LocalizerError::Invalid(
                 "the sensor ring has no sonar".into(),
             ));
+        }
+        if let Some(realign) = self.realign {
+            realign.validate()?;
         }
         Ok(self)
     }
@@ -255,6 +263,19 @@ pub struct CorrectionReport {
     pub tables_built: usize,
 }
 
+/// A tracked pose moved onto where the frame fits ([`Mcl::realign`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Realignment {
+    /// The tracked pose, moved by odometry.
+    pub from: Pose2,
+    /// Where the frame fits: the particles were moved rigidly onto it.
+    pub to: Pose2,
+    /// The frame's fit at `from`, as a share of the recent frames'.
+    pub fit_before: f64,
+    /// Its fit at `to`, the same way.
+    pub fit_after: f64,
+}
+
 /// A settled filter whose newest frame fits less than this share as well
 /// as its frames have lately is not called converged: a robot carried off
 /// keeps its filter's tight cluster for the few frames the averages take
@@ -323,6 +344,9 @@ pub struct Mcl {
     /// frame's readings at ([`SensorModel::set_reference`]). `None` while
     /// searching.
     reference: Option<Pose2>,
+    /// Sensor updates left in which the odometry is suspect after a
+    /// realignment ([`Mcl::realign`]).
+    odometry_suspect: usize,
     scratch_log: Vec<f64>,
     /// The new weights as [`Self::correct`] works them out.
     scratch_weights: Vec<f64>,
@@ -389,6 +413,7 @@ impl Mcl {
             frame_fit: 1.0,
             cluster: None,
             reference: None,
+            odometry_suspect: 0,
             scratch_log: Vec::new(),
             scratch_weights: Vec::new(),
             uphill: Vec::new(),
@@ -691,6 +716,95 @@ impl Mcl {
         self.reference = self.reference.map(|pose| step.apply(&pose));
         self.odometry = Some(odometry);
         Ok(true)
+    }
+
+    /// The tiles [`Self::realign`] reads for a frame of `readings`: those
+    /// its echoes fall in from the tracked pose's window (its centre and
+    /// corners at the window's extreme headings). Empty when the filter
+    /// would not realign.
+    pub fn tiles_for_realign(&self, map: &LocalMap, readings: &[f64]) -> Vec<TileKey> {
+        let (Some(settings), Some(at)) = (self.realign_settings(), self.reference) else {
+            return Vec::new();
+        };
+        let (l, a) = (settings.linear_m, settings.angular_rad);
+        let mut poses = vec![at];
+        for (dx, dy, dt) in [(l, l, a), (l, -l, -a), (-l, l, -a), (-l, -l, a)] {
+            poses.push(Pose2::new(at.x + dx, at.y + dy, at.theta + dt));
+        }
+        self.sensor.tiles_needed(map, &poses, readings)
+    }
+
+    /// The realignment's settings when this filter realigns now: it has
+    /// them, its sensor is sharp (it judges modes by their best particle,
+    /// as a laser does), it tracks one tight pose, and it has a recent fit
+    /// to compare the frame with.
+    fn realign_settings(&self) -> Option<RealignSettings> {
+        let settings = self.settings.realign?;
+        (!self.sensor.judges_modes_at_mean()
+            && self.reference.is_some()
+            && self.settled()
+            && self.w_slow > 0.0)
+            .then_some(settings)
+    }
+
+    /// Before a correction, once [`Self::predict`] has moved the
+    /// particles: when the filter tracks one pose and the frame of
+    /// `readings` fits it far worse than frames have lately, the poses of
+    /// a window around it are scored with the sensor model, and if one
+    /// fits as frames usually do, the particles are moved rigidly onto it
+    /// ([`crate::realign`]). `tiles` are [`Self::tiles_for_realign`]'s,
+    /// fetched. Returns the move made, if any.
+    pub fn realign(
+        &mut self,
+        map: &mut LocalMap,
+        tiles: &[TileKey],
+        readings: &[f64],
+    ) -> Result<Option<Realignment>, LocalizerError> {
+        let (Some(settings), Some(at)) = (self.realign_settings(), self.reference) else {
+            return Ok(None);
+        };
+        self.sensor.check_frame(readings)?;
+        self.sensor.set_searching(false);
+        self.sensor.set_reference(self.reference);
+        self.sensor.set_reading_poses(self.reading_poses.as_deref());
+        // Fits as shares of the recent frames', in logarithms.
+        let (observations, recent) = (self.sensor.observations(), self.w_slow.ln());
+        let mut centre = Vec::with_capacity(1);
+        self.sensor
+            .score_poses(map, tiles, std::slice::from_ref(&at), readings, &mut centre)?;
+        let before = centre[0] / observations - recent;
+        let poor = if self.odometry_suspect > 0 {
+            self.odometry_suspect -= 1;
+            settings.suspect_fit
+        } else {
+            settings.poor_fit
+        };
+        if before >= poor.ln() {
+            return Ok(None);
+        }
+        let sensor = &mut self.sensor;
+        let window = best_in_window(&at, &settings, |poses, out| {
+            let from = out.len();
+            sensor.score_poses(map, tiles, poses, readings, out)?;
+            for fit in &mut out[from..] {
+                *fit = *fit / observations - recent;
+            }
+            Ok(())
+        })?;
+        if window.best_log_fit < settings.good_fit.ln()
+            || window.best_rank - window.centre_log_fit < settings.min_gain.ln()
+        {
+            return Ok(None);
+        }
+        move_rigidly(&mut self.particles, &at, &window.best);
+        self.odometry_suspect = settings.suspect_updates;
+        self.reference = Some(window.best);
+        Ok(Some(Realignment {
+            from: at,
+            to: window.best,
+            fit_before: window.centre_log_fit.exp(),
+            fit_after: window.best_log_fit.exp(),
+        }))
     }
 
     /// The tiles under the particles' sensors: those within the sensor's

@@ -24,6 +24,9 @@
 //!   exact distance transform both kinds of table are built from.
 //! - [`distance_field`]: per-tile distances to the nearest occupied cell,
 //!   a byte a cell, for the likelihood field.
+//! - [`realign`]: a tracking filter whose frame stops fitting its pose
+//!   moved onto where the frame fits, in a small window around it (a
+//!   laser's tracking through wheels that slip).
 //! - [`refine`]: the filter's estimate refined by matching the frame
 //!   against the distance field (Gauss–Newton), for the likelihood field.
 //! - [`beam_model`]: the likelihood of a measured range given the
@@ -52,6 +55,7 @@ pub mod motion;
 pub mod numeric;
 pub mod preset;
 pub mod range_table;
+pub mod realign;
 pub mod refine;
 pub mod sampling;
 pub mod search;

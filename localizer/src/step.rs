@@ -1,6 +1,7 @@
 //! One frame through the localizer, the same for the `deog localize`
 //! process and for `deog bench localize`: apply the map changes the server
-//! reported (at most every refresh period), predict, fetch the tiles the
+//! reported (at most every refresh period), predict, realign a tracked
+//! pose the frame no longer fits ([`crate::realign`]), fetch the tiles the
 //! frame needs (as its sensor model says: under the particles for a sonar,
 //! where the endpoints fall for a likelihood field), correct, evict what
 //! the cache cannot hold, and refine the estimate where the sensor model
@@ -20,7 +21,7 @@ use std::time::{Duration, Instant};
 use deog_grid::{Pose2, Tile, TileKey, TileMap};
 
 use crate::error::LocalizerError;
-use crate::filter::{CarriedEstimate, CorrectionReport, Estimate, Mcl};
+use crate::filter::{CarriedEstimate, CorrectionReport, Estimate, Mcl, Realignment};
 use crate::local_map::LocalMap;
 use crate::searcher::Searcher;
 
@@ -74,6 +75,9 @@ pub struct StepReport {
     pub tiles_fetched: usize,
     /// The estimate after the frame, once the filter has one.
     pub estimate: Option<Estimate>,
+    /// The tracked pose moved onto where the frame fits, before the
+    /// correction ([`Mcl::realign`]).
+    pub realigned: Option<Realignment>,
 }
 
 /// A filter on its cached map, kept current with the server's changes.
@@ -383,6 +387,12 @@ impl Localizer {
         }
         let mut updated = None;
         if self.mcl.predict(odometry)? {
+            let realign = self.mcl.tiles_for_realign(&self.map, readings);
+            if !realign.is_empty() {
+                let missing = self.mcl.missing_tiles(&self.map, &realign);
+                report.tiles_fetched += fetch_into(tiles, &missing, &mut self.map)?;
+                report.realigned = self.mcl.realign(&mut self.map, &realign, readings)?;
+            }
             let needed = self.mcl.tiles_for_frame(&self.map, readings);
             let missing = self.mcl.missing_tiles(&self.map, &needed);
             report.tiles_fetched += fetch_into(tiles, &missing, &mut self.map)?;

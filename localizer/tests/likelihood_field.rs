@@ -520,3 +520,68 @@ fn a_searching_filter_scores_with_the_search_tempering() {
         "searching {searching}, settled {settled}"
     );
 }
+
+/// The room's circle, with wheels that slip from frame 60 to 71: the
+/// odometry reads each of those steps backwards (5 cm back where the
+/// robot drove 5 cm on), as the Freiburg 079 log's do for a stretch.
+fn slipping_path() -> Vec<(Pose2, Pose2)> {
+    let steps = path(150);
+    let mut out = Vec::with_capacity(steps.len());
+    let mut odometry = steps[0].1;
+    out.push(steps[0]);
+    for (k, pair) in steps.windows(2).enumerate() {
+        let (from, to) = (pair[0].1, pair[1].1);
+        let mut step = to.relative_to(&from);
+        if (60..72).contains(&(k + 1)) {
+            step.x = -step.x;
+            step.y = -step.y;
+        }
+        odometry = odometry.compose(&step);
+        out.push((pair[1].0, odometry));
+    }
+    out
+}
+
+/// The worst position error from frame 30 on of a laser filter tracking
+/// [`slipping_path`], realigning or not.
+fn worst_error_through_slipping_wheels(realign: bool) -> f64 {
+    let reference = room();
+    let rig = laser();
+    let steps = slipping_path();
+    let now = Instant::now();
+    let mut filter = FilterSettings {
+        seed: 4,
+        ..FilterSettings::default()
+    };
+    filter.kld.max_particles = 3_000;
+    if !realign {
+        filter.realign = None;
+    }
+    let mut mcl = Mcl::with_sensor(filter, Box::new(model())).unwrap();
+    mcl.start_at(steps[0].0, 0.05, 0.05).unwrap();
+    let map = LocalMap::new(settings(1 << 30)).unwrap();
+    let mut localizer = Localizer::new(mcl, map, Duration::from_secs(5), now);
+    let mut source = room_tiles();
+    let mut worst: f64 = 0.0;
+    let mut realigned = 0;
+    for (k, (truth, odometry)) in steps.iter().enumerate() {
+        let ranges = laser_frame_mid_cell(&rig, &reference, truth);
+        let report = localizer.step(odometry, &ranges, now, &mut source).unwrap();
+        realigned += usize::from(report.realigned.is_some());
+        if k >= 30 {
+            worst = worst.max(error(&report.estimate.expect("an estimate").pose, truth).0);
+        }
+    }
+    assert_eq!(realigned > 0, realign, "{realigned} realignments");
+    worst
+}
+
+#[test]
+fn a_laser_filter_follows_the_scans_where_the_wheels_slip() {
+    let followed = worst_error_through_slipping_wheels(true);
+    let wheels_alone = worst_error_through_slipping_wheels(false);
+    assert!(
+        followed < 0.25 && wheels_alone > 1.0,
+        "worst error realigning {followed:.3} m, following the wheels alone {wheels_alone:.3} m"
+    );
+}

@@ -46,7 +46,7 @@
 //! - `log`, `robot`, `scans` (the scans localized: `N`), `log_scans` (the
 //!   log's), `seed`, `settle_scans`, `window_scans` (`W`);
 //! - `recipe`: the localizer's flags, `field_tempering`,
-//!   `field_search_tempering`, `no_refine`, `field_beams`,
+//!   `field_search_tempering`, `no_refine`, `no_realign`, `field_beams`,
 //!   `motion_noise_scale`, `min_particles`, `max_particles`,
 //!   `initial_std_xy`, `initial_std_theta`;
 //! - `bounds`: `position_m`, `heading_rad`;
@@ -116,6 +116,10 @@ pub struct Recipe {
     /// as it is (the recipe refines it against the map).
     #[arg(long)]
     pub no_refine: bool,
+    /// The localizer's --no-realign: a tracked pose whose scan stops
+    /// fitting follows the wheels alone (the recipe realigns it).
+    #[arg(long)]
+    pub no_realign: bool,
     /// The localizer's --field-beams: echoes of a scan scored.
     #[arg(long, default_value_t = real_laser().field_beams)]
     pub field_beams: usize,
@@ -161,6 +165,7 @@ impl Recipe {
         .into_iter()
         .flat_map(|(flag, value)| [flag.to_owned(), value])
         .chain(self.no_refine.then(|| "--no-refine".to_owned()))
+        .chain(self.no_realign.then(|| "--no-realign".to_owned()))
         .collect()
     }
 

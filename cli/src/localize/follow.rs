@@ -8,6 +8,7 @@ use std::future::Future;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
+use deog_grid::normalize_angle;
 use deog_localizer::searcher::SearcherStats;
 use deog_localizer::step::Localizer;
 use deog_proto::rig::frame_rig_name;
@@ -56,6 +57,8 @@ pub(super) struct Ends<'a> {
 pub(super) struct Followed {
     pub processed: u64,
     pub corrections: u64,
+    /// Corrections whose tracked pose was first realigned to the frame.
+    pub realigned: u64,
     /// Frames skipped to keep up.
     pub skipped: u64,
     /// The most seconds of frames that came while one step ran: how far
@@ -71,6 +74,7 @@ struct Following<'a> {
     rig_field: String,
     processed: u64,
     corrections: u64,
+    realigned: u64,
     last_sequence: u64,
     /// Frame time of the last estimate sent with particles.
     sampled_at: Option<f64>,
@@ -111,6 +115,7 @@ pub(super) fn follow(
         rig_field: first.rig.clone(),
         processed: 0,
         corrections: 0,
+        realigned: 0,
         last_sequence: 0,
         sampled_at: None,
         last_took: Duration::ZERO,
@@ -131,6 +136,7 @@ pub(super) fn follow(
     Ok(Followed {
         processed: following.processed,
         corrections: following.corrections,
+        realigned: following.realigned,
         skipped: following.catch_up.skipped(),
         filter_lag_s: following.filter_lag_s,
     })
@@ -265,6 +271,23 @@ impl Following<'_> {
                 particles = localizer.mcl().particles().len(),
                 most_particles = localizer.mcl().most_particles(),
                 "global search"
+            );
+        }
+        if let Some(moved) = &report.realigned {
+            self.realigned += 1;
+            tracing::info!(
+                frame = frame.sequence,
+                from_x = format!("{:.3}", moved.from.x),
+                from_y = format!("{:.3}", moved.from.y),
+                to_x = format!("{:.3}", moved.to.x),
+                to_y = format!("{:.3}", moved.to.y),
+                turned_deg = format!(
+                    "{:.2}",
+                    normalize_angle(moved.to.theta - moved.from.theta).to_degrees()
+                ),
+                fit_before = format!("{:.3}", moved.fit_before),
+                fit_after = format!("{:.3}", moved.fit_after),
+                "tracked pose realigned to the frame"
             );
         }
         if let Some(correction) = &report.correction {

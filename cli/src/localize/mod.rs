@@ -163,6 +163,11 @@ pub struct LocalizeArgs {
     /// refining it by matching the frame against the map.
     #[arg(long)]
     pub no_refine: bool,
+    /// Laser: never move a tracked pose whose scan stops fitting onto
+    /// where the scan fits nearby (the filter then follows the wheels
+    /// alone between sensor updates).
+    #[arg(long)]
+    pub no_realign: bool,
     /// Scales the motion model's four noise figures (α1 to α4): above 1 for
     /// odometry worse than the simulator's. Default: the preset's (1 sim,
     /// 2 real-laser).
@@ -418,11 +423,12 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     let followed = follow(&mut localizer, first, ends, settings, &mut shutdown)?;
     let map = localizer.map();
     println!(
-        "{} on {}: {} frames, {} sensor updates, {} frames skipped to keep up (the filter at most {:.2} s of frames behind while carried), {} range tables built, cache {:.1} MiB",
+        "{} on {}: {} frames, {} sensor updates, {} realigned, {} frames skipped to keep up (the filter at most {:.2} s of frames behind while carried), {} range tables built, cache {:.1} MiB",
         args.robot,
         args.map,
         followed.processed,
         followed.corrections,
+        followed.realigned,
         followed.skipped,
         followed.filter_lag_s,
         map.stats().tables_built,

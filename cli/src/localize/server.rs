@@ -91,8 +91,14 @@ pub(super) fn log_estimate(
     processed: u64,
     cache_bytes: usize,
 ) {
-    if let Some(truth) = &frame.true_pose {
+    let (truth, beside) = match (&frame.true_pose, &frame.reference_pose) {
+        (Some(truth), _) => (Some(truth), "true"),
+        (None, Some(reference)) => (Some(reference), "reference"),
+        (None, None) => (None, ""),
+    };
+    if let Some(truth) = truth {
         tracing::debug!(
+            beside,
             frame = frame.sequence,
             x = format!("{:.3}", estimate.pose.x),
             y = format!("{:.3}", estimate.pose.y),
@@ -105,7 +111,7 @@ pub(super) fn log_estimate(
             spread_m = spread_m(estimate),
             converged = estimate.converged,
             lost = format!("{:.2}", estimate.lost_score),
-            "estimate beside the simulator's true pose"
+            "estimate beside the simulator's true pose or the log's reference"
         );
     }
     if processed % 100 == 0 {

@@ -106,6 +106,9 @@ impl LocalizeArgs {
         settings.recovery_threshold = self.recovery_threshold;
         settings.search_share = self.recovery_search_share;
         settings.motion = settings.motion.scaled(motion_noise_scale);
+        if self.no_realign {
+            settings.realign = None;
+        }
         // The filter is built once the first frame names the rig; its
         // settings are checked now, before anything waits.
         let settings = settings.validate().context("the filter's settings")?;

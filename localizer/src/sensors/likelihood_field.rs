@@ -347,6 +347,18 @@ impl LikelihoodField {
         if self.params.beam_skip_threshold > 0.0 && particles.len() > 1 {
             return self.score_skipping(window, endpoints, particles, out);
         }
+        self.score_plain(window, endpoints, particles, out)
+    }
+
+    /// As [`Self::score_over`], every endpoint scored at every pose, none
+    /// skipped: each pose's score its own, whatever is scored with it.
+    fn score_plain(
+        &self,
+        window: &impl FieldCodes,
+        endpoints: &[Endpoint],
+        particles: &[Pose2],
+        out: &mut Vec<f64>,
+    ) -> usize {
         let beams: Vec<(f64, f64, &CodeTable)> = endpoints
             .iter()
             .map(|e| (e.x, e.y, &self.tables[e.table]))
@@ -491,6 +503,23 @@ impl SensorModel for LikelihoodField {
             FieldWindow::Sparse(window) => self.score_over(&window, &endpoints, particles, out),
         };
         self.echoes = scored;
+        Ok(built)
+    }
+
+    fn score_poses(
+        &mut self,
+        map: &mut LocalMap,
+        tiles: &[TileKey],
+        poses: &[Pose2],
+        readings: &[f64],
+        out: &mut Vec<f64>,
+    ) -> Result<usize, LocalizerError> {
+        let endpoints = self.endpoints(readings);
+        let built = map.ensure_fields(tiles, &self.spec)?;
+        match map.field_window(tiles) {
+            FieldWindow::Dense(window) => self.score_plain(&window, &endpoints, poses, out),
+            FieldWindow::Sparse(window) => self.score_plain(&window, &endpoints, poses, out),
+        };
         Ok(built)
     }
 

@@ -112,6 +112,22 @@ pub trait SensorModel: std::fmt::Debug + Send {
         out: &mut Vec<f64>,
     ) -> Result<usize, LocalizerError>;
 
+    /// As [`Self::score_particles`], but each pose scored as if it were
+    /// alone, so that its score does not depend on the others scored with
+    /// it (a likelihood field's beam skipping looks at the whole set): for
+    /// comparing poses with one another. By default,
+    /// [`Self::score_particles`].
+    fn score_poses(
+        &mut self,
+        map: &mut LocalMap,
+        tiles: &[TileKey],
+        poses: &[Pose2],
+        readings: &[f64],
+        out: &mut Vec<f64>,
+    ) -> Result<usize, LocalizerError> {
+        self.score_particles(map, tiles, poses, readings, out)
+    }
+
     /// The log-likelihood of `readings` at one `pose`, as a particle there
     /// would get it: for diagnostics and tests.
     fn score_pose(
