@@ -585,3 +585,46 @@ fn a_laser_filter_follows_the_scans_where_the_wheels_slip() {
         "worst error realigning {followed:.3} m, following the wheels alone {wheels_alone:.3} m"
     );
 }
+
+#[test]
+fn a_thick_walls_field_grows_inside_it_from_its_faces() {
+    use deog_localizer::distance_field::FieldCodes;
+    // Free space, then a wall 0.5 m thick from x = 1 m, then unknown.
+    let log_odds = |x: f64, _y: f64| {
+        if x < 1.0 {
+            FREE
+        } else if x < 1.5 {
+            OCCUPIED
+        } else {
+            i16::MIN
+        }
+    };
+    let mut map = LocalMap::new(settings(1 << 30)).unwrap();
+    let key = TileKey::new(0, 0);
+    for tx in -1..=1 {
+        for ty in -1..=1 {
+            let k = TileKey::new(tx, ty);
+            map.insert_tile(k, 1, Some(&tile_of(k, log_odds))).unwrap();
+        }
+    }
+    let spec = FieldSpec { max_distance: 2.0 };
+    map.ensure_fields(&[key], &spec).unwrap();
+    let window = map.field_window(&[key]);
+    let at = |x: f64| spec.distance_of(window_code(&window, x, 1.0)).unwrap();
+    fn window_code(window: &deog_localizer::distance_field::FieldWindow, x: f64, y: f64) -> u8 {
+        match window {
+            deog_localizer::distance_field::FieldWindow::Dense(w) => w.code_at(x, y),
+            deog_localizer::distance_field::FieldWindow::Sparse(w) => w.code_at(x, y),
+        }
+    }
+    // On the face, and a cell in front of it: near; 0.3 m into the wall
+    // as far from its face as 0.3 m in front of it.
+    assert!(at(1.025) < 0.03, "{}", at(1.025));
+    assert!(
+        (at(1.325) - at(0.725)).abs() < 0.03,
+        "{} {}",
+        at(1.325),
+        at(0.725)
+    );
+    assert!(at(1.325) > 0.25, "{}", at(1.325));
+}
