@@ -1,9 +1,6 @@
 //! Per-tile distance fields: for every cell of a tile, how far its centre
 //! lies from the nearest occupied cell's centre, as the likelihood field
-//! ([`crate::sensors::likelihood_field`]) judges a beam's endpoint by. The
-//! cache builds them counting only a wall's faces occupied (occupied
-//! cells beside a free one), so that inside a thick wall the distance
-//! grows again ([`crate::local_map`]).
+//! ([`crate::sensors::likelihood_field`]) judges a beam's endpoint by.
 //!
 //! A field is built from an [`OccupancyRaster`] covering the tile and
 //! everything within [`FieldSpec::max_distance`] of it, whose exact

@@ -645,41 +645,12 @@ impl LocalMap {
     /// The raster, reused when there is one, filled with the occupied
     /// cells of `bounds`; `held` is what the old one counted in `bytes`.
     fn fill_raster(&mut self, bounds: CellBox, held: usize) -> OccupancyRaster {
-        self.fill_raster_with(bounds, held, |map, cell| map.cell_state(cell) == OCCUPIED)
-    }
-
-    /// As [`Self::fill_raster`], with only the occupied cells on a wall's
-    /// face (beside a free cell, of four) counted occupied: what a
-    /// likelihood field measures an endpoint's distance to. A wall mapped
-    /// from many poses is several cells thick, and with every one of them
-    /// at distance 0 an endpoint anywhere inside it scores as one on its
-    /// face: a laser that looks ahead then fits as well a wall's thickness
-    /// further on, and the estimate sits that far ahead (6 cm along the
-    /// way on the Freiburg 079 log's map, 1.4 cm on the Intel log's).
-    fn fill_face_raster(&mut self, bounds: CellBox, held: usize) -> OccupancyRaster {
-        self.fill_raster_with(bounds, held, |map, cell| {
-            map.cell_state(cell) == OCCUPIED
-                && [(1, 0), (-1, 0), (0, 1), (0, -1)].iter().any(|&(dx, dy)| {
-                    map.cell_state(CellIndex::new(
-                        cell.x.saturating_add(dx),
-                        cell.y.saturating_add(dy),
-                    )) == FREE
-                })
-        })
-    }
-
-    fn fill_raster_with(
-        &mut self,
-        bounds: CellBox,
-        held: usize,
-        occupied: impl Fn(&Self, CellIndex) -> bool,
-    ) -> OccupancyRaster {
         let raster = match self.raster.take() {
             Some(mut raster) => {
-                raster.refill(bounds, |cell| occupied(self, cell));
+                raster.refill(bounds, |cell| self.cell_state(cell) == OCCUPIED);
                 raster
             }
-            None => OccupancyRaster::new(bounds, |cell| occupied(self, cell)),
+            None => OccupancyRaster::new(bounds, |cell| self.cell_state(cell) == OCCUPIED),
         };
         self.bytes = self.bytes - held + raster.held_bytes();
         raster
@@ -826,7 +797,7 @@ impl LocalMap {
             let needed = (bounds.width() * bounds.height() * RASTER_BYTES_PER_CELL) as usize;
             let held = self.raster.as_ref().map_or(0, OccupancyRaster::held_bytes);
             self.make_room_for_fields(taken, needed.saturating_sub(held), &keep);
-            let raster = self.fill_face_raster(bounds, held);
+            let raster = self.fill_raster(bounds, held);
             for key in &remaining[..taken] {
                 // Checked when the batch was formed: cannot fail here.
                 let tile_box = size.cell_box(*key)?;
