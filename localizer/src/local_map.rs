@@ -144,6 +144,9 @@ pub struct CacheStats {
     /// Distance fields dropped, by eviction or because their
     /// neighbourhood changed.
     pub fields_dropped: u64,
+    /// Tiles newly held (not those fetched again): what a grid of the
+    /// held tiles, built before, lacks.
+    pub tiles_added: u64,
 }
 
 /// The cached part of one map.
@@ -309,6 +312,7 @@ impl LocalMap {
                     },
                 );
                 self.bytes += area + reference_bytes;
+                self.stats.tiles_added += 1;
                 true
             }
         };

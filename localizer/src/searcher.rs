@@ -250,6 +250,8 @@ struct Pending {
     purpose: Purpose,
     /// The odometry of the frame its cloud is of.
     kept: Pose2,
+    /// A check's estimate at that frame, when the check began.
+    estimate_at_kept: Option<Pose2>,
 }
 
 /// A check whose search has ended, weighing its rivals frame by frame.
@@ -272,6 +274,7 @@ struct Ended {
     outcome: SearchOutcome,
     cloud: ScanCloud,
     kept: Pose2,
+    estimate_at_kept: Option<Pose2>,
 }
 
 /// Counts of what the searcher did, for logs and benches.
@@ -287,6 +290,9 @@ pub struct SearcherStats {
     pub incomplete: u64,
     /// Checks of a settled estimate that found a rival or a bad fit.
     pub vetoes: u64,
+    /// Of those, the vetoes for a bad fit: the estimate's own echoes
+    /// scored below the search's least score, rival or none.
+    pub unfit: u64,
     /// Checks that confirmed it.
     pub confirmations: u64,
     /// Checks that ended with neither: their search cut short or their
@@ -330,6 +336,10 @@ pub struct Searcher {
     /// the map changed (once no search is under way on it).
     grid: Option<SearchGrid>,
     grid_stale: bool,
+    /// The map's count of tiles added when the grid was built: a filter
+    /// tracking a given pose holds the tiles near its path only, and
+    /// the grid must grow with them.
+    grid_tiles_added: u64,
     pending: Option<Pending>,
     judging: Option<Judging>,
     slice_lookups: u64,
@@ -365,6 +375,7 @@ impl Searcher {
             phase: Phase::Off,
             grid: None,
             grid_stale: false,
+            grid_tiles_added: 0,
             pending: None,
             judging: None,
             slice_lookups: settings.slice_lookups,
@@ -512,9 +523,11 @@ impl Searcher {
         purpose: Purpose,
         odometry: &Pose2,
     ) -> Result<bool, LocalizerError> {
-        if self.grid.is_none() || self.grid_stale {
+        let added = map.stats().tiles_added;
+        if self.grid.is_none() || self.grid_stale || added != self.grid_tiles_added {
             self.grid = None;
             self.grid_stale = false;
+            self.grid_tiles_added = added;
             let Some(cells) = map.search_cells(self.settings.cell_factor)? else {
                 return Ok(false);
             };
@@ -553,6 +566,7 @@ impl Searcher {
             job,
             purpose,
             kept: self.last_kept.unwrap_or(*odometry),
+            estimate_at_kept: None,
         });
         Ok(true)
     }
@@ -568,7 +582,12 @@ impl Searcher {
         if !done {
             return None;
         }
-        let Pending { job, kept, .. } = self.pending.take()?;
+        let Pending {
+            job,
+            kept,
+            estimate_at_kept,
+            ..
+        } = self.pending.take()?;
         let cloud = job.cloud().clone();
         let outcome = job.finish();
         self.stats.ended += 1;
@@ -579,6 +598,7 @@ impl Searcher {
             outcome,
             cloud,
             kept,
+            estimate_at_kept,
         })
     }
 
@@ -743,6 +763,13 @@ impl Searcher {
             if !self.begin(map, Purpose::Verify, odometry)? {
                 return Ok(false);
             }
+            // The estimate at the cloud's frame, carried the short way
+            // back now: carried at the check's end, it would cross every
+            // frame the search took, and a real robot's odometry drifts.
+            if let Some(pending) = &mut self.pending {
+                pending.estimate_at_kept =
+                    Some(OdometryMove::between(odometry, &pending.kept).apply(&estimate.pose));
+            }
         }
         // A check under way keeps the flag as the last one left it.
         if self.judging.is_none() {
@@ -772,23 +799,24 @@ impl Searcher {
             outcome,
             cloud,
             kept,
+            estimate_at_kept,
         } = ended;
         let pose = estimate.pose;
         // The cloud is of the robot at the frame it was made at: the
-        // estimate is carried back there, the hypotheses forward to now.
-        let own_cloud = self.grid.as_ref().map_or(0.0, |grid| {
-            score_pose(
-                grid,
-                &cloud,
-                &OdometryMove::between(odometry, &kept).apply(&pose),
-            )
-        });
-        let forward = OdometryMove::between(&kept, odometry);
+        // estimate is judged as it was there, and the hypotheses are
+        // carried to now as the estimate moved since (by the odometry
+        // when the check began without one).
+        let at_kept =
+            estimate_at_kept.unwrap_or_else(|| OdometryMove::between(odometry, &kept).apply(&pose));
+        let own_cloud = self
+            .grid
+            .as_ref()
+            .map_or(0.0, |grid| score_pose(grid, &cloud, &at_kept));
         let search = &self.settings.search;
         let left = outcome
             .hypotheses
             .iter()
-            .map(|h| forward.apply(&h.pose))
+            .map(|h| pose.compose(&h.pose.relative_to(&at_kept)))
             .filter(|p| apart(p, &pose, search))
             // Weighed from the last: the best first.
             .rev()
@@ -798,12 +826,21 @@ impl Searcher {
         // one cut short, it confirms nothing.
         let whole = outcome.complete
             && outcome.hypotheses.len() < search.max_hypotheses.max(CHECK_HYPOTHESES);
+        // The estimate's echoes fit if they score as a hypothesis would,
+        // or nearly as well as the best the search found anywhere: a real
+        // laser's frames carried a metre by its odometry smear far
+        // echoes, and a right pose then scores below the least alone.
+        let best = outcome
+            .hypotheses
+            .first()
+            .map_or(f64::INFINITY, |h| h.score);
+        let fits = own_cloud >= search.min_score.min(search.keep_ratio * best);
         self.found = Some(Found {
             odometry: kept,
             hypotheses: outcome.hypotheses,
         });
         self.judging = Some(Judging {
-            fits: own_cloud >= search.min_score,
+            fits,
             complete: whole,
             odometry: *odometry,
             left,
@@ -879,6 +916,7 @@ impl Searcher {
             self.streak = 0;
             self.checked = None;
             self.stats.vetoes += 1;
+            self.stats.unfit += u64::from(!fits);
         } else {
             self.stats.undecided += 1;
         }

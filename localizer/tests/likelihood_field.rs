@@ -585,3 +585,16 @@ fn a_laser_filter_follows_the_scans_where_the_wheels_slip() {
         "worst error realigning {followed:.3} m, following the wheels alone {wheels_alone:.3} m"
     );
 }
+
+#[test]
+fn the_cache_counts_tiles_newly_held_not_those_fetched_again() {
+    // What a search grid of the held tiles checks to grow with them.
+    let mut map = LocalMap::new(settings(1 << 30)).unwrap();
+    let (a, b) = (TileKey::new(0, 0), TileKey::new(1, 0));
+    map.insert_tile(a, 1, Some(&room_tile(a))).unwrap();
+    assert_eq!(map.stats().tiles_added, 1);
+    map.insert_tile(a, 2, Some(&room_tile(a))).unwrap();
+    assert_eq!(map.stats().tiles_added, 1);
+    map.insert_tile(b, 1, None).unwrap();
+    assert_eq!(map.stats().tiles_added, 2);
+}

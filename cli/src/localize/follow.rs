@@ -262,6 +262,7 @@ impl Following<'_> {
                 cut_short = stats.incomplete,
                 confirmations = stats.confirmations,
                 vetoes = stats.vetoes,
+                unfit = stats.unfit,
                 undecided = stats.undecided,
                 dropped = stats.dropped,
                 unsettled = stats.unsettled,
