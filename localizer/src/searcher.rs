@@ -763,10 +763,14 @@ impl Searcher {
             if !self.begin(map, Purpose::Verify, odometry)? {
                 return Ok(false);
             }
-            // The estimate at the cloud's frame, carried the short way
-            // back now: carried at the check's end, it would cross every
-            // frame the search took, and a real robot's odometry drifts.
-            if let Some(pending) = &mut self.pending {
+            // A tracked filter's estimate at the cloud's frame, carried
+            // the short way back now: carried at the check's end, it would
+            // cross every frame the search took, and a real robot's
+            // odometry drifts. (A global start's estimate may change mode
+            // while its check runs, and is carried at the end.)
+            if self.tracking
+                && let Some(pending) = &mut self.pending
+            {
                 pending.estimate_at_kept =
                     Some(OdometryMove::between(odometry, &pending.kept).apply(&estimate.pose));
             }
@@ -802,21 +806,27 @@ impl Searcher {
             estimate_at_kept,
         } = ended;
         let pose = estimate.pose;
-        // The cloud is of the robot at the frame it was made at: the
-        // estimate is judged as it was there, and the hypotheses are
-        // carried to now as the estimate moved since (by the odometry
-        // when the check began without one).
+        // The cloud is of the robot at the frame it was made at: a
+        // tracked estimate is judged as it was there, and the hypotheses
+        // are carried to now as the estimate moved since. Any other, or
+        // one that has left the mode it was in when the check began, is
+        // judged carried back by the odometry, the hypotheses forward.
+        let search = &self.settings.search;
+        let forward = OdometryMove::between(&kept, odometry);
+        let same_mode = estimate_at_kept.filter(|then| !apart(&forward.apply(then), &pose, search));
         let at_kept =
-            estimate_at_kept.unwrap_or_else(|| OdometryMove::between(odometry, &kept).apply(&pose));
+            same_mode.unwrap_or_else(|| OdometryMove::between(odometry, &kept).apply(&pose));
         let own_cloud = self
             .grid
             .as_ref()
             .map_or(0.0, |grid| score_pose(grid, &cloud, &at_kept));
-        let search = &self.settings.search;
         let left = outcome
             .hypotheses
             .iter()
-            .map(|h| pose.compose(&h.pose.relative_to(&at_kept)))
+            .map(|h| match same_mode {
+                Some(then) => pose.compose(&h.pose.relative_to(&then)),
+                None => forward.apply(&h.pose),
+            })
             .filter(|p| apart(p, &pose, search))
             // Weighed from the last: the best first.
             .rev()
@@ -826,15 +836,7 @@ impl Searcher {
         // one cut short, it confirms nothing.
         let whole = outcome.complete
             && outcome.hypotheses.len() < search.max_hypotheses.max(CHECK_HYPOTHESES);
-        // The estimate's echoes fit if they score as a hypothesis would,
-        // or nearly as well as the best the search found anywhere: a real
-        // laser's frames carried a metre by its odometry smear far
-        // echoes, and a right pose then scores below the least alone.
-        let best = outcome
-            .hypotheses
-            .first()
-            .map_or(f64::INFINITY, |h| h.score);
-        let fits = own_cloud >= search.min_score.min(search.keep_ratio * best);
+        let fits = own_cloud >= search.min_score;
         self.found = Some(Found {
             odometry: kept,
             hypotheses: outcome.hypotheses,
