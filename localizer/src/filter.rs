@@ -772,7 +772,10 @@ impl Mcl {
         let mut centre = Vec::with_capacity(1);
         self.sensor
             .score_poses(map, tiles, std::slice::from_ref(&at), readings, &mut centre)?;
-        let before = centre[0] / observations - recent;
+        let Some(&centre) = centre.first() else {
+            return Ok(None);
+        };
+        let before = centre / observations - recent;
         let poor = if self.odometry_suspect > 0 {
             self.odometry_suspect -= 1;
             settings.suspect_fit
