@@ -334,6 +334,35 @@ impl LikelihoodField {
             .collect()
     }
 
+    /// Scores `poses` over the fields of `tiles` (built where missing),
+    /// pushing onto `out`: with beam skipping when `may_skip`
+    /// ([`Self::score_over`]), else every endpoint at every pose
+    /// ([`Self::score_plain`]). Returns the fields built and the
+    /// endpoints scored.
+    fn score_in_fields(
+        &mut self,
+        map: &mut LocalMap,
+        tiles: &[TileKey],
+        poses: &[Pose2],
+        readings: &[f64],
+        out: &mut Vec<f64>,
+        may_skip: bool,
+    ) -> Result<(usize, usize), LocalizerError> {
+        let endpoints = self.endpoints(readings);
+        let built = map.ensure_fields(tiles, &self.spec)?;
+        let scored = match (map.field_window(tiles), may_skip) {
+            (FieldWindow::Dense(window), true) => self.score_over(&window, &endpoints, poses, out),
+            (FieldWindow::Sparse(window), true) => self.score_over(&window, &endpoints, poses, out),
+            (FieldWindow::Dense(window), false) => {
+                self.score_plain(&window, &endpoints, poses, out)
+            }
+            (FieldWindow::Sparse(window), false) => {
+                self.score_plain(&window, &endpoints, poses, out)
+            }
+        };
+        Ok((built, scored))
+    }
+
     /// Scores `particles` over `window`, pushing onto `out`; returns how
     /// many of the endpoints were scored (the rest skipped, see
     /// [`LikelihoodFieldParams::beam_skip_threshold`]).
@@ -495,13 +524,8 @@ impl SensorModel for LikelihoodField {
         readings: &[f64],
         out: &mut Vec<f64>,
     ) -> Result<usize, LocalizerError> {
-        let endpoints = self.endpoints(readings);
-        self.echoes = endpoints.len();
-        let built = map.ensure_fields(tiles, &self.spec)?;
-        let scored = match map.field_window(tiles) {
-            FieldWindow::Dense(window) => self.score_over(&window, &endpoints, particles, out),
-            FieldWindow::Sparse(window) => self.score_over(&window, &endpoints, particles, out),
-        };
+        self.echoes = self.endpoints(readings).len();
+        let (built, scored) = self.score_in_fields(map, tiles, particles, readings, out, true)?;
         self.echoes = scored;
         Ok(built)
     }
@@ -514,13 +538,9 @@ impl SensorModel for LikelihoodField {
         readings: &[f64],
         out: &mut Vec<f64>,
     ) -> Result<usize, LocalizerError> {
-        let endpoints = self.endpoints(readings);
-        let built = map.ensure_fields(tiles, &self.spec)?;
-        match map.field_window(tiles) {
-            FieldWindow::Dense(window) => self.score_plain(&window, &endpoints, poses, out),
-            FieldWindow::Sparse(window) => self.score_plain(&window, &endpoints, poses, out),
-        };
-        Ok(built)
+        Ok(self
+            .score_in_fields(map, tiles, poses, readings, out, false)?
+            .0)
     }
 
     fn score_pose(
