@@ -656,6 +656,7 @@ impl Mcl {
         self.w_slow = 0.0;
         self.w_fast = 0.0;
         self.frame_fit = 1.0;
+        self.odometry_suspect = 0;
         self.cluster = heaviest_cluster(&self.particles, &self.weights, self.settings.bins);
         self.reference = self.tracked_pose();
     }
@@ -1523,7 +1524,11 @@ impl Mcl {
                 covariance: cluster.covariance,
                 particle_count: self.particles.len(),
                 cluster_weight: cluster.weight,
-                converged: self.settled() && self.frame_fit >= CONVERGED_FRAME_FIT,
+                // Just after a realignment the pose rests on a scan's match
+                // alone: not converged while the odometry is suspect.
+                converged: self.settled()
+                    && self.frame_fit >= CONVERGED_FRAME_FIT
+                    && self.odometry_suspect == 0,
                 lost_score: self.injection_share(),
             },
             odometry: self.odometry,

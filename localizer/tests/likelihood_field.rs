@@ -542,9 +542,10 @@ fn slipping_path() -> Vec<(Pose2, Pose2)> {
     out
 }
 
-/// The worst position error from frame 30 on of a laser filter tracking
-/// [`slipping_path`], realigning or not.
-fn worst_error_through_slipping_wheels(realign: bool) -> f64 {
+/// A laser filter tracking [`slipping_path`], realigning or not: the
+/// worst position error from frame 30 on, the realignments whose estimate
+/// was called converged, and whether the last estimate is.
+fn worst_error_through_slipping_wheels(realign: bool) -> (f64, usize, bool) {
     let reference = room();
     let rig = laser();
     let steps = slipping_path();
@@ -563,27 +564,34 @@ fn worst_error_through_slipping_wheels(realign: bool) -> f64 {
     let mut localizer = Localizer::new(mcl, map, Duration::from_secs(5), now);
     let mut source = room_tiles();
     let mut worst: f64 = 0.0;
-    let mut realigned = 0;
+    let (mut realigned, mut sure_on_one_scan, mut converged_at_end) = (0, 0, false);
     for (k, (truth, odometry)) in steps.iter().enumerate() {
         let ranges = laser_frame_mid_cell(&rig, &reference, truth);
         let report = localizer.step(odometry, &ranges, now, &mut source).unwrap();
+        let estimate = report.estimate.expect("an estimate");
         realigned += usize::from(report.realigned.is_some());
+        sure_on_one_scan += usize::from(report.realigned.is_some() && estimate.converged);
+        converged_at_end = estimate.converged;
         if k >= 30 {
-            worst = worst.max(error(&report.estimate.expect("an estimate").pose, truth).0);
+            worst = worst.max(error(&estimate.pose, truth).0);
         }
     }
     assert_eq!(realigned > 0, realign, "{realigned} realignments");
-    worst
+    (worst, sure_on_one_scan, converged_at_end)
 }
 
 #[test]
 fn a_laser_filter_follows_the_scans_where_the_wheels_slip() {
-    let followed = worst_error_through_slipping_wheels(true);
-    let wheels_alone = worst_error_through_slipping_wheels(false);
+    let (followed, sure_on_one_scan, converged_at_end) = worst_error_through_slipping_wheels(true);
+    let (wheels_alone, _, _) = worst_error_through_slipping_wheels(false);
     assert!(
         followed < 0.25 && wheels_alone > 1.0,
         "worst error realigning {followed:.3} m, following the wheels alone {wheels_alone:.3} m"
     );
+    // A pose that rests on one scan's match is not called converged; once
+    // the scans fit it again, it is.
+    assert_eq!(sure_on_one_scan, 0, "realignments called converged");
+    assert!(converged_at_end, "not converged again after the slip");
 }
 
 #[test]
