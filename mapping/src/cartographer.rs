@@ -377,7 +377,13 @@ impl Cartographer {
         }
         let pose = self.pose_of(frame)?;
         match self.guard.as_mut() {
-            Some((view, reach)) => view.missing_around(&pose, *reach),
+            Some((view, reach)) => view.missing_around(&pose, *reach).map_err(|e| match e {
+                MappingError::Grid(e) => MappingError::UnusableFrame {
+                    sequence: frame.sequence,
+                    reason: e.to_string(),
+                },
+                other => other,
+            }),
             None => Ok(Vec::new()),
         }
     }
@@ -444,8 +450,9 @@ impl Cartographer {
             self.sensor.set_reading_poses(at.as_deref());
         }
         let start = out.len();
-        let invalid = |e: GridError| {
-            MappingError::invalid(format!("frame {}", frame.sequence), e.to_string())
+        let invalid = |e: GridError| MappingError::UnusableFrame {
+            sequence: frame.sequence,
+            reason: e.to_string(),
         };
         if let Some(d) = &mut self.directional {
             d.plain.clear();
@@ -616,6 +623,31 @@ mod tests {
         };
         assert!(c.integrate(&bad, &mut out).is_err());
         assert!(out.is_empty());
+        // A pose beyond the grid's reach is the frame's fault, not the
+        // mapping's: an error that says to skip that frame.
+        let far = FrameInput {
+            sequence: 6,
+            true_pose: Some(Pose2::new(1e300, 0.0, 0.0)),
+            ranges: &ranges,
+            ..bad
+        };
+        match c.integrate(&far, &mut out) {
+            Err(MappingError::UnusableFrame {
+                sequence: 6,
+                reason,
+            }) => {
+                assert!(reason.contains("must be within"), "{reason}");
+            }
+            other => panic!("expected an unusable frame, got {other:?}"),
+        }
+        assert!(out.is_empty());
+        // The same cartographer maps the next frame as if it had not been.
+        let next = FrameInput {
+            sequence: 7,
+            true_pose: Some(Pose2::new(0.0, 0.0, 0.0)),
+            ..far
+        };
+        assert!(c.integrate(&next, &mut out).expect("maps") > 0);
     }
 
     /// Frames with echoes near and far, short, at the maximum range and

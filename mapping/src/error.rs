@@ -16,6 +16,15 @@ pub enum MappingError {
         /// What is wrong with it.
         reason: String,
     },
+    /// A frame's own values cannot be mapped (a pose beyond the grid's
+    /// reach, say): the frame is to be skipped, the mapping goes on.
+    #[error("frame {sequence}: {reason}")]
+    UnusableFrame {
+        /// The frame's sequence.
+        sequence: u64,
+        /// What in it cannot be used.
+        reason: String,
+    },
 }
 
 impl MappingError {

@@ -247,11 +247,38 @@ pub fn tile_to_wire(key: TileKey, version: u64, cells: Option<&Tile>) -> pb::Til
     }
 }
 
+/// What a frame may hold, so that every consumer can use what is stored:
+/// positions within a thousand kilometres of the origin (a map of the
+/// finest cells, 1 cm, reaches 21,000 km) …
+pub const FRAME_MAX_COORDINATE_M: f64 = 1e6;
+/// … ranges of at most 10 km (no range sensor reads farther; a log marks
+/// no return with its sensor's largest value, 82 m at most in ours) …
+pub const FRAME_MAX_RANGE_M: f64 = 1e4;
+/// … and times from 0 to 10^10 s (the year 2286 in Unix time).
+pub const FRAME_MAX_TIME_S: f64 = 1e10;
+
 fn pose(field: &str, value: Option<&pb::Pose2>) -> Result<(), StoreError> {
     let p = value.ok_or_else(|| StoreError::invalid(field, "is required"))?;
     finite(&format!("{field}.x"), p.x)?;
     finite(&format!("{field}.y"), p.y)?;
     finite(&format!("{field}.theta"), p.theta)?;
+    Ok(())
+}
+
+/// A frame's pose: finite, and within [`FRAME_MAX_COORDINATE_M`].
+fn frame_pose(field: &str, value: Option<&pb::Pose2>) -> Result<(), StoreError> {
+    pose(field, value)?;
+    let p = value.ok_or_else(|| StoreError::invalid(field, "is required"))?;
+    for (axis, v) in [("x", p.x), ("y", p.y)] {
+        if v.abs() > FRAME_MAX_COORDINATE_M {
+            return Err(StoreError::invalid(
+                format!("{field}.{axis}"),
+                format!(
+                    "must be within [-{FRAME_MAX_COORDINATE_M}, {FRAME_MAX_COORDINATE_M}] m, got {v}"
+                ),
+            ));
+        }
+    }
     Ok(())
 }
 
@@ -276,13 +303,19 @@ pub fn sequence(field: &str, value: u64) -> Result<u64, StoreError> {
 pub fn sonar_frame(field: &str, frame: &pb::SonarFrame, limits: &Limits) -> Result<(), StoreError> {
     robot_name(&format!("{field}.robot"), &frame.robot)?;
     sequence(&format!("{field}.sequence"), frame.sequence)?;
-    finite(&format!("{field}.time_s"), frame.time_s)?;
-    pose(&format!("{field}.odometry"), frame.odometry.as_ref())?;
+    let time = finite(&format!("{field}.time_s"), frame.time_s)?;
+    if !(0.0..=FRAME_MAX_TIME_S).contains(&time) {
+        return Err(StoreError::invalid(
+            format!("{field}.time_s"),
+            format!("must be within [0, {FRAME_MAX_TIME_S}] s, got {time}"),
+        ));
+    }
+    frame_pose(&format!("{field}.odometry"), frame.odometry.as_ref())?;
     if frame.true_pose.is_some() {
-        pose(&format!("{field}.true_pose"), frame.true_pose.as_ref())?;
+        frame_pose(&format!("{field}.true_pose"), frame.true_pose.as_ref())?;
     }
     if frame.reference_pose.is_some() {
-        pose(
+        frame_pose(
             &format!("{field}.reference_pose"),
             frame.reference_pose.as_ref(),
         )?;
@@ -303,6 +336,12 @@ pub fn sonar_frame(field: &str, frame: &pb::SonarFrame, limits: &Limits) -> Resu
             return Err(StoreError::invalid(
                 f,
                 format!("must not be negative, got {r}"),
+            ));
+        }
+        if r > FRAME_MAX_RANGE_M {
+            return Err(StoreError::invalid(
+                f,
+                format!("must be at most {FRAME_MAX_RANGE_M} m, got {r}"),
             ));
         }
     }

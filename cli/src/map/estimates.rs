@@ -9,6 +9,7 @@ use deog_grid::Pose2;
 use deog_mapping::{EstimateBook, EstimateLookup};
 use deog_robot_client::MapClient;
 use deog_robot_client::convert::pose_from_wire;
+use tokio_util::sync::CancellationToken;
 
 /// How often to ask for new estimates while a frame waits for one.
 const POLL: Duration = Duration::from_millis(100);
@@ -22,6 +23,8 @@ pub struct EstimateFollower {
     book: EstimateBook,
     /// How long one frame waits for the localizer to reach it.
     wait: Duration,
+    /// Cancelled when the process is asked to stop: a frame's wait ends.
+    shutdown: CancellationToken,
     /// Frames skipped, by why.
     pub not_converged: u64,
     /// Frames the localizer passed over or never reached in time.
@@ -29,25 +32,45 @@ pub struct EstimateFollower {
 }
 
 impl EstimateFollower {
-    /// Follows `robot`'s estimates on `map`; a frame waits at most `wait`.
-    pub fn new(client: MapClient, robot: &str, map: &str, wait: Duration) -> Self {
+    /// Follows `robot`'s estimates on `map`; a frame waits at most `wait`,
+    /// or until `shutdown` is cancelled.
+    pub fn new(
+        client: MapClient,
+        robot: &str,
+        map: &str,
+        wait: Duration,
+        shutdown: CancellationToken,
+    ) -> Self {
         Self {
             client,
             robot: robot.to_owned(),
             map: map.to_owned(),
             book: EstimateBook::new(),
             wait,
+            shutdown,
             not_converged: 0,
             missed: 0,
         }
     }
 
+    /// Whether the process was asked to stop: a `None` from
+    /// [`Self::pose_for`] then means the frame was not reached, not that it
+    /// is to be skipped.
+    pub fn stopping(&self) -> bool {
+        self.shutdown.is_cancelled()
+    }
+
     /// The converged estimate for frame `sequence`, waiting for the
-    /// localizer to reach it; `None` when the frame is to be skipped.
+    /// localizer to reach it; `None` when the frame is to be skipped, or
+    /// when the process is stopping ([`Self::stopping`]).
     pub async fn pose_for(&mut self, sequence: u64) -> Result<Option<Pose2>> {
         let began = Instant::now();
         let mut logged = false;
+        let shutdown = self.shutdown.clone();
         loop {
+            if shutdown.is_cancelled() {
+                return Ok(None);
+            }
             match self.book.lookup(sequence) {
                 EstimateLookup::Converged(pose) => {
                     self.book.forget_before(sequence);
@@ -68,12 +91,19 @@ impl EstimateFollower {
                 self.missed += 1;
                 return Ok(None);
             }
-            if !self.fetch(sequence).await? {
+            let fetched = tokio::select! {
+                () = shutdown.cancelled() => return Ok(None),
+                fetched = self.fetch(sequence) => fetched?,
+            };
+            if !fetched {
                 if !logged {
                     tracing::info!(robot = %self.robot, map = %self.map, frame = sequence, "waiting for the localizer's estimate");
                     logged = true;
                 }
-                tokio::time::sleep(POLL).await;
+                tokio::select! {
+                    () = shutdown.cancelled() => return Ok(None),
+                    () = tokio::time::sleep(POLL) => {}
+                }
             }
         }
     }

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use deog_grid::{FrameMotion, TileDelta, TileKey, TileSize};
-use deog_mapping::{FrameInput, MapView};
+use deog_mapping::{FrameInput, MapView, MappingError};
 use deog_proto::v1 as pb;
 use deog_robot_client::convert::{pose_from_wire, pose_or_origin};
 use deog_robot_client::{AckState, MapClient, UpdateSender};
@@ -51,6 +51,8 @@ pub(super) struct Mapping<'a> {
     pub integrated: u64,
     pub cells: u64,
     pub last: u64,
+    /// Frames skipped because their values cannot be mapped.
+    pub unusable: u64,
 }
 
 impl<'a> Mapping<'a> {
@@ -64,6 +66,7 @@ impl<'a> Mapping<'a> {
             integrated: 0,
             cells: 0,
             last: 0,
+            unusable: 0,
         }
     }
 
@@ -106,6 +109,8 @@ impl Mapping<'_> {
         let estimate = match &mut self.ends.estimates {
             Some(follower) => match follower.pose_for(frame.sequence).await? {
                 Some(pose) => Some(pose),
+                // Stopping while the frame waited: left for the next run.
+                None if follower.stopping() => return Ok(Break(())),
                 None => {
                     // No converged estimate for it: not mapped.
                     self.last = frame.sequence;
@@ -137,7 +142,12 @@ impl Mapping<'_> {
                 self.view_read = Instant::now();
             }
         }
-        let missing = cartographer.missing_tiles(&input)?;
+        let missing = match cartographer.missing_tiles(&input) {
+            Err(MappingError::UnusableFrame { sequence, reason }) => {
+                return Ok(self.skip_unusable(sequence, &reason));
+            }
+            other => other?,
+        };
         if let (false, Some(view)) = (missing.is_empty(), cartographer.view_mut()) {
             fill_view(
                 self.ends.client,
@@ -148,7 +158,13 @@ impl Mapping<'_> {
             )
             .await?;
         }
-        self.cells += cartographer.integrate(&input, &mut self.deltas)? as u64;
+        self.cells += match cartographer.integrate(&input, &mut self.deltas) {
+            Err(MappingError::UnusableFrame { sequence, reason }) => {
+                self.deltas.clear();
+                return Ok(self.skip_unusable(sequence, &reason));
+            }
+            other => other? as u64,
+        };
         for delta in self.deltas.drain(..) {
             self.ends.sender.push(delta).await?;
         }
@@ -162,6 +178,19 @@ impl Mapping<'_> {
         } else {
             Continue(())
         })
+    }
+
+    /// A frame whose values cannot be mapped: skipped with a warning that
+    /// names it, and the mapping goes on.
+    fn skip_unusable(&mut self, sequence: u64, reason: &str) -> ControlFlow<()> {
+        tracing::warn!(frame = sequence, reason, "frame cannot be mapped: skipped");
+        self.unusable += 1;
+        self.last = sequence;
+        if self.ends.to > 0 && sequence >= self.ends.to {
+            Break(())
+        } else {
+            Continue(())
+        }
     }
 
     /// Sends the pending deltas as one batch numbered by the last frame

@@ -283,6 +283,16 @@ pub fn run(args: MapArgs) -> Result<()> {
         };
         let mut queue = FrameQueue::follow(&client, &args.robot, start, args.idle_exit).await?;
         let progress = queue.replay_progress("mapping frames", start, args.to, args.idle_exit);
+        // Cancelled on SIGTERM or ctrl-c: the loop below and a frame's wait
+        // for its estimate both end on it.
+        let shutdown = tokio_util::sync::CancellationToken::new();
+        tokio::spawn({
+            let shutdown = shutdown.clone();
+            async move {
+                deog_harness::shutdown_signal().await;
+                shutdown.cancel();
+            }
+        });
         let estimates = (args.pose == MapPoseSource::Estimate).then(|| {
             let map = args.estimate_map.as_deref().unwrap_or(&args.map);
             tracing::info!(robot = %args.robot, estimates_on = map, "mapping from the localizer's converged estimates");
@@ -291,11 +301,10 @@ pub fn run(args: MapArgs) -> Result<()> {
                 &args.robot,
                 map,
                 std::time::Duration::from_secs_f64(args.estimate_wait),
+                shutdown.clone(),
             )
         });
 
-        let shutdown = deog_harness::shutdown_signal();
-        tokio::pin!(shutdown);
         let mut mapping = Mapping::new(MappingEnds {
             client: &client,
             map: &args.map,
@@ -315,7 +324,7 @@ pub fn run(args: MapArgs) -> Result<()> {
         let mut batch = Vec::new();
         loop {
             let first = tokio::select! {
-                () = &mut shutdown => break,
+                () = shutdown.cancelled() => break,
                 frame = queue.next() => match frame? {
                     Some(frame) => frame,
                     None => break,
@@ -342,13 +351,19 @@ pub fn run(args: MapArgs) -> Result<()> {
             }
         }
         let closing = Instant::now();
-        let (integrated, cells) = (mapping.integrated, mapping.cells);
+        let (integrated, cells, unusable) = (mapping.integrated, mapping.cells, mapping.unusable);
         let estimates = mapping.take_estimates();
         let state = mapping.close().await?;
         progress.finish();
         let seconds = began.map_or(0.0, |t| {
             (worked_until - t + closing.elapsed()).as_secs_f64()
         });
+        if unusable > 0 {
+            println!(
+                "{}: {unusable} frames skipped whose values cannot be mapped (each named in a warning)",
+                args.robot
+            );
+        }
         if let Some(follower) = &estimates {
             println!(
                 "{}: {} frames skipped without a converged estimate, {} the localizer passed over or did not reach in time",

@@ -534,6 +534,33 @@ async fn frames_with_bad_numbers_are_refused_and_none_of_the_request_is_stored()
             Code::InvalidArgument,
             "frames[1].ranges[2]",
         ),
+        // Finite but beyond what any consumer can use: refused at the door
+        // rather than stored to stop a cartographer later.
+        (
+            with(&|f| f.true_pose.get_or_insert_with(Default::default).x = 1e300),
+            Code::InvalidArgument,
+            "frames[1].true_pose.x: must be within [-1000000, 1000000] m",
+        ),
+        (
+            with(&|f| f.odometry.as_mut().expect("pose").y = -2e6),
+            Code::InvalidArgument,
+            "frames[1].odometry.y",
+        ),
+        (
+            with(&|f| f.ranges[3] = 1e30),
+            Code::InvalidArgument,
+            "frames[1].ranges[3]: must be at most 10000 m",
+        ),
+        (
+            with(&|f| f.time_s = 1e300),
+            Code::InvalidArgument,
+            "frames[1].time_s",
+        ),
+        (
+            with(&|f| f.time_s = -5.0),
+            Code::InvalidArgument,
+            "frames[1].time_s: must be within [0, 10000000000] s",
+        ),
     ];
     for (bad, code, field) in cases {
         // A good frame first: the request is refused whole.
