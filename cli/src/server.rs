@@ -54,6 +54,11 @@ pub struct ServerArgs {
     /// refused with RESOURCE_EXHAUSTED.
     #[arg(long, env = "DEOG_MAX_READ_STREAMS", default_value_t = ReadStreamLimits::default().max_streams)]
     max_read_streams: usize,
+    /// Read streams one connection may hold at once; one more is refused
+    /// with RESOURCE_EXHAUSTED, so that one client leaves the others
+    /// theirs.
+    #[arg(long, env = "DEOG_MAX_READ_STREAMS_PER_CONNECTION", default_value_t = ReadStreamLimits::default().max_streams_per_connection)]
+    max_read_streams_per_connection: usize,
     /// Seconds a read stream waits for a client that takes nothing before
     /// it ends.
     #[arg(long, env = "DEOG_STALLED_READ_TIMEOUT_S", default_value_t = ReadStreamLimits::default().stalled_timeout.as_secs_f64())]
@@ -68,6 +73,11 @@ pub fn run(args: ServerArgs) -> Result<()> {
         args.max_read_streams >= 1,
         "--max-read-streams must be at least 1, got {}",
         args.max_read_streams
+    );
+    anyhow::ensure!(
+        args.max_read_streams_per_connection >= 1,
+        "--max-read-streams-per-connection must be at least 1, got {}",
+        args.max_read_streams_per_connection
     );
     anyhow::ensure!(
         args.stalled_read_timeout_s.is_finite()
@@ -98,6 +108,7 @@ pub fn run(args: ServerArgs) -> Result<()> {
         max_streams_per_connection: args.max_streams_per_connection,
         reads: ReadStreamLimits {
             max_streams: args.max_read_streams,
+            max_streams_per_connection: args.max_read_streams_per_connection,
             stalled_timeout: Duration::from_secs_f64(args.stalled_read_timeout_s),
         },
         ..ServerConfig::default()

@@ -34,15 +34,31 @@ pub const KEEPALIVE_INTERVAL: Duration = Duration::from_secs(30);
 /// See [`KEEPALIVE_INTERVAL`].
 pub const KEEPALIVE_TIMEOUT: Duration = Duration::from_secs(20);
 
+/// HTTP/2 flow-control windows the servers announce: what one stream, and
+/// one connection's streams together, may send ahead of what the server
+/// has read. h2 closes a connection whose small DATA frames sitting unread
+/// cost more than half the connection window (each counted as 256 bytes),
+/// so a stream's window must hold few enough of them: 256 KiB of 30-byte
+/// frames (a one-cell update batch) costs under 2 MiB of the 4 MiB budget,
+/// however late the server's reader runs, where hyper's default of 1 MiB
+/// for both got a pipelining client's connection closed within
+/// milliseconds.
+pub const STREAM_WINDOW_BYTES: u32 = 256 << 10;
+/// See [`STREAM_WINDOW_BYTES`].
+pub const CONNECTION_WINDOW_BYTES: u32 = 8 << 20;
+
 /// The transport both servers build on: at most `max_streams` calls open
-/// per connection, keepalive pings, and TLS with `tls` when given. Made
-/// first, so that a bad certificate or key starts nothing.
+/// per connection, keepalive pings, the flow-control windows above, and TLS
+/// with `tls` when given. Made first, so that a bad certificate or key
+/// starts nothing.
 pub fn server_builder(
     max_streams: u32,
     tls: Option<&crate::tls::TlsIdentity>,
 ) -> Result<tonic::transport::Server, crate::tls::TlsError> {
     let builder = tonic::transport::Server::builder()
         .max_concurrent_streams(Some(max_streams))
+        .initial_stream_window_size(Some(STREAM_WINDOW_BYTES))
+        .initial_connection_window_size(Some(CONNECTION_WINDOW_BYTES))
         .http2_keepalive_interval(Some(KEEPALIVE_INTERVAL))
         .http2_keepalive_timeout(Some(KEEPALIVE_TIMEOUT));
     match tls {

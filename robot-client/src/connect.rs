@@ -170,7 +170,12 @@ impl ClientConfig {
             .connect_timeout(Duration::from_secs(5))
             .tcp_nodelay(true)
             .http2_keep_alive_interval(Duration::from_secs(20))
-            .keep_alive_while_idle(true);
+            .keep_alive_while_idle(true)
+            // The servers' windows, for the same reason: h2 closes the
+            // connection of a client whose unread small frames (the acks
+            // and watch events it has not taken yet) outgrow its budget.
+            .initial_stream_window_size(deog_proto::connection::STREAM_WINDOW_BYTES)
+            .initial_connection_window_size(deog_proto::connection::CONNECTION_WINDOW_BYTES);
         if let Some(ca) = &self.tls_ca_pem {
             let mut tls = ClientTlsConfig::new().ca_certificate(Certificate::from_pem(ca));
             if let Some(domain) = &self.tls_domain {

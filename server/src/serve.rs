@@ -2,8 +2,9 @@
 
 use crate::convert::Limits;
 use crate::events::Events;
+use crate::read_streams::ReadStreamLimits;
 use crate::rigs::RigRegistry;
-use crate::service::{MapServer, ReadStreamLimits, ServiceSettings};
+use crate::service::{MapServer, ServiceSettings};
 use crate::store::{Store, StoreChange};
 use crate::writer::{StoreHealth, Writer};
 use deog_proto::auth::BearerAuth;

@@ -9,20 +9,19 @@
 use crate::convert::{self, Limits};
 use crate::error::StoreError;
 use crate::events::{Events, MapEvent};
+use crate::read_streams::{ReadResponse, ReadSink, ReadStreamLimits, ReadStreams};
 use crate::rigs::RigRegistry;
 use crate::store::{MapRecord, Store, TileRange};
+use crate::update_stream::{self, UpdateQueueBudget};
 use crate::writer::{Batch, EncodedFrame, WriterHandle};
 use deog_proto::v1 as pb;
 use deog_proto::v1::map_service_server::MapService;
 use std::sync::Arc;
-use std::time::Duration;
-use tokio::sync::{Semaphore, broadcast, mpsc, oneshot};
+use tokio::sync::{broadcast, mpsc};
 use tokio_stream::wrappers::ReceiverStream;
 use tokio_util::sync::CancellationToken;
 use tonic::{Request, Response, Status, Streaming};
 
-/// Batches one `ApplyUpdates` stream may have waiting for the writer.
-const IN_FLIGHT_BATCHES: usize = 64;
 /// Frames or poses read from the store per blocking call while catching up.
 const CATCH_UP_CHUNK: usize = 256;
 
@@ -37,10 +36,11 @@ pub struct MapServer<S> {
     limits: Limits,
     stream_buffer: usize,
     shutdown: CancellationToken,
-    reads: ReadStreamLimits,
-    /// One per read stream (GetTiles, ReadFrames, ReadPoses) whose
-    /// producer holds a blocking thread.
-    read_permits: Arc<Semaphore>,
+    /// The places of read streams (GetTiles, ReadFrames, ReadPoses),
+    /// whose producers hold a blocking thread each.
+    read_streams: Arc<ReadStreams>,
+    /// Bytes of update batches read and not yet handed to the writer.
+    update_queue: UpdateQueueBudget,
 }
 
 /// What the service checks requests against and how it streams replies.
@@ -52,60 +52,6 @@ pub struct ServiceSettings {
     pub stream_buffer: usize,
     /// Read streams at once, and their stall timeout.
     pub reads: ReadStreamLimits,
-}
-
-/// How many read streams may run at once and how long one may wait for a
-/// client that does not read. Each runs on a blocking thread while it
-/// reads the store; a client that never reads would hold that thread for
-/// ever, and enough of them would leave none for anyone else.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ReadStreamLimits {
-    /// Read streams at once; one more is refused with RESOURCE_EXHAUSTED.
-    pub max_streams: usize,
-    /// How long a read stream waits for its client to take the next
-    /// message before it ends.
-    pub stalled_timeout: Duration,
-}
-
-impl Default for ReadStreamLimits {
-    fn default() -> Self {
-        Self {
-            max_streams: 64,
-            stalled_timeout: Duration::from_secs(30),
-        }
-    }
-}
-
-/// What a read stream's producer sends through: waits for a slow client
-/// up to the stall timeout, then gives up (false), as for a client gone.
-pub(crate) struct ReadSink<T> {
-    tx: mpsc::Sender<Result<T, Status>>,
-    runtime: tokio::runtime::Handle,
-    stalled_timeout: Duration,
-}
-
-impl<T> ReadSink<T> {
-    /// Sends `item`; false once the client is gone or has not taken a
-    /// message for the stall timeout.
-    fn send(&self, item: Result<T, Status>) -> bool {
-        match self.tx.try_send(item) {
-            Ok(()) => true,
-            Err(mpsc::error::TrySendError::Closed(_)) => false,
-            Err(mpsc::error::TrySendError::Full(item)) => {
-                let sent = self.runtime.block_on(tokio::time::timeout(
-                    self.stalled_timeout,
-                    self.tx.send(item),
-                ));
-                if sent.is_err() {
-                    tracing::debug!(
-                        timeout_s = self.stalled_timeout.as_secs_f64(),
-                        "read stream ended: its client took nothing for the stall timeout"
-                    );
-                }
-                matches!(sent, Ok(Ok(())))
-            }
-        }
-    }
 }
 
 impl<S> std::fmt::Debug for MapServer<S> {
@@ -126,8 +72,8 @@ impl<S> Clone for MapServer<S> {
             limits: self.limits,
             stream_buffer: self.stream_buffer,
             shutdown: self.shutdown.clone(),
-            reads: self.reads,
-            read_permits: self.read_permits.clone(),
+            read_streams: self.read_streams.clone(),
+            update_queue: self.update_queue.clone(),
         }
     }
 }
@@ -150,9 +96,19 @@ impl<S: Store> MapServer<S> {
             limits: settings.limits,
             stream_buffer: settings.stream_buffer.max(1),
             shutdown,
-            reads: settings.reads,
-            read_permits: Arc::new(Semaphore::new(settings.reads.max_streams)),
+            read_streams: Arc::new(ReadStreams::new(settings.reads)),
+            update_queue: UpdateQueueBudget::new(),
         }
+    }
+
+    /// The writer the service hands its writes to.
+    pub(crate) fn writer(&self) -> &WriterHandle {
+        &self.writer
+    }
+
+    /// Cancelled when the server shuts down.
+    pub(crate) fn shutdown_token(&self) -> CancellationToken {
+        self.shutdown.clone()
     }
 
     fn record(&self, name: &str) -> Result<MapRecord, StoreError> {
@@ -161,7 +117,8 @@ impl<S: Store> MapServer<S> {
             .ok_or_else(|| StoreError::MapNotFound(name.to_string()))
     }
 
-    fn check_batch(&self, batch: pb::UpdateBatch) -> Result<Batch, StoreError> {
+    /// Checks a batch against the limits and its map.
+    pub(crate) fn check_batch(&self, batch: pb::UpdateBatch) -> Result<Batch, StoreError> {
         self.limits.check_size("UpdateBatch", &batch)?;
         let map = convert::map_name("map", &batch.map)?;
         let client_id = convert::client_id("client_id", &batch.client_id)?;
@@ -218,50 +175,40 @@ impl<S: Store> MapServer<S> {
         Ok(())
     }
 
-    /// Runs `produce` on a blocking thread, streaming what it sends; one of
-    /// at most [`ReadStreamLimits::max_streams`] at once.
-    fn blocking_stream<T: Send + 'static>(
+    /// Runs `produce` on a blocking thread, streaming what it sends, once
+    /// the client on `connection` has a place among the read streams.
+    async fn blocking_stream<T: Send + 'static>(
         &self,
+        connection: Option<std::net::SocketAddr>,
         produce: impl FnOnce(&ReadSink<T>) -> Result<(), StoreError> + Send + 'static,
-    ) -> Result<ResponseStream<T>, Status> {
-        let permit = self.read_permits.clone().try_acquire_owned().map_err(|_| {
-            Status::resource_exhausted(format!(
-                "{} read streams are open, the most the map server allows (--max-read-streams): \
-                 retry when one has ended",
-                self.reads.max_streams
-            ))
-        })?;
-        let (tx, rx) = mpsc::channel(self.stream_buffer);
-        let sink = ReadSink {
-            tx,
-            runtime: tokio::runtime::Handle::current(),
-            stalled_timeout: self.reads.stalled_timeout,
-        };
+    ) -> Result<ReadResponse<T>, Status> {
+        let place = self.read_streams.admit(connection).await?;
+        let (sink, response) = ReadSink::new(place, self.stream_buffer);
         tokio::task::spawn_blocking(move || {
-            let _permit = permit;
             if let Err(error) = produce(&sink) {
-                sink.send(Err(error.into()));
+                sink.fail(error.into());
             }
         });
-        Ok(ReceiverStream::new(rx))
+        Ok(response)
     }
 
     /// [`Self::blocking_stream`] of the records `read` visits in the store,
     /// each decoded as `T` (`what` names it in the error), `limit` at most;
     /// one that does not decode ends the stream with that error.
-    fn decoded_stream<T: prost::Message + Default + Send + 'static>(
+    async fn decoded_stream<T: prost::Message + Default + Send + 'static>(
         &self,
+        connection: Option<std::net::SocketAddr>,
         what: &'static str,
         limit: usize,
         read: impl FnOnce(&mut dyn FnMut(u64, &[u8]) -> bool) -> Result<(), StoreError> + Send + 'static,
-    ) -> Result<ResponseStream<T>, Status> {
-        self.blocking_stream(move |tx| {
+    ) -> Result<ReadResponse<T>, Status> {
+        self.blocking_stream(connection, move |tx| {
             let mut sent = 0usize;
             let mut failure = None;
             read(&mut |_, bytes| match decode::<T>(bytes, what) {
                 Ok(record) => {
                     sent += 1;
-                    tx.send(Ok(record)) && sent < limit
+                    tx.send(record) && sent < limit
                 }
                 Err(e) => {
                     failure = Some(e);
@@ -270,6 +217,7 @@ impl<S: Store> MapServer<S> {
             })?;
             failure.map_or(Ok(()), Err)
         })
+        .await
     }
 }
 
@@ -314,7 +262,7 @@ impl<S> MapServer<S> {
 }
 
 /// What ends a stream when the server shuts down.
-fn shutting_down() -> Status {
+pub(crate) fn shutting_down() -> Status {
     Status::unavailable("the map server is shutting down")
 }
 
@@ -323,26 +271,6 @@ fn decode<T: prost::Message + Default>(bytes: &[u8], what: &str) -> Result<T, St
         what: what.to_string(),
         reason: e.to_string(),
     })
-}
-
-/// The status that ends an update stream whose next batch (after `read`
-/// good ones) the transport could not decode. Too large a message is
-/// RESOURCE_EXHAUSTED, as the server's own size check answers; any other
-/// failure keeps the transport's code.
-fn unreadable_batch(read: u64, status: &Status) -> Status {
-    let code = match status.code() {
-        tonic::Code::OutOfRange => tonic::Code::ResourceExhausted,
-        code => code,
-    };
-    Status::new(
-        code,
-        format!(
-            "update batch {} of this stream could not be read ({read} read before it; \
-             none after it is applied): {}",
-            read.saturating_add(1),
-            status.message()
-        ),
-    )
 }
 
 /// Reads a robot's stored frames after sequence `after`, in chunks, sending
@@ -458,92 +386,12 @@ impl<S: Store> MapService for MapServer<S> {
         &self,
         request: Request<Streaming<pb::UpdateBatch>>,
     ) -> Result<Response<Self::ApplyUpdatesStream>, Status> {
-        enum Pending {
-            Ack(
-                String,
-                u64,
-                oneshot::Receiver<Result<crate::writer::Ack, StoreError>>,
-            ),
-            Fail(Status),
-        }
-        let mut inbound = request.into_inner();
-        let (out_tx, out_rx) = mpsc::channel(self.stream_buffer);
-        let (pending_tx, mut pending_rx) = mpsc::channel::<Pending>(IN_FLIGHT_BATCHES);
-        let server = self.clone();
-        let stream_broken = Arc::new(std::sync::atomic::AtomicBool::new(false));
-        // Reads batches and hands them to the writer, in order.
-        tokio::spawn(async move {
-            let mut read = 0u64;
-            loop {
-                let message = tokio::select! {
-                    () = server.shutdown.cancelled() => {
-                        let _ = pending_tx.send(Pending::Fail(shutting_down())).await;
-                        break;
-                    }
-                    message = inbound.message() => message,
-                };
-                let batch = match message {
-                    Ok(Some(batch)) => batch,
-                    Ok(None) => break,
-                    Err(status) => {
-                        // Ending with OK here would tell the client that
-                        // everything it sent was taken.
-                        let status = unreadable_batch(read, &status);
-                        tracing::debug!(%status, "update stream unreadable");
-                        let _ = pending_tx.send(Pending::Fail(status)).await;
-                        break;
-                    }
-                };
-                read += 1;
-                let (client, sequence) = (batch.client_id.clone(), batch.sequence);
-                let submitted = match server.check_batch(batch) {
-                    Ok(mut batch) => {
-                        batch.stream_broken = stream_broken.clone();
-                        server.writer.submit_batch(batch).await
-                    }
-                    Err(error) => {
-                        if matches!(error, StoreError::Unavailable(_)) {
-                            server.writer.store_unavailable();
-                        }
-                        Err(error)
-                    }
-                };
-                let pending = match submitted {
-                    Ok(ack) => Pending::Ack(client, sequence, ack),
-                    Err(error) => {
-                        tracing::debug!(%error, "update batch refused");
-                        Pending::Fail(error.into())
-                    }
-                };
-                let failed = matches!(pending, Pending::Fail(_));
-                if pending_tx.send(pending).await.is_err() || failed {
-                    break;
-                }
-            }
-        });
-        // Sends acknowledgements, in the order the batches came.
-        tokio::spawn(async move {
-            while let Some(pending) = pending_rx.recv().await {
-                let reply = match pending {
-                    Pending::Ack(client_id, sequence, ack) => match ack.await {
-                        Ok(Ok(ack)) => Ok(pb::UpdateAck {
-                            client_id,
-                            sequence,
-                            applied: ack.applied,
-                            map_version: ack.map_version,
-                        }),
-                        Ok(Err(error)) => Err(error.into()),
-                        Err(_) => Err(StoreError::ShuttingDown.into()),
-                    },
-                    Pending::Fail(status) => Err(status),
-                };
-                let failed = reply.is_err();
-                if out_tx.send(reply).await.is_err() || failed {
-                    break;
-                }
-            }
-        });
-        Ok(Response::new(ReceiverStream::new(out_rx)))
+        Ok(Response::new(update_stream::run(
+            self.clone(),
+            request.into_inner(),
+            self.update_queue.clone(),
+            self.stream_buffer,
+        )))
     }
 
     async fn get_update_cursor(
@@ -576,12 +424,13 @@ impl<S: Store> MapService for MapServer<S> {
         Ok(Response::new(pb::ListUpdateCursorsResponse { cursors }))
     }
 
-    type GetTilesStream = ResponseStream<pb::Tile>;
+    type GetTilesStream = ReadResponse<pb::Tile>;
 
     async fn get_tiles(
         &self,
         request: Request<pb::TileQuery>,
     ) -> Result<Response<Self::GetTilesStream>, Status> {
+        let connection = request.remote_addr();
         let request = request.into_inner();
         self.limits.check_size("TileQuery", &request)?;
         let map = convert::map_name("map", &request.map)?;
@@ -600,11 +449,12 @@ impl<S: Store> MapService for MapServer<S> {
             Some(pb::tile_query::Selection::Region(region)) => {
                 let region = convert::cell_box("region", Some(&region))?;
                 let (min, max) = size.tiles_covering(&region);
-                self.blocking_stream(move |tx| {
+                self.blocking_stream(connection, move |tx| {
                     store.tiles_in(&record, TileRange { min, max }, &mut |key, stored| {
-                        tx.send(Ok(wire(key, &stored)))
+                        tx.send(wire(key, &stored))
                     })
-                })?
+                })
+                .await?
             }
             Some(pb::tile_query::Selection::Keys(keys)) => {
                 let keys = keys
@@ -615,16 +465,17 @@ impl<S: Store> MapService for MapServer<S> {
                         convert::tile_key(&format!("keys.keys[{i}]"), Some(k), size, &self.limits)
                     })
                     .collect::<Result<Vec<_>, _>>()?;
-                self.blocking_stream(move |tx| {
+                self.blocking_stream(connection, move |tx| {
                     for key in keys {
                         if let Some(stored) = store.tile(&record, key)?
-                            && !tx.send(Ok(wire(key, &stored)))
+                            && !tx.send(wire(key, &stored))
                         {
                             break;
                         }
                     }
                     Ok(())
-                })?
+                })
+                .await?
             }
             None => return Err(StoreError::invalid("selection", "give a region or keys").into()),
         };
@@ -767,12 +618,13 @@ impl<S: Store> MapService for MapServer<S> {
         }))
     }
 
-    type ReadFramesStream = ResponseStream<pb::SonarFrame>;
+    type ReadFramesStream = ReadResponse<pb::SonarFrame>;
 
     async fn read_frames(
         &self,
         request: Request<pb::ReadFramesRequest>,
     ) -> Result<Response<Self::ReadFramesStream>, Status> {
+        let connection = request.remote_addr();
         let request = request.into_inner();
         let robot = convert::robot_name("robot", &request.robot)?;
         let (from, to) = convert::sequence_range(request.from_sequence, request.to_sequence)?;
@@ -782,11 +634,12 @@ impl<S: Store> MapService for MapServer<S> {
             request.limit as usize
         };
         let store = self.store.clone();
-        Ok(Response::new(self.decoded_stream(
-            "frame",
-            limit,
-            move |visit| store.read_frames(&robot, from, to, visit),
-        )?))
+        Ok(Response::new(
+            self.decoded_stream(connection, "frame", limit, move |visit| {
+                store.read_frames(&robot, from, to, visit)
+            })
+            .await?,
+        ))
     }
 
     type SubscribeFramesStream = ResponseStream<pb::SonarFrame>;
@@ -896,21 +749,23 @@ impl<S: Store> MapService for MapServer<S> {
         Ok(Response::new(pb::PublishPoseResponse {}))
     }
 
-    type ReadPosesStream = ResponseStream<pb::PoseEstimate>;
+    type ReadPosesStream = ReadResponse<pb::PoseEstimate>;
 
     async fn read_poses(
         &self,
         request: Request<pb::ReadPosesRequest>,
     ) -> Result<Response<Self::ReadPosesStream>, Status> {
+        let connection = request.remote_addr();
         let request = request.into_inner();
         let robot = convert::robot_name("robot", &request.robot)?;
         let (from, to) = convert::sequence_range(request.from_sequence, request.to_sequence)?;
         let store = self.store.clone();
-        Ok(Response::new(self.decoded_stream(
-            "pose",
-            usize::MAX,
-            move |visit| store.read_poses(&robot, from, to, visit),
-        )?))
+        Ok(Response::new(
+            self.decoded_stream(connection, "pose", usize::MAX, move |visit| {
+                store.read_poses(&robot, from, to, visit)
+            })
+            .await?,
+        ))
     }
 
     type WatchPosesStream = ResponseStream<pb::PoseEstimate>;

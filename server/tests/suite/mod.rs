@@ -6,6 +6,7 @@ mod bad_input;
 pub mod common;
 mod frames_and_poses;
 mod map_service;
+mod pipelined_batches;
 mod read_streams;
 mod security;
 mod sequences;
