@@ -65,6 +65,9 @@ fn print(text: &str) -> Result<bool> {
 pub fn run(args: FramesArgs) -> Result<()> {
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     runtime.block_on(async {
+        // Deaf to the signal no more while it connects and waits to start:
+        // until the loop below listens, the signal ends the process.
+        let until_running = deog_harness::ExitOnSignal::during("connecting or waiting for the first frames", &tokio::runtime::Handle::current());
         let config = args.connection.client_config()?;
         let config = if args.follow {
             config.retrying_forever()
@@ -119,6 +122,7 @@ pub fn run(args: FramesArgs) -> Result<()> {
         let mut frames = FrameQueue::follow(&map, robot, args.from, 0.0).await?;
         let shutdown = deog_harness::shutdown_signal();
         tokio::pin!(shutdown);
+        drop(until_running);
         loop {
             tokio::select! {
                 () = &mut shutdown => return Ok(()),

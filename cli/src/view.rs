@@ -73,8 +73,9 @@ pub fn run(args: ViewArgs) -> Result<()> {
         }
         tracing::info!(%addr, "serving the view");
         let stop = shutdown.clone();
+        let signal = deog_harness::shutdown_signal();
         tokio::spawn(async move {
-            deog_harness::shutdown_signal().await;
+            signal.await;
             stop.cancel();
         });
         view.run().await?;

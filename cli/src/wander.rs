@@ -97,6 +97,10 @@ pub fn run(args: WanderArgs) -> Result<()> {
     let sim_config = args.sim.client_config()?.retrying_forever();
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     let summary = runtime.block_on(async {
+        // Deaf to the signal no more while it connects and waits to start:
+        // until the loop below listens, the signal ends the process.
+        let until_running =
+            deog_harness::ExitOnSignal::during("connecting", &tokio::runtime::Handle::current());
         let sim = SimClient::connect(sim_config).await?;
         let rig = sim_rig(&sim).await?;
         if let Some(spec) = &args.rig {
@@ -139,6 +143,7 @@ pub fn run(args: WanderArgs) -> Result<()> {
         let mut states = spawn_state_reader(sim.watch(&args.robot).await?);
         let shutdown = deog_harness::shutdown_signal();
         tokio::pin!(shutdown);
+        drop(until_running);
         let mut summary = Summary::default();
         let (mut start_time, mut last_control, mut last_pose) = (None, None::<f64>, None::<Pose2>);
         let mut was_bumped = false;

@@ -36,7 +36,7 @@ pub mod status;
 pub mod supervisor;
 
 pub use progress::Progress;
-pub use shutdown::shutdown_signal;
+pub use shutdown::{ExitOnSignal, shutdown_signal};
 pub use supervisor::{
     Role, Supervisor, connect, free_loopback_addr, log_tail, os, prepare_run_folder,
 };

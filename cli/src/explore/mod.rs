@@ -235,6 +235,10 @@ pub fn run(args: ExploreArgs) -> Result<()> {
 }
 
 async fn explore(args: &ExploreArgs) -> Result<Summary> {
+    // Deaf to the signal no more while it connects and waits to start:
+    // until the loop below listens, the signal ends the process.
+    let until_running =
+        deog_harness::ExitOnSignal::during("connecting", &tokio::runtime::Handle::current());
     let sim = SimClient::connect(args.sim.client_config()?.retrying_forever()).await?;
     let rig = sim_rig(&sim).await?;
     let client = MapClient::connect(args.connection.client_config()?.retrying_forever()).await?;
@@ -291,6 +295,7 @@ async fn explore(args: &ExploreArgs) -> Result<Summary> {
     let mut states = spawn_state_reader(sim.watch(&args.robot).await?);
     let shutdown = deog_harness::shutdown_signal();
     tokio::pin!(shutdown);
+    drop(until_running);
     let mut summary = Summary::default();
     let mut backlog = Vec::new();
     'run: loop {

@@ -7,8 +7,9 @@
 use std::future::Future;
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use deog_grid::normalize_angle;
+use deog_localizer::error::LocalizerError;
 use deog_localizer::searcher::SearcherStats;
 use deog_localizer::step::Localizer;
 use deog_proto::rig::frame_rig_name;
@@ -61,6 +62,8 @@ pub(super) struct Followed {
     pub realigned: u64,
     /// Frames skipped to keep up.
     pub skipped: u64,
+    /// Frames skipped for values the filter cannot use.
+    pub unusable: u64,
     /// The most seconds of frames that came while one step ran: how far
     /// the filter's evidence fell behind.
     pub filter_lag_s: f64,
@@ -73,6 +76,8 @@ struct Following<'a> {
     /// The rig field of the first frame: later frames must name the same.
     rig_field: String,
     processed: u64,
+    /// Frames skipped for values the filter cannot use.
+    unusable: u64,
     corrections: u64,
     realigned: u64,
     last_sequence: u64,
@@ -114,6 +119,7 @@ pub(super) fn follow(
         ends,
         rig_field: first.rig.clone(),
         processed: 0,
+        unusable: 0,
         corrections: 0,
         realigned: 0,
         last_sequence: 0,
@@ -138,6 +144,7 @@ pub(super) fn follow(
         corrections: following.corrections,
         realigned: following.realigned,
         skipped: following.catch_up.skipped(),
+        unusable: following.unusable,
         filter_lag_s: following.filter_lag_s,
     })
 }
@@ -216,10 +223,14 @@ impl Following<'_> {
 
     /// One localizer step with `frame`, its estimate published.
     fn step(&mut self, frame: &pb::SonarFrame, localizer: &mut Localizer) -> Result<()> {
-        let odometry = frame
-            .odometry
-            .map(pose_from_wire)
-            .with_context(|| format!("frame {} has no odometry pose", frame.sequence))?;
+        let Some(odometry) = frame.odometry.map(pose_from_wire) else {
+            tracing::warn!(
+                frame = frame.sequence,
+                "frame cannot be localized: it has no odometry pose; skipped"
+            );
+            self.unusable += 1;
+            return Ok(());
+        };
         localizer.note_frame(&odometry, frame.time_s);
         let particles = localizer.mcl().particles().len();
         let searched_before = localizer.searcher().map(|s| search_events(&s.stats()));
@@ -246,8 +257,19 @@ impl Following<'_> {
                 report
             }
             None => localizer.step(&odometry, &frame.ranges, started, &mut ends.tiles),
-        }
-        .with_context(|| format!("frame {}", frame.sequence))?;
+        };
+        let report = match report {
+            Ok(report) => report,
+            // What is wrong is this frame's: the next may do.
+            Err(error @ (LocalizerError::Invalid(_) | LocalizerError::Grid(_))) => {
+                tracing::warn!(frame = frame.sequence, %error, "frame cannot be localized: skipped");
+                self.unusable += 1;
+                return Ok(());
+            }
+            Err(error) => {
+                return Err(anyhow::Error::new(error).context(format!("frame {}", frame.sequence)));
+            }
+        };
         let took = started.elapsed();
         self.last_took = took;
         if let Some(searcher) = localizer.searcher()

@@ -288,6 +288,12 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         .build()
         .context("starting the async runtime")?;
     let _context = runtime.enter();
+    // Until the frames are followed nothing listens for the signal all the
+    // time (the table build runs on this thread) and nothing needs a flush.
+    let until_following = deog_harness::ExitOnSignal::during(
+        "connecting, waiting for the first frame or building the map's range tables",
+        runtime.handle(),
+    );
     let client = runtime.block_on(MapClient::connect(
         args.connection.client_config()?.retrying_forever(),
     ))?;
@@ -420,6 +426,7 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         },
         progress,
     };
+    drop(until_following);
     let followed = follow(&mut localizer, first, ends, settings, &mut shutdown)?;
     let map = localizer.map();
     println!(
@@ -434,6 +441,12 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
         map.stats().tables_built,
         map.bytes() as f64 / f64::from(1 << 20)
     );
+    if followed.unusable > 0 {
+        println!(
+            "{} frames skipped whose values cannot be localized (see the warnings)",
+            followed.unusable
+        );
+    }
     Ok(())
 }
 

@@ -231,6 +231,9 @@ pub fn run(args: MapArgs) -> Result<()> {
     let client_id = format!("carto/{}", args.robot);
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     runtime.block_on(async {
+        // Deaf to the signal no more while it connects and waits to start:
+        // until the loop below listens, the signal ends the process.
+        let until_running = deog_harness::ExitOnSignal::during("connecting or waiting for the first frames", &tokio::runtime::Handle::current());
         let client =
             MapClient::connect(args.connection.client_config()?.retrying_forever()).await?;
         let info = client
@@ -288,11 +291,13 @@ pub fn run(args: MapArgs) -> Result<()> {
         let shutdown = tokio_util::sync::CancellationToken::new();
         tokio::spawn({
             let shutdown = shutdown.clone();
+            let signal = deog_harness::shutdown_signal();
             async move {
-                deog_harness::shutdown_signal().await;
+                signal.await;
                 shutdown.cancel();
             }
         });
+        drop(until_running);
         let estimates = (args.pose == MapPoseSource::Estimate).then(|| {
             let map = args.estimate_map.as_deref().unwrap_or(&args.map);
             tracing::info!(robot = %args.robot, estimates_on = map, "mapping from the localizer's converged estimates");
