@@ -9,6 +9,8 @@
 //!   no rig means.
 //! - [`auth`]: [`auth::BearerAuth`], the optional bearer-token check both
 //!   servers put in front of their service.
+//! - [`health`]: the gRPC health service both servers serve, `Watch` on an
+//!   unknown service streaming SERVICE_UNKNOWN as the protocol asks.
 //! - [`tls`]: [`tls::TlsIdentity`], a server's certificate and key, read and
 //!   checked so that a bad file is named with the reason.
 //! - [`FILE_DESCRIPTOR_SET`]: the encoded descriptors, for the gRPC reflection
@@ -22,6 +24,7 @@ pub mod v1 {
 
 pub mod auth;
 pub mod connection;
+pub mod health;
 pub mod names;
 pub mod rig;
 pub mod tls;

@@ -102,7 +102,7 @@ pub enum ServeError {
 /// Stops at shutdown, which sets NOT_SERVING for good.
 async fn report_store_health(
     mut store: watch::Receiver<StoreHealth>,
-    health: tonic_health::server::HealthReporter,
+    health: deog_proto::health::HealthReporter,
     shutdown: CancellationToken,
 ) {
     loop {
@@ -119,7 +119,7 @@ async fn report_store_health(
             StoreHealth::Failing { .. } => tonic_health::ServingStatus::NotServing,
         };
         if !shutdown.is_cancelled() {
-            health.set_service_status(MAP_SERVICE_NAME, status).await;
+            health.set_service_status(MAP_SERVICE_NAME, status);
         }
     }
 }
@@ -177,10 +177,8 @@ pub async fn serve<S: Store>(
         BearerAuth::new(config.token.clone()),
     );
 
-    let (health, health_service) = tonic_health::server::health_reporter();
-    health
-        .set_service_status(MAP_SERVICE_NAME, tonic_health::ServingStatus::Serving)
-        .await;
+    let (health, health_service) = deog_proto::health::health_service();
+    health.set_service_status(MAP_SERVICE_NAME, tonic_health::ServingStatus::Serving);
     tokio::spawn(report_store_health(
         writer.health(),
         health.clone(),
@@ -222,7 +220,7 @@ pub async fn serve<S: Store>(
         result = &mut serving => result,
         () = shutdown => {
             tracing::info!("shutting down: finishing in-flight calls");
-            health.set_service_status(MAP_SERVICE_NAME, tonic_health::ServingStatus::NotServing).await;
+            health.set_service_status(MAP_SERVICE_NAME, tonic_health::ServingStatus::NotServing);
             stop_streams.cancel();
             let _ = stop_tx.send(());
             match tokio::time::timeout(config.shutdown_grace, &mut serving).await {

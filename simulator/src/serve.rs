@@ -166,10 +166,8 @@ pub async fn serve_sim_server(
     let max_step = Duration::from_millis(200);
     let clock = tokio::spawn(server.clone().run_clock(config.tick, max_step));
 
-    let (health, health_service) = tonic_health::server::health_reporter();
-    health
-        .set_service_status(ROBOT_SERVICE_NAME, tonic_health::ServingStatus::Serving)
-        .await;
+    let (health, health_service) = deog_proto::health::health_service();
+    health.set_service_status(ROBOT_SERVICE_NAME, tonic_health::ServingStatus::Serving);
     // Both versions of reflection, as the map server serves them.
     let reflection_builder = || {
         tonic_reflection::server::Builder::configure()
@@ -214,7 +212,7 @@ pub async fn serve_sim_server(
         result = &mut serving => result,
         () = shutdown => {
             tracing::info!("shutting down the simulator");
-            health.set_service_status(ROBOT_SERVICE_NAME, tonic_health::ServingStatus::NotServing).await;
+            health.set_service_status(ROBOT_SERVICE_NAME, tonic_health::ServingStatus::NotServing);
             stop.cancel();
             let _ = stop_tx.send(());
             match tokio::time::timeout(config.shutdown_grace, &mut serving).await {

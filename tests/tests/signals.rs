@@ -42,8 +42,8 @@ fn wait_for_log(log: &Path, needle: &str, within: Duration) -> bool {
 }
 
 /// Sends `signal` and waits, at most [`WITHIN`], for the process to end
-/// with exit 0; panics naming `what` otherwise.
-fn stops_on(mut child: Child, signal: &str, what: &str) {
+/// with exit 0; what it printed. Panics naming `what` otherwise.
+fn stops_on(mut child: Child, signal: &str, what: &str) -> String {
     assert!(
         child.try_wait().expect("wait").is_none(),
         "{what}: still running before the signal"
@@ -57,7 +57,8 @@ fn stops_on(mut child: Child, signal: &str, what: &str) {
     while began.elapsed() < WITHIN {
         if let Some(status) = child.try_wait().expect("wait") {
             assert!(status.success(), "{what}: exit 0 on {signal}, got {status}");
-            return;
+            let output = child.wait_with_output().expect("output");
+            return String::from_utf8_lossy(&output.stdout).into_owned();
         }
         std::thread::sleep(Duration::from_millis(25));
     }
@@ -156,21 +157,51 @@ async fn commands_waiting_for_frames_or_their_own_work_stop_on_either_signal() {
             ],
             "localizing with the frames' rig",
         ),
-        (
-            "map waiting for estimates",
-            vec![
-                "map",
-                "--robot",
-                "moving",
-                "--map",
-                "m",
-                "--pose",
-                "estimate",
-                "--estimate-wait",
-                "60",
-            ],
-            "waiting for the localizer's estimate",
-        ),
     ];
     each_stops(&cases, &addr, &free_loopback_addr().to_string(), dir.path());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_cartographer_stopped_while_waiting_for_an_estimate_leaves_the_frame_for_the_next_run() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let server = ServerProcess::start(&dir.path().join("data"), &[]).await;
+    let addr = server.addr.to_string();
+    let client = MapClient::connect(ClientConfig::new(addr.clone()))
+        .await
+        .expect("client");
+    client
+        .publish_frames(wander_frames("r", 5, 20))
+        .await
+        .expect("publish");
+    let args = [
+        "map",
+        "--robot",
+        "r",
+        "--map",
+        "m",
+        "--pose",
+        "estimate",
+        "--estimate-wait",
+        "60",
+    ];
+    for signal in ["-TERM", "-INT"] {
+        let log = dir.path().join(format!("map{signal}.log"));
+        let child = spawn(&args, &addr, &free_loopback_addr().to_string(), &log);
+        assert!(
+            wait_for_log(
+                &log,
+                "waiting for the localizer's estimate",
+                Duration::from_secs(30)
+            ),
+            "{}",
+            std::fs::read_to_string(&log).unwrap_or_default()
+        );
+        let printed = stops_on(child, signal, "deog map waiting for an estimate");
+        // The frame it waited on was neither mapped nor skipped.
+        assert!(printed.contains("r -> m: 0 frames integrated"), "{printed}");
+        assert!(
+            printed.contains(", 0 the localizer passed over"),
+            "{printed}"
+        );
+    }
 }

@@ -692,3 +692,45 @@ async fn a_bad_tls_key_is_refused_with_the_reason() {
     assert!(text.contains("TLS setup failed"), "{text}");
     assert!(text.contains("KeyMismatch"), "{text}");
 }
+
+#[tokio::test]
+async fn health_watch_on_an_unknown_service_streams_service_unknown_and_stays_open() {
+    let server = TestServer::start().await;
+    let mut health = HealthClient::new(plain_channel(&server).await);
+    // Check answers NOT_FOUND, as the protocol says.
+    let checked = health_status(plain_channel(&server).await, "no.such.Service").await;
+    assert_eq!(checked.expect_err("unknown").code(), Code::NotFound);
+    // Watch streams SERVICE_UNKNOWN and does not end.
+    let mut watch = bounded(
+        "health watch",
+        health.watch(HealthCheckRequest {
+            service: "no.such.Service".into(),
+        }),
+    )
+    .await
+    .expect("a watch, not an error")
+    .into_inner();
+    let first = bounded("first status", watch.message())
+        .await
+        .expect("ok")
+        .expect("a status");
+    assert_eq!(first.status, ServingStatus::ServiceUnknown as i32);
+    let next = tokio::time::timeout(Duration::from_millis(500), watch.message()).await;
+    assert!(next.is_err(), "the watch stays open: {next:?}");
+    drop(watch);
+    // The map service, watched, is SERVING.
+    let mut watch = bounded(
+        "health watch",
+        health.watch(HealthCheckRequest {
+            service: MAP_SERVICE_NAME.into(),
+        }),
+    )
+    .await
+    .expect("watch")
+    .into_inner();
+    let first = bounded("status", watch.message()).await.unwrap().unwrap();
+    assert_eq!(first.status, ServingStatus::Serving as i32);
+    // A watch never ends by itself; the stop would wait out its grace.
+    drop(watch);
+    server.stop().await;
+}
