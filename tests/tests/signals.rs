@@ -122,7 +122,7 @@ async fn commands_waiting_for_frames_or_their_own_work_stop_on_either_signal() {
     let dir = tempfile::tempdir().expect("temp dir");
     let server = ServerProcess::start(&dir.path().join("data"), &[]).await;
     let addr = server.addr.to_string();
-    let map = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/maps/lse_arena.yaml");
+    let map = Path::new(env!("CARGO_MANIFEST_DIR")).join("../mapfile/tests/data/lse_arena.yaml");
     succeeded(&deog_tests::run_deog(
         &["import", "--map", "arena", map.to_str().expect("path")],
         &[("DEOG_SERVER", addr.clone())],
