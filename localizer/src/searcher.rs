@@ -508,6 +508,22 @@ impl Searcher {
         })
     }
 
+    /// The last global start's or lost filter's hypotheses, best first,
+    /// carried to the robot's pose now at `odometry` (empty before the
+    /// first such search ends).
+    pub fn hypotheses_now(&self, odometry: &Pose2) -> Vec<Hypothesis> {
+        self.found.as_ref().map_or_else(Vec::new, |f| {
+            let step = OdometryMove::between(&f.odometry, odometry);
+            f.hypotheses
+                .iter()
+                .map(|h| Hypothesis {
+                    pose: step.apply(&h.pose),
+                    score: h.score,
+                })
+                .collect()
+        })
+    }
+
     /// Whether the filter's pose stands confirmed: always, for a
     /// searcher that is off; else since the last check found no rival.
     pub fn confirmed(&self) -> bool {

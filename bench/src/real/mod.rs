@@ -7,8 +7,10 @@
 //!    `<out>/server-data`;
 //! 2. `deog import --carmen LOG --robot R`; the scan count `N` read back
 //!    from the server (or `--to`, a prefix of the log);
-//! 3. `deog map --robot R --map reference --pose reference --to N`: the
-//!    reference map, from the log's reference (corrected) poses;
+//! 3. `deog map --robot R --map reference --pose reference --to N
+//!    --hit-probability H --miss-probability M`: the reference map, from
+//!    the log's reference (corrected) poses, its laser ray model's beliefs
+//!    the bench's `--hit-probability` and `--miss-probability`;
 //! 4. tracking: `deog localize --from 1 --to N` from the first scan's
 //!    reference pose (`--initial-pose`, `--initial-std-xy`,
 //!    `--initial-std-theta`) with the [`Recipe`]'s flags, every estimate
@@ -50,7 +52,8 @@
 //!   `motion_noise_scale`, `min_particles`, `max_particles`,
 //!   `initial_std_xy`, `initial_std_theta`;
 //! - `bounds`: `position_m`, `heading_rad`;
-//! - `map`: `name`, `resolution_m`, `tiles`, `observed_cells`,
+//! - `map`: `name`, `resolution_m`, `hit_probability`,
+//!   `miss_probability`, `tiles`, `observed_cells`,
 //!   `occupied_cells` (above the localizer's occupied threshold, 0.65),
 //!   `seconds` (the cartographer's wall-clock time);
 //! - `tracking`: `initial_pose` (`x`, `y`, `theta`), `frames`,
@@ -236,6 +239,17 @@ pub struct RealOptions {
     /// Cell side of the reference map, metres.
     #[arg(long, default_value_t = 0.05)]
     pub resolution: f64,
+    /// The reference map's belief in the cell a laser echo ends in
+    /// (`deog map --hit-probability`). Stronger than the cartographer's
+    /// default (OctoMap's 0.7): along a corridor the rays to its far end
+    /// graze the side walls, and at 0.7 against 0.4 their crossings wear
+    /// holes in walls every scan sees.
+    #[arg(long, default_value_t = 0.85)]
+    pub hit_probability: f64,
+    /// The reference map's belief in each cell a laser ray crosses
+    /// (`deog map --miss-probability`; the cartographer's default 0.4).
+    #[arg(long, default_value_t = 0.45)]
+    pub miss_probability: f64,
     /// Global starts, each a localizer of its own on a window of scans
     /// (0: no global localization).
     #[arg(long, default_value_t = 20)]
@@ -285,6 +299,26 @@ impl RealOptions {
                 format!(
                     "--resolution takes a cell side in [0.01, 1] m, got {}",
                     self.resolution
+                )
+            },
+        )?;
+        require(
+            self.hit_probability.is_finite() && (0.5..=0.9999).contains(&self.hit_probability),
+            "--hit-probability",
+            || {
+                format!(
+                    "--hit-probability takes a probability in [0.5, 0.9999], got {}",
+                    self.hit_probability
+                )
+            },
+        )?;
+        require(
+            self.miss_probability.is_finite() && (0.0001..=0.5).contains(&self.miss_probability),
+            "--miss-probability",
+            || {
+                format!(
+                    "--miss-probability takes a probability in [0.0001, 0.5], got {}",
+                    self.miss_probability
                 )
             },
         )?;
@@ -407,6 +441,21 @@ mod tests {
             (0.05, 0.05)
         );
         assert_eq!(options.out, PathBuf::from("bench-real-out"));
+        assert_eq!(
+            (options.hit_probability, options.miss_probability),
+            (0.85, 0.45)
+        );
+    }
+
+    #[test]
+    fn the_map_beliefs_must_be_probabilities_on_their_side_of_a_half() {
+        assert_eq!(blamed(&["--hit-probability", "0.4"]), "--hit-probability");
+        assert_eq!(blamed(&["--hit-probability", "NaN"]), "--hit-probability");
+        assert_eq!(blamed(&["--miss-probability", "0.6"]), "--miss-probability");
+        assert_eq!(blamed(&["--miss-probability", "0"]), "--miss-probability");
+        parse(&["--hit-probability", "0.7", "--miss-probability", "0.4"])
+            .validate()
+            .expect("the cartographer's defaults are valid");
     }
 
     #[test]

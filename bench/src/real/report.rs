@@ -23,6 +23,10 @@ const TARGET_CONVERGED: f64 = 0.9;
 pub(super) struct MapFigures {
     /// Metres per cell.
     pub resolution_m: f64,
+    /// The ray model's belief in an echo's cell.
+    pub hit_probability: f64,
+    /// The ray model's belief in a crossed cell.
+    pub miss_probability: f64,
     /// Stored tiles.
     pub tiles: u64,
     /// Cells ever observed.
@@ -209,8 +213,13 @@ impl RealFigures {
         );
         let _ = writeln!(
             out,
-            "map {MAP} (reference poses): {} tiles, {} cells observed, {} occupied, {} m cells",
-            self.map.tiles, self.map.observed_cells, self.map.occupied_cells, self.map.resolution_m
+            "map {MAP} (reference poses, echoes {} and crossings {} likely occupied): {} tiles, {} cells observed, {} occupied, {} m cells",
+            self.map.hit_probability,
+            self.map.miss_probability,
+            self.map.tiles,
+            self.map.observed_cells,
+            self.map.occupied_cells,
+            self.map.resolution_m
         );
         let _ = writeln!(out, "\n| figure | value | target |");
         let _ = writeln!(out, "|---|---|---|");
@@ -344,6 +353,8 @@ impl RealFigures {
             map: MapRecord {
                 name: MAP,
                 resolution_m: self.map.resolution_m,
+                hit_probability: self.map.hit_probability,
+                miss_probability: self.map.miss_probability,
                 tiles: self.map.tiles,
                 observed_cells: self.map.observed_cells,
                 occupied_cells: self.map.occupied_cells,
@@ -443,6 +454,8 @@ struct BoundsRecord {
 struct MapRecord {
     name: &'static str,
     resolution_m: f64,
+    hit_probability: f64,
+    miss_probability: f64,
     tiles: u64,
     observed_cells: u64,
     occupied_cells: u64,
@@ -549,6 +562,8 @@ mod tests {
             recipe: Cli::parse_from(["real"]).recipe,
             map: MapFigures {
                 resolution_m: 0.05,
+                hit_probability: 0.85,
+                miss_probability: 0.45,
                 tiles: 120,
                 observed_cells: 300_000,
                 occupied_cells: 20_000,
@@ -605,6 +620,8 @@ mod tests {
         assert_eq!(json["recipe"]["min_particles"], 2000);
         assert_eq!(json["map"]["observed_cells"], 300_000);
         assert_eq!(json["map"]["occupied_cells"], 20_000);
+        assert_eq!(json["map"]["hit_probability"], 0.85);
+        assert_eq!(json["map"]["miss_probability"], 0.45);
         let t = &json["tracking"];
         assert_eq!(t["rms_position_m"], 0.06);
         assert_eq!(t["max_position_error_m"], 0.4);

@@ -78,6 +78,10 @@ pub(super) async fn bench(options: &RealOptions) -> Result<RealFigures> {
                 &scans.to_string(),
                 "--resolution",
                 &options.resolution.to_string(),
+                "--hit-probability",
+                &options.hit_probability.to_string(),
+                "--miss-probability",
+                &options.miss_probability.to_string(),
                 "--idle-exit",
                 IDLE_EXIT_S,
                 // One frame a batch: the server clamps each batch's sum,
@@ -98,6 +102,8 @@ pub(super) async fn bench(options: &RealOptions) -> Result<RealFigures> {
     let map = read_map(&processes.client, MAP).await?;
     let map_figures = MapFigures {
         resolution_m: info.resolution_m,
+        hit_probability: options.hit_probability,
+        miss_probability: options.miss_probability,
         tiles: info.tile_count,
         observed_cells: info.cell_count,
         occupied_cells: occupied_cells(&map),

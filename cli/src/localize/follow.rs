@@ -8,9 +8,9 @@ use std::future::Future;
 use std::time::{Duration, Instant};
 
 use anyhow::{Result, bail};
-use deog_grid::normalize_angle;
+use deog_grid::{Pose2, normalize_angle};
 use deog_localizer::error::LocalizerError;
-use deog_localizer::searcher::SearcherStats;
+use deog_localizer::searcher::{Searcher, SearcherStats};
 use deog_localizer::step::Localizer;
 use deog_proto::rig::frame_rig_name;
 use deog_proto::v1 as pb;
@@ -295,6 +295,11 @@ impl Following<'_> {
                 most_particles = localizer.mcl().most_particles(),
                 "global search"
             );
+            if tracing::enabled!(tracing::Level::DEBUG)
+                && searched_before.is_some_and(|before| before[1] != stats.ended)
+            {
+                log_hypotheses(frame, &odometry, searcher);
+            }
         }
         if let Some(moved) = &report.realigned {
             self.realigned += 1;
@@ -349,6 +354,41 @@ impl Following<'_> {
 
 /// What a search log line is written for: a search begun or ended, a
 /// check's verdict (not the lookups each frame's slice makes).
+/// Logs a search's hypotheses at debug level, each beside the
+/// simulator's true pose or the log's reference when the frame has one.
+fn log_hypotheses(frame: &pb::SonarFrame, odometry: &Pose2, searcher: &Searcher) {
+    let truth = frame.true_pose.or(frame.reference_pose).map(pose_from_wire);
+    if let Some(probe) = truth.and_then(|t| searcher.probe(&t, odometry)) {
+        tracing::debug!(
+            frame = frame.sequence,
+            score = format!("{:.3}", probe.score),
+            latest_score = format!("{:.3}", probe.latest_score),
+            points = probe.points,
+            "the search's cloud at the true or reference pose"
+        );
+    }
+    let hypotheses = searcher.hypotheses_now(odometry);
+    for (rank, h) in hypotheses.iter().enumerate() {
+        let off = truth.map(|t| {
+            format!(
+                "{:.2} m, {:.1} deg",
+                (h.pose.x - t.x).hypot(h.pose.y - t.y),
+                normalize_angle(h.pose.theta - t.theta).abs().to_degrees()
+            )
+        });
+        tracing::debug!(
+            frame = frame.sequence,
+            rank,
+            x = format!("{:.3}", h.pose.x),
+            y = format!("{:.3}", h.pose.y),
+            theta = format!("{:.3}", h.pose.theta),
+            score = format!("{:.3}", h.score),
+            off = off.as_deref().unwrap_or("-"),
+            "search hypothesis"
+        );
+    }
+}
+
 fn search_events(stats: &SearcherStats) -> [u64; 4] {
     [
         stats.searches,
