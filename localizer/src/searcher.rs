@@ -508,9 +508,9 @@ impl Searcher {
         })
     }
 
-    /// The last global start's or lost filter's hypotheses, best first,
-    /// carried to the robot's pose now at `odometry` (empty before the
-    /// first such search ends).
+    /// The last search's hypotheses (a global start's, a lost filter's
+    /// or a check's), best first, carried to the robot's pose now at
+    /// `odometry`; empty before the first search ends.
     pub fn hypotheses_now(&self, odometry: &Pose2) -> Vec<Hypothesis> {
         self.found.as_ref().map_or_else(Vec::new, |f| {
             let step = OdometryMove::between(&f.odometry, odometry);

@@ -352,8 +352,6 @@ impl Following<'_> {
     }
 }
 
-/// What a search log line is written for: a search begun or ended, a
-/// check's verdict (not the lookups each frame's slice makes).
 /// Logs a search's hypotheses at debug level, each beside the
 /// simulator's true pose or the log's reference when the frame has one.
 fn log_hypotheses(frame: &pb::SonarFrame, odometry: &Pose2, searcher: &Searcher) {
@@ -389,6 +387,8 @@ fn log_hypotheses(frame: &pb::SonarFrame, odometry: &Pose2, searcher: &Searcher)
     }
 }
 
+/// What a search log line is written for: a search begun or ended, a
+/// check's verdict (not the lookups each frame's slice makes).
 fn search_events(stats: &SearcherStats) -> [u64; 4] {
     [
         stats.searches,
