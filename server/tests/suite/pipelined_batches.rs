@@ -59,7 +59,14 @@ fn one_cell_batch(sequence: u64) -> pb::UpdateBatch {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn tiny_batches_pipelined_without_pause_are_all_acknowledged_and_the_connection_lives() {
-    const BATCHES: u64 = 100_000;
+    // 100,000 on sled, the target; PostgreSQL commits each batch on its
+    // own, and there 25,000, well past where the connection used to be
+    // killed (after 5,294 and 14,897 acknowledgements), keep the suite short.
+    let batches: u64 = if crate::common::on_postgres() {
+        25_000
+    } else {
+        100_000
+    };
     let server = TestServer::start().await;
     let mut client = server.client().await;
     create_map(&mut client, "m", 8).await;
@@ -101,7 +108,7 @@ async fn tiny_batches_pipelined_without_pause_are_all_acknowledged_and_the_conne
     let mut acks = client
         .apply_updates(OneFramePerBatch {
             next: 1,
-            last: BATCHES,
+            last: batches,
             paused: false,
         })
         .await
@@ -122,12 +129,12 @@ async fn tiny_batches_pipelined_without_pause_are_all_acknowledged_and_the_conne
             Err(_) => panic!("no acknowledgement for 60 s after {acknowledged}"),
         }
     }
-    assert_eq!(acknowledged, BATCHES);
+    assert_eq!(acknowledged, batches);
 
     // The watch is alive: a new batch on another stream of the same
     // connection reaches it.
     let (more, error) =
-        crate::common::send_batches(&mut client, vec![one_cell_batch(BATCHES + 1)]).await;
+        crate::common::send_batches(&mut client, vec![one_cell_batch(batches + 1)]).await;
     assert!(error.is_none() && more.len() == 1, "{error:?}");
     let target = more[0].map_version;
     let seen = tokio::time::timeout(Duration::from_secs(10), async {
