@@ -56,6 +56,7 @@ use deog_grid::{CellIndex, FrameMotion, Pose2, RingFiring, SensorRing, TileKey, 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use crate::ambiguity::{AmbiguitySettings, Ring, rival_in_ring};
 use crate::beam_model::BeamModelParams;
 use crate::cluster::{
     BinMap, BinSet, BinSize, ClusterEstimate, Clusters, MEAN_POSE_MIN_PARTICLES, cluster_particles,
@@ -121,6 +122,10 @@ pub struct FilterSettings {
     /// How a tracked pose whose frame stops fitting is realigned
     /// ([`Mcl::realign`]); `None` never realigns.
     pub realign: Option<RealignSettings>,
+    /// How a laser filter's estimate is checked for a rival pose nearby
+    /// that its frame fits nearly as well ([`Mcl::rival_nearby`]);
+    /// `None` never checks.
+    pub ambiguity: Option<AmbiguitySettings>,
     /// Seed of every random draw.
     pub seed: u64,
 }
@@ -146,6 +151,7 @@ impl Default for FilterSettings {
             cluster_keep_weight: 1e-6,
             cluster_min_particles: 300,
             realign: Some(RealignSettings::default()),
+            ambiguity: Some(AmbiguitySettings::default()),
             seed: 1,
         }
     }
@@ -189,6 +195,9 @@ impl FilterSettings {
         }
         if let Some(realign) = self.realign {
             realign.validate()?;
+        }
+        if let Some(ambiguity) = self.ambiguity {
+            ambiguity.validate()?;
         }
         Ok(self)
     }
@@ -809,6 +818,61 @@ impl Mcl {
             fit_before: window.centre_log_fit.exp(),
             fit_after: window.best_log_fit.exp(),
         }))
+    }
+
+    /// The ring check's settings when this filter checks its estimate
+    /// for a rival nearby: it has them and its sensor is sharp (a laser's).
+    fn ambiguity_settings(&self) -> Option<AmbiguitySettings> {
+        let settings = self.settings.ambiguity?;
+        (!self.sensor.judges_modes_at_mean()).then_some(settings)
+    }
+
+    /// The tiles [`Self::rival_nearby`] reads for a frame of `readings`
+    /// around `pose`: those its echoes fall in from the ring's corners at
+    /// its extreme headings. Empty when the filter does not check.
+    pub fn tiles_for_ring(&self, map: &LocalMap, pose: &Pose2, readings: &[f64]) -> Vec<TileKey> {
+        let Some(settings) = self.ambiguity_settings() else {
+            return Vec::new();
+        };
+        let (l, a) = (settings.far_m, settings.half_rad);
+        let mut poses = vec![*pose];
+        for (dx, dy, dt) in [(l, l, a), (l, -l, -a), (-l, l, -a), (-l, -l, a)] {
+            poses.push(Pose2::new(pose.x + dx, pose.y + dy, pose.theta + dt));
+        }
+        self.sensor.tiles_needed(map, &poses, readings)
+    }
+
+    /// The best pose of a ring around the estimate `pose` (0.4 to 0.8 m
+    /// off by default) and how its frame fits there beside `pose`
+    /// ([`crate::ambiguity`]): where one fits nearly as well, the frame
+    /// does not pin the robot and the estimate is not converged. `tiles`
+    /// are [`Self::tiles_for_ring`]'s, fetched. `None` when the filter
+    /// does not check.
+    pub fn rival_nearby(
+        &mut self,
+        map: &mut LocalMap,
+        tiles: &[TileKey],
+        pose: &Pose2,
+        readings: &[f64],
+    ) -> Result<Option<(Ring, bool)>, LocalizerError> {
+        let Some(settings) = self.ambiguity_settings() else {
+            return Ok(None);
+        };
+        self.sensor.check_frame(readings)?;
+        self.sensor.set_searching(false);
+        self.sensor.set_reference(self.reference);
+        self.sensor.set_reading_poses(self.reading_poses.as_deref());
+        let observations = self.sensor.observations();
+        let sensor = &mut self.sensor;
+        let ring = rival_in_ring(pose, &settings, |poses, out| {
+            let from = out.len();
+            sensor.score_poses(map, tiles, poses, readings, out)?;
+            for fit in &mut out[from..] {
+                *fit /= observations;
+            }
+            Ok(())
+        })?;
+        Ok(ring.map(|ring| (ring, ring.ambiguous(settings.rival_fit))))
     }
 
     /// The tiles under the particles' sensors: those within the sensor's

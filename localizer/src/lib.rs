@@ -27,6 +27,8 @@
 //! - [`realign`]: a tracking filter whose frame stops fitting its pose
 //!   moved onto where the frame fits, in a small window around it (a
 //!   laser's tracking through wheels that slip).
+//! - [`ambiguity`]: an estimate whose frame fits as well half a metre
+//!   away (along a corridor) is not converged.
 //! - [`refine`]: the filter's estimate refined by matching the frame
 //!   against the distance field (Gauss–Newton), for the likelihood field.
 //! - [`beam_model`]: the likelihood of a measured range given the
@@ -44,6 +46,7 @@
 //!
 //! How well it localizes is judged in `deog-evaluation`.
 
+pub mod ambiguity;
 pub mod beam_model;
 pub mod cluster;
 pub mod distance_field;

@@ -20,6 +20,7 @@ use std::time::{Duration, Instant};
 
 use deog_grid::{Pose2, Tile, TileKey, TileMap};
 
+use crate::ambiguity::Ring;
 use crate::error::LocalizerError;
 use crate::filter::{CarriedEstimate, CorrectionReport, Estimate, Mcl, Realignment};
 use crate::local_map::LocalMap;
@@ -78,6 +79,10 @@ pub struct StepReport {
     /// The tracked pose moved onto where the frame fits, before the
     /// correction ([`Mcl::realign`]).
     pub realigned: Option<Realignment>,
+    /// The estimate's ring check ([`Mcl::rival_nearby`]), when one ran:
+    /// the best pose nearby, and whether its fit made the estimate
+    /// ambiguous.
+    pub rival_nearby: Option<(Ring, bool)>,
 }
 
 /// A filter on its cached map, kept current with the server's changes.
@@ -100,6 +105,10 @@ pub struct Localizer {
     searcher: Option<Searcher>,
     /// The CPU budget per step, when the work is fitted to one.
     budget: Option<StepBudget>,
+    /// The last ring check found a rival nearby fitting the frame nearly
+    /// as well as the estimate ([`crate::ambiguity`]): not converged
+    /// until one finds none.
+    ambiguous: bool,
 }
 
 /// Shares of a step's budget: the filter's update, and a search's slice;
@@ -171,6 +180,7 @@ impl Localizer {
             stretch_refresh: true,
             searcher: None,
             budget: None,
+            ambiguous: false,
         }
     }
 
@@ -222,7 +232,7 @@ impl Localizer {
     /// search confirmed it ([`Mcl::estimate`] otherwise).
     pub fn estimate(&self, odometry: &Pose2) -> Option<Estimate> {
         let mut estimate = self.mcl.estimate(odometry)?;
-        estimate.converged &= self.confirmed();
+        estimate.converged &= self.confirmed() && !self.ambiguous;
         Some(estimate)
     }
 
@@ -230,7 +240,7 @@ impl Localizer {
     /// it to frames that come while a step runs.
     pub fn carried(&self) -> Option<CarriedEstimate> {
         let carried = self.mcl.carried()?;
-        Some(if self.confirmed() {
+        Some(if self.confirmed() && !self.ambiguous {
             carried
         } else {
             carried.unconfirmed()
@@ -432,11 +442,31 @@ impl Localizer {
         {
             estimate.converged = false;
         }
+        // The ring check, on each correction of an estimate that is
+        // otherwise converged; its verdict holds for the frames between.
+        if let Some(estimate) = &report.estimate {
+            if !estimate.converged {
+                self.ambiguous = false;
+            } else if report.correction.is_some() {
+                let needed = self.mcl.tiles_for_ring(&self.map, &estimate.pose, readings);
+                if !needed.is_empty() {
+                    let missing = self.mcl.missing_tiles(&self.map, &needed);
+                    report.tiles_fetched += fetch_into(tiles, &missing, &mut self.map)?;
+                    report.rival_nearby =
+                        self.mcl
+                            .rival_nearby(&mut self.map, &needed, &estimate.pose, readings)?;
+                    self.ambiguous = report.rival_nearby.is_some_and(|(_, ambiguous)| ambiguous);
+                }
+            }
+        }
         if let (Some(searcher), Some(estimate)) = (&mut self.searcher, &mut report.estimate) {
             let (mcl, map) = (&mut self.mcl, &mut self.map);
             estimate.converged = searched.time(searcher, |searcher| {
                 searcher.verify(mcl, map, estimate, odometry)
             })?;
+        }
+        if let Some(estimate) = &mut report.estimate {
+            estimate.converged &= !self.ambiguous;
         }
         self.fit_budget(updated, searched);
         Ok(report)

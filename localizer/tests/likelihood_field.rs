@@ -3,7 +3,9 @@
 //! error is the model's or the filter's): scores peak at the true pose,
 //! MCL tracks a laser robot, a frame's tiles are where its endpoints fall
 //! (and the step fetches them), fields go when the walls near them move,
-//! and the cache keeps to its budget with fields built and evicted.
+//! and the cache keeps to its budget with fields built and evicted; an
+//! estimate along a corridor whose ends the laser cannot see is not
+//! called converged.
 
 mod common;
 
@@ -605,4 +607,74 @@ fn the_cache_counts_tiles_newly_held_not_those_fetched_again() {
     assert_eq!(map.stats().tiles_added, 1);
     map.insert_tile(b, 1, None).unwrap();
     assert_eq!(map.stats().tiles_added, 2);
+}
+
+/// A corridor 1.8 m wide along x from -60 m to `end`, closed there.
+fn corridor_tiles(end: f64) -> TileMap {
+    let log_odds = move |x: f64, y: f64| {
+        if !(-60.0..=end + 0.2).contains(&x) || y.abs() > 1.1 {
+            i16::MIN
+        } else if y.abs() >= 0.9 || x >= end {
+            OCCUPIED
+        } else {
+            FREE
+        }
+    };
+    let mut tiles = TileMap::new(
+        Resolution::DEFAULT,
+        TileSize::new(64).unwrap(),
+        ClampLimits::default(),
+    );
+    let side: f64 = 64.0 * Resolution::DEFAULT.metres();
+    for tx in (-60.0 / side).floor() as i32..=((end + 0.2) / side).floor() as i32 {
+        for ty in -1..=0 {
+            let key = TileKey::new(tx, ty);
+            tiles.insert(key, tile_of(key, log_odds)).unwrap();
+        }
+    }
+    tiles
+}
+
+/// A laser filter tracking a robot that drives 2 m along the corridor of
+/// [`corridor_tiles`] to x = 0, from its true pose: whether its last
+/// estimate is called converged, and its error.
+fn converged_in_corridor(end: f64) -> (bool, f64) {
+    let mut source = corridor_tiles(end);
+    let rig = laser();
+    let mut settings = FilterSettings {
+        seed: 3,
+        ..FilterSettings::default()
+    };
+    settings.kld.max_particles = 2_000;
+    let mut mcl = Mcl::with_sensor(settings, Box::new(model())).unwrap();
+    let start = Pose2::new(-2.0, 0.0, 0.0);
+    mcl.start_at(start, 0.02, 0.02).unwrap();
+    let now = Instant::now();
+    let map = LocalMap::new(settings(1 << 30)).unwrap();
+    let mut localizer = Localizer::new(mcl, map, Duration::from_secs(5), now);
+    let mut last = None;
+    for k in 0..=20 {
+        let truth = Pose2::new(-2.0 + 0.1 * f64::from(k), 0.0, 0.0);
+        let ranges = laser_frame(&rig, &source, &truth);
+        let report = localizer.step(&truth, &ranges, now, &mut source).unwrap();
+        last = report
+            .estimate
+            .map(|e| (e.converged, error(&e.pose, &truth).0));
+    }
+    last.expect("an estimate")
+}
+
+#[test]
+fn an_estimate_along_a_corridor_whose_ends_the_laser_cannot_see_is_not_converged() {
+    // The far end 60 m ahead, past the laser's 50 m: every pose along the
+    // corridor explains the scan as well.
+    let (open, open_error) = converged_in_corridor(60.0);
+    // The end 3 m ahead pins the pose along it.
+    let (closed, closed_error) = converged_in_corridor(3.0);
+    assert!(
+        closed_error < 0.1 && open_error < 0.3,
+        "errors {closed_error:.3} m (closed), {open_error:.3} m (open)"
+    );
+    assert!(closed, "not converged with the corridor's end in sight");
+    assert!(!open, "converged where the scan does not pin the pose");
 }

@@ -11,10 +11,20 @@
 //! so a connection that sends none within the handshake timeout fails the
 //! same way; and an accept loop that retried at once on EMFILE would spin a
 //! core while every new client times out, so it waits, longer each time.
+//!
+//! A connection has spoken once it has sent [`SPOKEN_BYTES`] (an HTTP/2
+//! preface is 24 bytes, a TLS hello more). Connections that have not yet
+//! spoken do not hold the limit against a newcomer: with every place
+//! taken, the one that has been silent longest is closed for it. Without
+//! that, a client opening a thousand sockets and sending nothing kept
+//! every fresh client out for the whole handshake timeout, and could do
+//! it again at once.
 
+use std::collections::VecDeque;
 use std::io;
 use std::pin::Pin;
-use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use std::time::{Duration, Instant};
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
@@ -93,29 +103,97 @@ impl Default for ConnectionLimits {
     }
 }
 
+/// Bytes a connection must send before it counts as speaking: an HTTP/2
+/// client preface's length (a TLS client hello is longer).
+pub const SPOKEN_BYTES: usize = 24;
+
+/// A connection's place, shared between it and the accept loop: the loop
+/// takes it from a silent connection it closes and gives it to the
+/// newcomer at once (a newcomer waiting for the closed connection's task
+/// to let go lost the place to connections arriving meanwhile).
+type Place = Arc<Mutex<Option<OwnedSemaphorePermit>>>;
+
+/// A connection that has not yet spoken, as the accept loop sees it: the
+/// token that closes it alone, whether it has since spoken (or gone), and
+/// its place.
+struct Silent {
+    cut: CancellationToken,
+    done: Arc<AtomicBool>,
+    place: Place,
+}
+
+/// The connections that have not yet spoken, oldest first. Entries of
+/// those that have since spoken or gone are dropped as they are met.
+#[derive(Default)]
+struct SilentQueue {
+    queue: Mutex<VecDeque<Silent>>,
+}
+
+impl SilentQueue {
+    fn push(&self, silent: Silent, most: usize) {
+        let mut queue = lock(&self.queue);
+        if queue.len() >= most {
+            queue.retain(|s| !s.done.load(Ordering::Acquire));
+        }
+        queue.push_back(silent);
+    }
+
+    /// Closes the connection silent longest and returns its place; `None`
+    /// when no connection is silent.
+    fn close_oldest(&self) -> Option<OwnedSemaphorePermit> {
+        let mut queue = self.queue.lock().unwrap_or_else(|e| e.into_inner());
+        while let Some(silent) = queue.pop_front() {
+            if !silent.done.swap(true, Ordering::AcqRel) {
+                silent.cut.cancel();
+                if let Some(place) = lock(&silent.place).take() {
+                    return Some(place);
+                }
+            }
+        }
+        None
+    }
+}
+
+fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// A TCP connection that errors once its token is cancelled.
-/// It also errors if its first bytes do not come within the handshake
-/// timeout, and holds one of the server's connection permits.
+/// It also errors if it has not spoken ([`SPOKEN_BYTES`]) within the
+/// handshake timeout, and holds one of the server's connection places
+/// until it goes or the accept loop takes it back.
 pub struct CuttableStream {
     inner: TcpStream,
     cut: Pin<Box<WaitForCancellationFutureOwned>>,
-    /// Until the first bytes are read: when the connection gives up on them.
-    handshake: Option<Pin<Box<Sleep>>>,
-    _permit: OwnedSemaphorePermit,
+    /// Until it has spoken: when the connection gives up on it, the bytes
+    /// read so far, and its flag in the accept loop's [`SilentQueue`].
+    handshake: Option<Handshake>,
+    place: Place,
+}
+
+struct Handshake {
+    deadline: Pin<Box<Sleep>>,
+    read: usize,
+    done: Arc<AtomicBool>,
 }
 
 impl CuttableStream {
     fn new(
         inner: TcpStream,
-        cut: &CancellationToken,
+        cut: CancellationToken,
         handshake_timeout: Duration,
-        permit: OwnedSemaphorePermit,
+        place: Place,
+        done: Arc<AtomicBool>,
     ) -> Self {
         Self {
             inner,
-            cut: Box::pin(cut.clone().cancelled_owned()),
-            handshake: Some(Box::pin(tokio::time::sleep(handshake_timeout))),
-            _permit: permit,
+            cut: Box::pin(cut.cancelled_owned()),
+            handshake: Some(Handshake {
+                deadline: Box::pin(tokio::time::sleep(handshake_timeout)),
+                read: 0,
+                done,
+            }),
+            place,
         }
     }
 
@@ -124,7 +202,7 @@ impl CuttableStream {
         self.cut.as_mut().poll(cx).map(|()| {
             io::Error::new(
                 io::ErrorKind::ConnectionAborted,
-                "the map server closed the connection at shutdown",
+                "the server closed the connection (shutting down, or its place given to a newcomer)",
             )
         })
     }
@@ -143,17 +221,23 @@ impl AsyncRead for CuttableStream {
             return Poll::Ready(Err(error));
         }
         if let Some(handshake) = &mut this.handshake
-            && handshake.as_mut().poll(cx).is_ready()
+            && handshake.deadline.as_mut().poll(cx).is_ready()
         {
             return Poll::Ready(Err(io::Error::new(
                 io::ErrorKind::TimedOut,
-                "the connection sent nothing within the handshake timeout",
+                "the connection did not speak within the handshake timeout",
             )));
         }
         let filled = buf.filled().len();
         let read = Pin::new(&mut this.inner).poll_read(cx, buf);
-        if buf.filled().len() > filled {
-            this.handshake = None;
+        if let Some(handshake) = &mut this.handshake {
+            handshake.read += buf.filled().len() - filled;
+            // Once it has spoken it is no longer closed for a newcomer; if
+            // the accept loop closed it first, the cut says so next poll.
+            if handshake.read >= SPOKEN_BYTES {
+                handshake.done.store(true, Ordering::Release);
+                this.handshake = None;
+            }
         }
         read
     }
@@ -185,6 +269,16 @@ impl AsyncWrite for CuttableStream {
     }
 }
 
+impl Drop for CuttableStream {
+    fn drop(&mut self) {
+        if let Some(handshake) = &self.handshake {
+            handshake.done.store(true, Ordering::Release);
+        }
+        // The accept loop's entry shares the place: let it go now.
+        drop(lock(&self.place).take());
+    }
+}
+
 impl Connected for CuttableStream {
     type ConnectInfo = TcpConnectInfo;
 
@@ -194,7 +288,8 @@ impl Connected for CuttableStream {
 }
 
 /// The listener's connections, each cut when `cut` is cancelled, at most
-/// `limits.max_connections` at once. Accepting runs in a task of its own
+/// `limits.max_connections` at once; with every place taken, a newcomer
+/// takes the place of the connection silent longest, if one is. Accepting runs in a task of its own
 /// that ends, letting the listener go, once the server drops the stream.
 pub fn incoming(
     listener: TcpListener,
@@ -203,6 +298,7 @@ pub fn incoming(
 ) -> impl Stream<Item = io::Result<CuttableStream>> {
     let (tx, rx) = mpsc::channel(16);
     let permits = Arc::new(Semaphore::new(limits.max_connections));
+    let silent = Arc::new(SilentQueue::default());
     tokio::spawn(async move {
         let mut backoff = ACCEPT_BACKOFF.0;
         let mut last_refusal_logged: Option<Instant> = None;
@@ -214,28 +310,37 @@ pub fn incoming(
             match accepted {
                 Ok((stream, peer)) => {
                     backoff = ACCEPT_BACKOFF.0;
-                    let Ok(permit) = permits.clone().try_acquire_owned() else {
-                        // Logged at most once a second: a flood would
-                        // otherwise fill the log as fast as it connects.
-                        if last_refusal_logged.is_none_or(|t| t.elapsed() >= Duration::from_secs(1))
-                        {
-                            tracing::warn!(
-                                %peer,
-                                max_connections = limits.max_connections,
-                                "connection closed: the server holds as many connections as --max-connections allows"
-                            );
-                            last_refusal_logged = Some(Instant::now());
-                        }
-                        drop(stream);
-                        continue;
-                    };
                     // Small messages (acks) should not wait for Nagle.
                     let _ = stream.set_nodelay(true);
-                    let stream =
-                        CuttableStream::new(stream, &cut, limits.handshake_timeout, permit);
-                    if tx.send(Ok(stream)).await.is_err() {
-                        break;
+                    let admit = Admit {
+                        cut: cut.child_token(),
+                        done: Arc::new(AtomicBool::new(false)),
+                        limits,
+                        silent: silent.clone(),
+                    };
+                    if let Ok(permit) = permits.clone().try_acquire_owned() {
+                        if tx.send(Ok(admit.stream(stream, permit))).await.is_err() {
+                            break;
+                        }
+                        continue;
                     }
+                    if let Some(permit) = silent.close_oldest() {
+                        if tx.send(Ok(admit.stream(stream, permit))).await.is_err() {
+                            break;
+                        }
+                        continue;
+                    }
+                    // Logged at most once a second: a flood would
+                    // otherwise fill the log as fast as it connects.
+                    if last_refusal_logged.is_none_or(|t| t.elapsed() >= Duration::from_secs(1)) {
+                        tracing::warn!(
+                            %peer,
+                            max_connections = limits.max_connections,
+                            "connection closed: the server holds as many connections as --max-connections allows"
+                        );
+                        last_refusal_logged = Some(Instant::now());
+                    }
+                    drop(stream);
                 }
                 Err(error) if out_of_resources(&error) => {
                     tracing::warn!(
@@ -253,6 +358,35 @@ pub fn incoming(
         }
     });
     ReceiverStream::new(rx)
+}
+
+/// What a connection accepted gets once it has a place.
+struct Admit {
+    cut: CancellationToken,
+    done: Arc<AtomicBool>,
+    limits: ConnectionLimits,
+    silent: Arc<SilentQueue>,
+}
+
+impl Admit {
+    fn stream(self, stream: TcpStream, permit: OwnedSemaphorePermit) -> CuttableStream {
+        let place = Arc::new(Mutex::new(Some(permit)));
+        self.silent.push(
+            Silent {
+                cut: self.cut.clone(),
+                done: self.done.clone(),
+                place: place.clone(),
+            },
+            self.limits.max_connections,
+        );
+        CuttableStream::new(
+            stream,
+            self.cut,
+            self.limits.handshake_timeout,
+            place,
+            self.done,
+        )
+    }
 }
 
 /// Whether an accept failed for want of resources (EMFILE, ENFILE,

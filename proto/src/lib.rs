@@ -11,6 +11,8 @@
 //!   servers put in front of their service.
 //! - [`health`]: the gRPC health service both servers serve, `Watch` on an
 //!   unknown service streaming SERVICE_UNKNOWN as the protocol asks.
+//! - [`reflection`]: gRPC server reflection, v1 and v1alpha from one
+//!   table, errors answered inside the stream.
 //! - [`tls`]: [`tls::TlsIdentity`], a server's certificate and key, read and
 //!   checked so that a bad file is named with the reason.
 //! - [`FILE_DESCRIPTOR_SET`]: the encoded descriptors, for the gRPC reflection
@@ -26,6 +28,7 @@ pub mod auth;
 pub mod connection;
 pub mod health;
 pub mod names;
+pub mod reflection;
 pub mod rig;
 pub mod tls;
 

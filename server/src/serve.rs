@@ -9,6 +9,7 @@ use crate::store::{Store, StoreChange};
 use crate::writer::{StoreHealth, Writer};
 use deog_proto::auth::BearerAuth;
 use deog_proto::connection::{self, ConnectionLimits};
+use deog_proto::reflection;
 use deog_proto::tls::{TlsError, TlsIdentity};
 use deog_proto::v1::map_service_server::MapServiceServer;
 use std::future::Future;
@@ -26,9 +27,6 @@ const FIRST_FOREIGN_CHANGE_WAIT: Duration = Duration::from_secs(5);
 /// The gRPC name of the map service, as the health service reports it.
 pub const MAP_SERVICE_NAME: &str = "deog.v1.MapService";
 const HEALTH_SERVICE_NAME: &str = "grpc.health.v1.Health";
-const REFLECTION_SERVICE_NAME: &str = "grpc.reflection.v1.ServerReflection";
-/// The reflection service's older name, which many tools still ask first.
-const REFLECTION_V1ALPHA_SERVICE_NAME: &str = "grpc.reflection.v1alpha.ServerReflection";
 
 /// How the server runs.
 #[derive(Debug, Clone)]
@@ -188,27 +186,25 @@ pub async fn serve<S: Store>(
     // also describes the simulator's service, which lives elsewhere.
     // Both versions of reflection: grpcurl asks v1, many tools (Python's
     // grpcio-reflection among them) v1alpha.
-    let reflection_builder = || {
-        tonic_reflection::server::Builder::configure()
-            .register_encoded_file_descriptor_set(deog_proto::FILE_DESCRIPTOR_SET)
-            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
-            .with_service_name(MAP_SERVICE_NAME)
-            .with_service_name(HEALTH_SERVICE_NAME)
-            .with_service_name(REFLECTION_SERVICE_NAME)
-            .with_service_name(REFLECTION_V1ALPHA_SERVICE_NAME)
-    };
-    let reflection = reflection_builder()
-        .build_v1()
-        .map_err(|e| std::io::Error::other(e.to_string()))?;
-    let reflection_v1alpha = reflection_builder()
-        .build_v1alpha()
-        .map_err(|e| std::io::Error::other(e.to_string()))?;
+    let reflection = reflection::Reflection::new(
+        &[
+            deog_proto::FILE_DESCRIPTOR_SET,
+            tonic_health::pb::FILE_DESCRIPTOR_SET,
+        ],
+        &[
+            MAP_SERVICE_NAME,
+            HEALTH_SERVICE_NAME,
+            reflection::V1_SERVICE_NAME,
+            reflection::V1ALPHA_SERVICE_NAME,
+        ],
+    )
+    .map_err(|e| std::io::Error::other(e.to_string()))?;
 
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
     let router = builder
         .add_service(health_service)
-        .add_service(reflection)
-        .add_service(reflection_v1alpha)
+        .add_service(reflection.v1())
+        .add_service(reflection.v1alpha())
         .add_service(map_service);
     let cut_connections = CancellationToken::new();
     let incoming = connection::incoming(listener, cut_connections.clone(), config.connections);

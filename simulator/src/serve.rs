@@ -169,21 +169,19 @@ pub async fn serve_sim_server(
     let (health, health_service) = deog_proto::health::health_service();
     health.set_service_status(ROBOT_SERVICE_NAME, tonic_health::ServingStatus::Serving);
     // Both versions of reflection, as the map server serves them.
-    let reflection_builder = || {
-        tonic_reflection::server::Builder::configure()
-            .register_encoded_file_descriptor_set(deog_proto::FILE_DESCRIPTOR_SET)
-            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
-            .with_service_name(ROBOT_SERVICE_NAME)
-            .with_service_name("grpc.health.v1.Health")
-            .with_service_name("grpc.reflection.v1.ServerReflection")
-            .with_service_name("grpc.reflection.v1alpha.ServerReflection")
-    };
-    let reflection = reflection_builder()
-        .build_v1()
-        .map_err(|e| SimError::Serve(e.to_string()))?;
-    let reflection_v1alpha = reflection_builder()
-        .build_v1alpha()
-        .map_err(|e| SimError::Serve(e.to_string()))?;
+    let reflection = deog_proto::reflection::Reflection::new(
+        &[
+            deog_proto::FILE_DESCRIPTOR_SET,
+            tonic_health::pb::FILE_DESCRIPTOR_SET,
+        ],
+        &[
+            ROBOT_SERVICE_NAME,
+            "grpc.health.v1.Health",
+            deog_proto::reflection::V1_SERVICE_NAME,
+            deog_proto::reflection::V1ALPHA_SERVICE_NAME,
+        ],
+    )
+    .map_err(|e| SimError::Serve(e.to_string()))?;
     // tonic's own decoder limit is a backstop well above ours, so that an
     // oversized request reaches the handlers' check and gets an answer
     // naming it, as the map server does.
@@ -201,8 +199,8 @@ pub async fn serve_sim_server(
     let incoming = connection::incoming(listener, cut_connections.clone(), config.connections);
     let serving = builder
         .add_service(health_service)
-        .add_service(reflection)
-        .add_service(reflection_v1alpha)
+        .add_service(reflection.v1())
+        .add_service(reflection.v1alpha())
         .add_service(service)
         .serve_with_incoming_shutdown(incoming, async {
             let _ = stop_rx.await;

@@ -1,12 +1,13 @@
 //! The map server against clients that connect and say nothing, and more
 //! of them than it can hold, through the real `deog server` process on
 //! 127.0.0.1: silent connections are closed after the handshake timeout,
-//! connections over `--max-connections` are closed at once, and a process
-//! out of file descriptors waits between accepts rather than spinning,
-//! serving again once descriptors are free. The simulator (`deog sim`)
-//! holds its connections the same way.
+//! connections over `--max-connections` are closed at once, silent ones
+//! give their place to a newcomer, and a process out of file descriptors
+//! waits between accepts rather than spinning, serving again once
+//! descriptors are free. The simulator (`deog sim`) holds its connections
+//! the same way.
 
-use std::io::Read as _;
+use std::io::{Read as _, Write as _};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
@@ -36,6 +37,16 @@ fn closed_within(stream: &mut TcpStream, within: Duration) -> bool {
             }
         }
     }
+}
+
+/// A connection that has spoken: it sent an HTTP/2 client preface (and
+/// then nothing), so the server holds it as it holds any client's.
+fn speaking(addr: std::net::SocketAddr) -> TcpStream {
+    let mut stream = TcpStream::connect(addr).expect("connect");
+    stream
+        .write_all(b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n")
+        .expect("send the preface");
+    stream
 }
 
 /// Whether a real client gets an answer from the server within `within`.
@@ -105,9 +116,7 @@ async fn connections_over_the_limit_are_closed_and_the_server_serves_again_once_
     .await;
     // The readiness check's connection must be gone before the count.
     tokio::time::sleep(Duration::from_millis(300)).await;
-    let held: Vec<TcpStream> = (0..3)
-        .map(|_| TcpStream::connect(server.addr).expect("connect"))
-        .collect();
+    let held: Vec<TcpStream> = (0..3).map(|_| speaking(server.addr)).collect();
     tokio::time::sleep(Duration::from_millis(300)).await;
     let mut over = TcpStream::connect(server.addr).expect("the kernel accepts");
     let closed = tokio::task::block_in_place(|| closed_within(&mut over, Duration::from_secs(5)));
@@ -123,6 +132,37 @@ async fn connections_over_the_limit_are_closed_and_the_server_serves_again_once_
     assert!(
         serves_again(&server).await,
         "the server did not serve again once connections closed"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn silent_connections_filling_the_limit_give_their_places_to_newcomers() {
+    let data = tempfile::tempdir().expect("temp dir");
+    let server = ServerProcess::start(
+        data.path(),
+        &["--max-connections", "8", "--handshake-timeout-s", "60"],
+    )
+    .await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    // Far more silent sockets than places, as a client holding the limit
+    // for the whole handshake timeout would open.
+    let mut silent: Vec<TcpStream> = (0..40)
+        .map(|_| TcpStream::connect(server.addr).expect("connect"))
+        .collect();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    for attempt in 0..5 {
+        assert!(
+            answers_within(&server, Duration::from_secs(1)).await,
+            "attempt {attempt}: a client was not served within 1 s beside 40 silent sockets"
+        );
+        // The silent ones come back at once.
+        silent.extend((0..8).map(|_| TcpStream::connect(server.addr).expect("connect")));
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let first = &mut silent[0];
+    assert!(
+        tokio::task::block_in_place(|| closed_within(first, Duration::from_secs(2))),
+        "the connection silent longest was still held"
     );
 }
 
@@ -161,23 +201,36 @@ async fn the_simulator_closes_silent_connections_and_those_over_its_limit() {
     .await;
     tokio::time::sleep(Duration::from_millis(300)).await;
     let mut silent = TcpStream::connect(sim.addr).expect("connect");
-    let _held = TcpStream::connect(sim.addr).expect("connect");
+    let held = speaking(sim.addr);
     tokio::time::sleep(Duration::from_millis(100)).await;
-    let mut over = TcpStream::connect(sim.addr).expect("the kernel accepts");
+    // The third takes the silent one's place …
+    let mut newcomer = TcpStream::connect(sim.addr).expect("the kernel accepts");
     let started = Instant::now();
-    let over_closed =
-        tokio::task::block_in_place(|| closed_within(&mut over, Duration::from_millis(400)));
-    assert!(
-        over_closed,
-        "a third connection was held beyond --max-connections 2"
-    );
     let silent_closed =
-        tokio::task::block_in_place(|| closed_within(&mut silent, Duration::from_secs(10)));
+        tokio::task::block_in_place(|| closed_within(&mut silent, Duration::from_millis(400)));
     assert!(
-        silent_closed && started.elapsed() >= Duration::from_millis(300),
-        "the silent connection: closed {silent_closed} after {:?}",
+        silent_closed,
+        "a silent connection kept its place from a newcomer"
+    );
+    // … and speaks no more than it did: it is closed after its timeout.
+    let newcomer_closed =
+        tokio::task::block_in_place(|| closed_within(&mut newcomer, Duration::from_secs(10)));
+    assert!(
+        newcomer_closed && started.elapsed() >= Duration::from_millis(300),
+        "the silent newcomer: closed {newcomer_closed} after {:?}",
         started.elapsed()
     );
+    // With both places held by connections that spoke, one more is
+    // closed at once.
+    let second = speaking(sim.addr);
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let mut over = TcpStream::connect(sim.addr).expect("the kernel accepts");
+    assert!(
+        tokio::task::block_in_place(|| closed_within(&mut over, Duration::from_millis(400))),
+        "a third connection was held beyond --max-connections 2"
+    );
+    drop(held);
+    drop(second);
     // Both silent ones are gone after their timeout: a client is served.
     let mut served = false;
     for _ in 0..30 {

@@ -48,7 +48,7 @@
 //! - `log`, `robot`, `scans` (the scans localized: `N`), `log_scans` (the
 //!   log's), `seed`, `settle_scans`, `window_scans` (`W`);
 //! - `recipe`: the localizer's flags, `field_tempering`,
-//!   `field_search_tempering`, `no_refine`, `no_realign`, `field_beams`,
+//!   `field_search_tempering`, `no_refine`, `no_realign`, `no_ambiguity_check`, `field_beams`,
 //!   `motion_noise_scale`, `min_particles`, `max_particles`,
 //!   `initial_std_xy`, `initial_std_theta`;
 //! - `bounds`: `position_m`, `heading_rad`;
@@ -123,6 +123,10 @@ pub struct Recipe {
     /// fitting follows the wheels alone (the recipe realigns it).
     #[arg(long)]
     pub no_realign: bool,
+    /// The localizer's --no-ambiguity-check: an estimate is called
+    /// converged even where its scan fits as well half a metre away.
+    #[arg(long)]
+    pub no_ambiguity_check: bool,
     /// The localizer's --field-beams: echoes of a scan scored.
     #[arg(long, default_value_t = real_laser().field_beams)]
     pub field_beams: usize,
@@ -169,6 +173,10 @@ impl Recipe {
         .flat_map(|(flag, value)| [flag.to_owned(), value])
         .chain(self.no_refine.then(|| "--no-refine".to_owned()))
         .chain(self.no_realign.then(|| "--no-realign".to_owned()))
+        .chain(
+            self.no_ambiguity_check
+                .then(|| "--no-ambiguity-check".to_owned()),
+        )
         .collect()
     }
 

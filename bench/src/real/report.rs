@@ -193,7 +193,7 @@ impl RealFigures {
         let bounds = params();
         let _ = writeln!(
             out,
-            "\nreal log: {}, {} of {} scans, robot {}; recipe --field-tempering {} --field-search-tempering {}{}{} --field-beams {} --motion-noise-scale {} --min-particles {} --max-particles {} (tracking: --initial-std-xy {} --initial-std-theta {}); bounds {} m, {} rad",
+            "\nreal log: {}, {} of {} scans, robot {}; recipe --field-tempering {} --field-search-tempering {}{}{}{} --field-beams {} --motion-noise-scale {} --min-particles {} --max-particles {} (tracking: --initial-std-xy {} --initial-std-theta {}); bounds {} m, {} rad",
             self.log,
             self.scans,
             self.log_scans,
@@ -202,6 +202,11 @@ impl RealFigures {
             r.field_search_tempering,
             if r.no_refine { " --no-refine" } else { "" },
             if r.no_realign { " --no-realign" } else { "" },
+            if r.no_ambiguity_check {
+                " --no-ambiguity-check"
+            } else {
+                ""
+            },
             r.field_beams,
             r.motion_noise_scale,
             r.min_particles,

@@ -60,6 +60,8 @@ pub(super) struct Followed {
     pub corrections: u64,
     /// Corrections whose tracked pose was first realigned to the frame.
     pub realigned: u64,
+    /// Corrections whose estimate a rival nearby made ambiguous.
+    pub ambiguous: u64,
     /// Frames skipped to keep up.
     pub skipped: u64,
     /// Frames skipped for values the filter cannot use.
@@ -80,6 +82,7 @@ struct Following<'a> {
     unusable: u64,
     corrections: u64,
     realigned: u64,
+    ambiguous: u64,
     last_sequence: u64,
     /// Frame time of the last estimate sent with particles.
     sampled_at: Option<f64>,
@@ -122,6 +125,7 @@ pub(super) fn follow(
         unusable: 0,
         corrections: 0,
         realigned: 0,
+        ambiguous: 0,
         last_sequence: 0,
         sampled_at: None,
         last_took: Duration::ZERO,
@@ -143,6 +147,7 @@ pub(super) fn follow(
         processed: following.processed,
         corrections: following.corrections,
         realigned: following.realigned,
+        ambiguous: following.ambiguous,
         skipped: following.catch_up.skipped(),
         unusable: following.unusable,
         filter_lag_s: following.filter_lag_s,
@@ -316,6 +321,22 @@ impl Following<'_> {
                 fit_before = format!("{:.3}", moved.fit_before),
                 fit_after = format!("{:.3}", moved.fit_after),
                 "tracked pose realigned to the frame"
+            );
+        }
+        if let Some((ring, ambiguous)) = &report.rival_nearby {
+            if *ambiguous {
+                self.ambiguous += 1;
+            }
+            let at = report.estimate.map(|e| e.pose).unwrap_or_default();
+            tracing::debug!(
+                frame = frame.sequence,
+                x = format!("{:.3}", at.x),
+                y = format!("{:.3}", at.y),
+                rival_x = format!("{:.3}", ring.rival.x),
+                rival_y = format!("{:.3}", ring.rival.y),
+                rival_share = format!("{:.3}", ring.rival_share()),
+                ambiguous,
+                "ring check"
             );
         }
         if let Some(correction) = &report.correction {

@@ -168,6 +168,10 @@ pub struct LocalizeArgs {
     /// alone between sensor updates).
     #[arg(long)]
     pub no_realign: bool,
+    /// Laser: call an estimate converged even where its scan fits as well
+    /// half a metre away (along a corridor whose ends it does not see).
+    #[arg(long)]
+    pub no_ambiguity_check: bool,
     /// Scales the motion model's four noise figures (α1 to α4): above 1 for
     /// odometry worse than the simulator's. Default: the preset's (1 sim,
     /// 2 real-laser).
@@ -430,12 +434,13 @@ pub fn run(args: LocalizeArgs) -> Result<()> {
     let followed = follow(&mut localizer, first, ends, settings, &mut shutdown)?;
     let map = localizer.map();
     println!(
-        "{} on {}: {} frames, {} sensor updates, {} realigned, {} frames skipped to keep up (the filter at most {:.2} s of frames behind while carried), {} range tables built, cache {:.1} MiB",
+        "{} on {}: {} frames, {} sensor updates, {} realigned, {} ambiguous, {} frames skipped to keep up (the filter at most {:.2} s of frames behind while carried), {} range tables built, cache {:.1} MiB",
         args.robot,
         args.map,
         followed.processed,
         followed.corrections,
         followed.realigned,
+        followed.ambiguous,
         followed.skipped,
         followed.filter_lag_s,
         map.stats().tables_built,

@@ -109,6 +109,9 @@ impl LocalizeArgs {
         if self.no_realign {
             settings.realign = None;
         }
+        if self.no_ambiguity_check {
+            settings.ambiguity = None;
+        }
         // The filter is built once the first frame names the rig; its
         // settings are checked now, before anything waits.
         let settings = settings.validate().context("the filter's settings")?;

@@ -464,6 +464,92 @@ async fn reflection_lists_exactly_the_served_services_in_both_versions() {
     server.stop().await;
 }
 
+/// The answers reflection version `$version` gives on `$channel` to a
+/// stream of requests for `$symbols` (files containing each), in order:
+/// for each, the files' names, or the error code answered in the stream.
+macro_rules! reflected_symbols {
+    ($version:ident, $channel:expr, $symbols:expr) => {{
+        use tonic_reflection::pb::$version::ServerReflectionRequest;
+        use tonic_reflection::pb::$version::server_reflection_client::ServerReflectionClient;
+        use tonic_reflection::pb::$version::server_reflection_request::MessageRequest;
+        use tonic_reflection::pb::$version::server_reflection_response::MessageResponse;
+        let mut client = ServerReflectionClient::new($channel);
+        let requests: Vec<ServerReflectionRequest> = $symbols
+            .iter()
+            .map(|symbol: &&str| ServerReflectionRequest {
+                host: String::new(),
+                message_request: Some(MessageRequest::FileContainingSymbol((*symbol).to_owned())),
+            })
+            .collect();
+        let count = requests.len();
+        let mut replies = bounded(
+            "reflection",
+            client.server_reflection_info(tokio_stream::iter(requests)),
+        )
+        .await
+        .unwrap()
+        .into_inner();
+        let mut answers: Vec<Result<Vec<String>, i32>> = Vec::new();
+        for _ in 0..count {
+            let reply = bounded("reflection reply", replies.message())
+                .await
+                .unwrap()
+                .expect("a reflection reply for each request");
+            answers.push(match reply.message_response {
+                Some(MessageResponse::FileDescriptorResponse(files)) => Ok(files
+                    .file_descriptor_proto
+                    .iter()
+                    .map(|f| {
+                        <prost_types::FileDescriptorProto as prost::Message>::decode(f.as_slice())
+                            .unwrap()
+                            .name()
+                            .to_owned()
+                    })
+                    .collect()),
+                Some(MessageResponse::ErrorResponse(e)) => Err(e.error_code),
+                other => panic!("unexpected reflection reply {other:?}"),
+            });
+        }
+        // The client's side ended: so does the server's, with OK.
+        assert!(
+            bounded("reflection end", replies.message())
+                .await
+                .unwrap()
+                .is_none()
+        );
+        answers
+    }};
+}
+
+#[tokio::test]
+async fn reflection_describes_every_served_service_in_both_versions_and_answers_errors_in_the_stream()
+ {
+    let server = TestServer::start().await;
+    let symbols = [
+        "grpc.reflection.v1alpha.ServerReflection",
+        "no.such.Service",
+        "grpc.reflection.v1.ServerReflection",
+        "grpc.health.v1.Health",
+        "deog.v1.MapService.ApplyUpdates",
+    ];
+    let v1 = reflected_symbols!(v1, plain_channel(&server).await, symbols);
+    let v1alpha = reflected_symbols!(v1alpha, plain_channel(&server).await, symbols);
+    for answers in [v1, v1alpha] {
+        assert_eq!(answers.len(), symbols.len());
+        assert_eq!(answers[1], Err(Code::NotFound as i32), "{answers:?}");
+        for (symbol, answer) in symbols.iter().zip(&answers) {
+            if *symbol != "no.such.Service" {
+                let files = answer.as_ref().expect("files");
+                assert!(!files.is_empty(), "{symbol}: no file");
+            }
+        }
+        // The map service's file comes with the files it imports.
+        let map_files = answers[4].as_ref().unwrap();
+        assert!(map_files[0].starts_with("deog/v1/"), "{map_files:?}");
+    }
+    server.stop().await;
+}
+
 #[tokio::test]
 async fn a_graceful_stop_keeps_every_acknowledged_batch() {
     const BATCHES: u64 = 24;
