@@ -641,12 +641,12 @@ fn corridor_tiles(end: f64) -> TileMap {
 fn converged_in_corridor(end: f64) -> (bool, f64) {
     let mut source = corridor_tiles(end);
     let rig = laser();
-    let mut settings = FilterSettings {
+    let mut filter = FilterSettings {
         seed: 3,
         ..FilterSettings::default()
     };
-    settings.kld.max_particles = 2_000;
-    let mut mcl = Mcl::with_sensor(settings, Box::new(model())).unwrap();
+    filter.kld.max_particles = 2_000;
+    let mut mcl = Mcl::with_sensor(filter, Box::new(model())).unwrap();
     let start = Pose2::new(-2.0, 0.0, 0.0);
     mcl.start_at(start, 0.02, 0.02).unwrap();
     let now = Instant::now();
