@@ -265,6 +265,16 @@ fn pose(field: &str, value: Option<&pb::Pose2>) -> Result<(), StoreError> {
     Ok(())
 }
 
+/// A number as an error message shows it: in exponent form when it is
+/// huge or tiny (1e300 printed whole is 301 digits).
+fn shown(v: f64) -> String {
+    if v != 0.0 && !(1e-4..1e7).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
 /// A frame's pose: finite, and within [`FRAME_MAX_COORDINATE_M`].
 fn frame_pose(field: &str, value: Option<&pb::Pose2>) -> Result<(), StoreError> {
     pose(field, value)?;
@@ -274,7 +284,8 @@ fn frame_pose(field: &str, value: Option<&pb::Pose2>) -> Result<(), StoreError> 
             return Err(StoreError::invalid(
                 format!("{field}.{axis}"),
                 format!(
-                    "must be within [-{FRAME_MAX_COORDINATE_M}, {FRAME_MAX_COORDINATE_M}] m, got {v}"
+                    "must be within [-{FRAME_MAX_COORDINATE_M}, {FRAME_MAX_COORDINATE_M}] m, got {}",
+                    shown(v)
                 ),
             ));
         }
@@ -307,7 +318,10 @@ pub fn sonar_frame(field: &str, frame: &pb::SonarFrame, limits: &Limits) -> Resu
     if !(0.0..=FRAME_MAX_TIME_S).contains(&time) {
         return Err(StoreError::invalid(
             format!("{field}.time_s"),
-            format!("must be within [0, {FRAME_MAX_TIME_S}] s, got {time}"),
+            format!(
+                "must be within [0, {FRAME_MAX_TIME_S}] s, got {}",
+                shown(time)
+            ),
         ));
     }
     frame_pose(&format!("{field}.odometry"), frame.odometry.as_ref())?;
@@ -341,7 +355,7 @@ pub fn sonar_frame(field: &str, frame: &pb::SonarFrame, limits: &Limits) -> Resu
         if r > FRAME_MAX_RANGE_M {
             return Err(StoreError::invalid(
                 f,
-                format!("must be at most {FRAME_MAX_RANGE_M} m, got {r}"),
+                format!("must be at most {FRAME_MAX_RANGE_M} m, got {}", shown(r)),
             ));
         }
     }

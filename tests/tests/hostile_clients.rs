@@ -1,0 +1,60 @@
+//! The hostile-client suite: stock grpcio (Python) against the real `deog
+//! server` process on 127.0.0.1, knowing only its address
+//! (`tests/scripts/hostile_client.py`): it learns the API by reflection,
+//! then pipelines one-cell batches beside a watch on the same connection,
+//! holds 70 unread read streams while another client reads, publishes a
+//! poisoned frame, sends bytes that are no protobuf, and opens silent
+//! sockets past `--max-connections`. Needs python3 with grpcio,
+//! grpcio-reflection and grpcio-health-checking (`.ci/run` installs them).
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use deog_tests::ServerProcess;
+
+/// Batches the suite pipelines here: past the 5,294 acknowledgements after
+/// which a connection was once closed, and quick (the script's default,
+/// 100,000, takes about 30 s; the server's own suite pipelines 100,000).
+const BATCHES: &str = "25000";
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stock_grpcio_clients_behaving_badly_get_the_answers_the_protocol_gives() {
+    let check = Command::new("python3")
+        .args(["-c", "import grpc, grpc_reflection, grpc_health"])
+        .output();
+    match check {
+        Err(error) => panic!(
+            "this test needs python3 ({error}); install it, then: python3 -m pip install grpcio grpcio-reflection grpcio-health-checking"
+        ),
+        Ok(out) if !out.status.success() => panic!(
+            "this test needs the PyPI packages grpcio, grpcio-reflection and grpcio-health-checking: python3 -m pip install grpcio grpcio-reflection grpcio-health-checking\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        ),
+        Ok(_) => {}
+    }
+    let data = tempfile::tempdir().expect("temp dir");
+    let server = ServerProcess::start(data.path(), &["--max-connections", "8"]).await;
+    let script = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scripts")
+        .join("hostile_client.py");
+    let addr = server.addr.to_string();
+    let run = tokio::task::spawn_blocking(move || {
+        Command::new("python3")
+            .arg(script)
+            .args([addr.as_str(), "--batches", BATCHES])
+            .output()
+            .expect("python3 runs")
+    });
+    let out = tokio::time::timeout(Duration::from_secs(300), run)
+        .await
+        .expect("the suite ends within 5 minutes")
+        .expect("the suite's thread");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    println!("{stdout}");
+    assert!(
+        out.status.success() && stdout.contains("7 of 7 checks passed"),
+        "the hostile-client suite failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
