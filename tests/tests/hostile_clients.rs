@@ -4,7 +4,8 @@
 //! then pipelines one-cell batches beside a watch on the same connection,
 //! holds 70 unread read streams while another client reads, publishes a
 //! poisoned frame, sends bytes that are no protobuf, and opens silent
-//! sockets past `--max-connections`. Needs python3 with grpcio,
+//! sockets past `--max-connections`; the server's memory stays bounded.
+//! Needs python3 with grpcio,
 //! grpcio-reflection and grpcio-health-checking (`.ci/run` installs them).
 
 use std::path::Path;
@@ -57,4 +58,20 @@ async fn stock_grpcio_clients_behaving_badly_get_the_answers_the_protocol_gives(
         "the hostile-client suite failed:\n{stdout}\n{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    // Whatever the clients did, the server's memory stayed bounded (its
+    // queues are: an update stream's 16 MiB, all streams' 256 MiB).
+    let peak_mb = peak_rss_mb(server.pid());
+    println!("server peak RSS {peak_mb:.0} MB");
+    assert!(peak_mb < 400.0, "the server's peak RSS was {peak_mb:.0} MB");
+}
+
+/// The process's peak resident set (`VmHWM`), MB.
+fn peak_rss_mb(pid: u32) -> f64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).expect("/proc status");
+    let kb: f64 = status
+        .lines()
+        .find_map(|line| line.strip_prefix("VmHWM:"))
+        .and_then(|rest| rest.trim().trim_end_matches("kB").trim().parse().ok())
+        .expect("VmHWM in /proc status");
+    kb / 1000.0
 }
