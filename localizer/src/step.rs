@@ -4,8 +4,10 @@
 //! pose the frame no longer fits ([`crate::realign`]), fetch the tiles the
 //! frame needs (as its sensor model says: under the particles for a sonar,
 //! where the endpoints fall for a likelihood field), correct, evict what
-//! the cache cannot hold, and refine the estimate where the sensor model
-//! does (the likelihood field: [`crate::refine`]).
+//! the cache cannot hold, refine the estimate where the sensor model
+//! does (the likelihood field: [`crate::refine`]), and check a laser's
+//! estimate for a rival nearby before calling it converged
+//! ([`crate::ambiguity`]).
 //!
 //! With a CPU budget ([`Localizer::with_step_budget`]) the particles and
 //! the global search's slices are fitted to it as the steps run: the

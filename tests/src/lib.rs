@@ -111,6 +111,24 @@ pub fn run_deog(args: &[&str], env: &[(&str, String)]) -> Output {
     command.output().expect("run deog")
 }
 
+/// Fails the test, saying what to install, unless python3 runs and
+/// imports `modules` (comma-separated, as `import` takes them) from the
+/// PyPI `packages` (space-separated, as pip takes them).
+pub fn require_python(modules: &str, packages: &str) {
+    let install = format!("python3 -m pip install {packages}");
+    match Command::new("python3")
+        .args(["-c", &format!("import {modules}")])
+        .output()
+    {
+        Err(error) => panic!("this test needs python3 ({error}); install it, then: {install}"),
+        Ok(out) if !out.status.success() => panic!(
+            "this test needs the PyPI packages {packages}: {install}\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        ),
+        Ok(_) => {}
+    }
+}
+
 /// The stdout of a run that must have succeeded; panics with its stderr
 /// otherwise.
 pub fn succeeded(output: &Output) -> String {

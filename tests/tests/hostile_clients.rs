@@ -12,7 +12,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use deog_tests::ServerProcess;
+use deog_tests::{ServerProcess, require_python};
 
 /// Batches the suite pipelines here: past the 5,294 acknowledgements after
 /// which a connection was once closed, and quick (the script's default,
@@ -21,19 +21,10 @@ const BATCHES: &str = "25000";
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn stock_grpcio_clients_behaving_badly_get_the_answers_the_protocol_gives() {
-    let check = Command::new("python3")
-        .args(["-c", "import grpc, grpc_reflection, grpc_health"])
-        .output();
-    match check {
-        Err(error) => panic!(
-            "this test needs python3 ({error}); install it, then: python3 -m pip install grpcio grpcio-reflection grpcio-health-checking"
-        ),
-        Ok(out) if !out.status.success() => panic!(
-            "this test needs the PyPI packages grpcio, grpcio-reflection and grpcio-health-checking: python3 -m pip install grpcio grpcio-reflection grpcio-health-checking\n{}",
-            String::from_utf8_lossy(&out.stderr)
-        ),
-        Ok(_) => {}
-    }
+    require_python(
+        "grpc, grpc_reflection, grpc_health",
+        "grpcio grpcio-reflection grpcio-health-checking",
+    );
     let data = tempfile::tempdir().expect("temp dir");
     let server = ServerProcess::start(data.path(), &["--max-connections", "8"]).await;
     let script = Path::new(env!("CARGO_MANIFEST_DIR"))

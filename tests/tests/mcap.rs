@@ -13,7 +13,7 @@ use deog_grid::{Pose2, TileMap};
 use deog_proto::v1 as pb;
 use deog_rig::BeamShape;
 use deog_robot_client::{ClientConfig, MapClient};
-use deog_tests::{ServerProcess, failure, run_deog, succeeded, wander_frames};
+use deog_tests::{ServerProcess, failure, require_python, run_deog, succeeded, wander_frames};
 use serde_json::Value;
 
 fn deog(args: &[&str], server: &ServerProcess) -> Output {
@@ -29,19 +29,10 @@ fn script(name: &str) -> PathBuf {
 /// Runs a script of `tests/scripts` with python3; fails the test with
 /// what to install when python3 or the MCAP packages are missing.
 fn python(name: &str, args: &[&str]) -> String {
-    let check = Command::new("python3")
-        .args(["-c", "import mcap, mcap_ros2.reader, mcap_ros2.writer"])
-        .output();
-    match check {
-        Err(error) => panic!(
-            "this test needs python3 ({error}); install it, then: python3 -m pip install mcap mcap-ros2-support"
-        ),
-        Ok(out) if !out.status.success() => panic!(
-            "this test needs the PyPI packages mcap and mcap-ros2-support: python3 -m pip install mcap mcap-ros2-support\n{}",
-            String::from_utf8_lossy(&out.stderr)
-        ),
-        Ok(_) => {}
-    }
+    require_python(
+        "mcap, mcap_ros2.reader, mcap_ros2.writer",
+        "mcap mcap-ros2-support",
+    );
     let out = Command::new("python3")
         .arg(script(name))
         .args(args)
