@@ -141,7 +141,7 @@ impl SilentQueue {
     /// Closes the connection silent longest and returns its place; `None`
     /// when no connection is silent.
     fn close_oldest(&self) -> Option<OwnedSemaphorePermit> {
-        let mut queue = self.queue.lock().unwrap_or_else(|e| e.into_inner());
+        let mut queue = lock(&self.queue);
         while let Some(silent) = queue.pop_front() {
             if !silent.done.swap(true, Ordering::AcqRel) {
                 silent.cut.cancel();
@@ -289,8 +289,9 @@ impl Connected for CuttableStream {
 
 /// The listener's connections, each cut when `cut` is cancelled, at most
 /// `limits.max_connections` at once; with every place taken, a newcomer
-/// takes the place of the connection silent longest, if one is. Accepting runs in a task of its own
-/// that ends, letting the listener go, once the server drops the stream.
+/// takes the place of the connection silent longest, if one is.
+/// Accepting runs in a task of its own that ends, letting the listener
+/// go, once the server drops the stream.
 pub fn incoming(
     listener: TcpListener,
     cut: CancellationToken,
@@ -312,20 +313,14 @@ pub fn incoming(
                     backoff = ACCEPT_BACKOFF.0;
                     // Small messages (acks) should not wait for Nagle.
                     let _ = stream.set_nodelay(true);
-                    let admit = Admit {
-                        cut: cut.child_token(),
-                        done: Arc::new(AtomicBool::new(false)),
-                        limits,
-                        silent: silent.clone(),
-                    };
-                    if let Ok(permit) = permits.clone().try_acquire_owned() {
-                        if tx.send(Ok(admit.stream(stream, permit))).await.is_err() {
-                            break;
-                        }
-                        continue;
-                    }
-                    if let Some(permit) = silent.close_oldest() {
-                        if tx.send(Ok(admit.stream(stream, permit))).await.is_err() {
+                    let place = permits
+                        .clone()
+                        .try_acquire_owned()
+                        .ok()
+                        .or_else(|| silent.close_oldest());
+                    if let Some(permit) = place {
+                        let stream = admit(stream, permit, &cut, &silent, limits);
+                        if tx.send(Ok(stream)).await.is_err() {
                             break;
                         }
                         continue;
@@ -360,33 +355,26 @@ pub fn incoming(
     ReceiverStream::new(rx)
 }
 
-/// What a connection accepted gets once it has a place.
-struct Admit {
-    cut: CancellationToken,
-    done: Arc<AtomicBool>,
+/// An accepted connection given its place: cut with `cut` or alone, and
+/// listed among the silent until it speaks.
+fn admit(
+    stream: TcpStream,
+    permit: OwnedSemaphorePermit,
+    cut: &CancellationToken,
+    silent: &SilentQueue,
     limits: ConnectionLimits,
-    silent: Arc<SilentQueue>,
-}
-
-impl Admit {
-    fn stream(self, stream: TcpStream, permit: OwnedSemaphorePermit) -> CuttableStream {
-        let place = Arc::new(Mutex::new(Some(permit)));
-        self.silent.push(
-            Silent {
-                cut: self.cut.clone(),
-                done: self.done.clone(),
-                place: place.clone(),
-            },
-            self.limits.max_connections,
-        );
-        CuttableStream::new(
-            stream,
-            self.cut,
-            self.limits.handshake_timeout,
-            place,
-            self.done,
-        )
-    }
+) -> CuttableStream {
+    let (cut, done) = (cut.child_token(), Arc::new(AtomicBool::new(false)));
+    let place = Arc::new(Mutex::new(Some(permit)));
+    silent.push(
+        Silent {
+            cut: cut.clone(),
+            done: done.clone(),
+            place: place.clone(),
+        },
+        limits.max_connections,
+    );
+    CuttableStream::new(stream, cut, limits.handshake_timeout, place, done)
 }
 
 /// Whether an accept failed for want of resources (EMFILE, ENFILE,
