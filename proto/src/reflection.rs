@@ -207,8 +207,9 @@ fn error(code: i32, message: String) -> MessageResponse {
     })
 }
 
-/// Answers each request of `requests` in turn onto `answers`, until the
-/// client ends its side or goes; `convert` reads a request as v1.
+/// The answers to each request of `requests` in turn, until the client
+/// ends its side or goes; `convert` reads a request as v1, `back` writes
+/// a v1 answer in the stream's own version.
 fn answer_stream<Req, Resp>(
     descriptors: Arc<Descriptors>,
     mut requests: Streaming<Req>,
